@@ -1,0 +1,44 @@
+"""fnnlib: feedback neural ODEs (Jia et al., "Feedback Favors the Generalization of Neural ODEs", ICLR 2025).
+
+The public face is flat: everything a notebook needs is importable from here.
+Importing fnnlib sets torch to one intra-op thread (faster for these tiny
+networks); call :func:`set_num_threads` to change it.
+"""
+
+from fnnlib._threads import set_num_threads
+from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
+from fnnlib.models import MODELS, NeuralODE, mlp
+from fnnlib.observers import (
+    Estimate,
+    GainError,
+    LinearFeedback,
+    check_gain,
+    decayed_gains,
+    gain_matrix,
+    spectral_radius,
+)
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
+from fnnlib.report import claim_result, read_results, verdict_from_checks, write_results
+from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.systems import DynamicalSystem, Spiral, add_measurement_noise
+from fnnlib.training import (
+    CheckpointError,
+    TrainHistory,
+    load_checkpoint,
+    save_checkpoint,
+    train_neural_ode,
+)
+
+__version__ = "0.1.0"
+
+set_num_threads()
+
+__all__ = [
+    "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
+    "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
+    "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",
+    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
+    "rollout_predict", "rmse", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "train_neural_ode", "verdict_from_checks", "write_results",
+]

@@ -1,0 +1,31 @@
+"""Error metrics. Shapes: trajectories are ``(..., T, n)``."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+
+def error_norm(pred: Tensor, true: Tensor) -> Tensor:
+    """Euclidean norm of the error per time step, shape ``(..., T)``."""
+    if pred.shape != true.shape:
+        raise ValueError(f"shape mismatch: pred {tuple(pred.shape)} vs true {tuple(true.shape)}")
+    return torch.linalg.vector_norm(pred - true, dim=-1)
+
+
+def mean_error_norm(pred: Tensor, true: Tensor) -> float:
+    """Mean over time (and batch) of the 2-norm error, the paper's "mean 2-norm error"."""
+    return float(error_norm(pred, true).mean())
+
+
+def rmse(pred: Tensor, true: Tensor) -> float:
+    """Root mean squared 2-norm error over time (and batch)."""
+    return float(error_norm(pred, true).pow(2).mean().sqrt())
+
+
+def relative_rmse(pred: Tensor, true: Tensor) -> float:
+    """RMSE divided by the RMS norm of ``true``: a scale-free fit measure."""
+    scale = float(torch.linalg.vector_norm(true, dim=-1).pow(2).mean().sqrt())
+    if scale == 0.0:
+        raise ValueError("relative_rmse is undefined for an all-zero reference")
+    return rmse(pred, true) / scale
