@@ -1,0 +1,26 @@
+"""Run the reproduction's notebooks as a checked, incremental pipeline.
+
+>>> spec = load_spec("pipeline.yaml")            # doctest: +SKIP
+>>> report = run(spec, "smoke", ["spiral"])       # doctest: +SKIP
+"""
+
+from fnnlib.pipeline.params import check_task_parameters, read_parameters, resolve_parameters
+from fnnlib.pipeline.runner import Plan, RunReport, TaskOutcome, check, is_up_to_date, run
+from fnnlib.pipeline.spec import Part, PipelineError, PipelineSpec, Task, load_spec
+
+__all__ = [
+    "Part",
+    "PipelineError",
+    "PipelineSpec",
+    "Plan",
+    "RunReport",
+    "Task",
+    "TaskOutcome",
+    "check",
+    "check_task_parameters",
+    "is_up_to_date",
+    "load_spec",
+    "read_parameters",
+    "resolve_parameters",
+    "run",
+]

@@ -1,0 +1,135 @@
+"""Command line: ``fnn-pipeline {run,check,list,book}``.
+
+Examples
+--------
+::
+
+    fnn-pipeline list
+    fnn-pipeline check --profile paper
+    fnn-pipeline run --profile smoke spiral
+    fnn-pipeline run --profile paper --force spiral
+    fnn-pipeline book --profile paper
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from fnnlib.pipeline.runner import check, is_up_to_date, run
+from fnnlib.pipeline.spec import PipelineError, PipelineSpec, load_spec
+
+__all__ = ["main"]
+
+PIPELINE_FILE = "pipeline.yaml"
+
+
+def _find_pipeline(given: str | None) -> Path:
+    if given is not None:
+        return Path(given)
+    here = Path.cwd().resolve()
+    for folder in (here, *here.parents):
+        if (folder / PIPELINE_FILE).is_file():
+            return folder / PIPELINE_FILE
+    raise PipelineError(f"no {PIPELINE_FILE} in {here} or its parents; pass --pipeline PATH")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fnn-pipeline",
+        description="Run the reproduction's notebooks (pipeline.yaml) and build the book.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def common(p: argparse.ArgumentParser, *, profile: bool = True, data: bool = True) -> None:
+        p.add_argument("--pipeline", metavar="PATH", help="pipeline file (default: ./pipeline.yaml, "
+                       "searched upwards)")
+        if profile:
+            p.add_argument("--profile", required=True, help="parameter profile, e.g. paper or smoke")
+        p.add_argument("--output-root", metavar="DIR", help="override output_root of pipeline.yaml")
+        if data:
+            p.add_argument("--data-dir", metavar="DIR", help="override data_dir of pipeline.yaml")
+
+    p_run = sub.add_parser("run", help="execute tasks (and their stale upstream tasks)")
+    common(p_run)
+    p_run.add_argument("tasks", nargs="*", metavar="TASK", help="tasks to run (default: all)")
+    p_run.add_argument("--force", action="store_true", help="rerun the named tasks even if up to date")
+    p_run.add_argument("--no-progress", action="store_true", help="hide papermill's progress bar")
+
+    p_check = sub.add_parser("check", help="validate pipeline.yaml and every task's parameters")
+    common(p_check)
+    p_check.add_argument("tasks", nargs="*", metavar="TASK", help="tasks to check (default: all)")
+
+    p_list = sub.add_parser("list", help="list tasks, their claims and status per profile")
+    common(p_list, profile=False)
+
+    p_book = sub.add_parser("book", help="assemble the executed notebooks and scoreboard, build the book")
+    common(p_book, data=False)
+    p_book.add_argument("--book-dir", metavar="DIR", help="book folder (default: book/ beside pipeline.yaml)")
+    return parser
+
+
+def _spec(args: argparse.Namespace) -> PipelineSpec:
+    spec = load_spec(_find_pipeline(args.pipeline))
+    return spec.with_paths(output_root=args.output_root, data_dir=getattr(args, "data_dir", None))
+
+
+def _list(spec: PipelineSpec) -> None:
+    for part in spec.parts:
+        print(part.title)
+        for name in part.tasks:
+            task = spec.tasks[name]
+            status = []
+            for profile in spec.profiles:
+                try:
+                    plan = check(spec, profile, [name])
+                    state = "up to date" if is_up_to_date(spec, plan, name) else (
+                        "stale" if spec.output_dir(profile, name).exists() else "not run")
+                except PipelineError:
+                    state = "invalid (run check)"
+                status.append(f"{profile}: {state}")
+            print(f"  {name:<16} {task.title}")
+            print(f"  {'':<16} claims {' '.join(task.claims) or '-'}; upstream "
+                  f"{' '.join(task.upstream) or '-'}; {'; '.join(status)}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``fnn-pipeline``; returns the exit status."""
+    args = _parser().parse_args(argv)
+    try:
+        spec = _spec(args)
+        if args.command == "list":
+            _list(spec)
+            return 0
+        if args.command == "check":
+            plan = check(spec, args.profile, args.tasks or None)
+            print(f"ok: {len(plan.order)} task(s) valid in profile {args.profile!r}: "
+                  f"{', '.join(plan.order)}")
+            return 0
+        if args.command == "run":
+            report = run(spec, args.profile, args.tasks or None, force=args.force,
+                         progress_bar=not args.no_progress,
+                         echo=lambda line: print(line, flush=True))
+            return 0 if report.ok else 1
+        if args.command == "book":
+            from fnnlib.report.book import assemble_book, build_book  # noqa: PLC0415
+
+            book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
+            assemble_book(spec, args.profile, book_dir)
+            start = time.perf_counter()
+            html = build_book(book_dir)
+            print(f"book built in {time.perf_counter() - start:.1f} s: {html / 'index.html'}")
+            return 0
+    except PipelineError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    raise AssertionError(f"unhandled command {args.command!r}")  # argparse restricts the choices
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,196 @@
+"""A notebook's ``parameters`` cell, and the checks on what a task passes to it.
+
+Each notebook has one code cell tagged ``parameters`` that holds plain
+literal assignments (``seed = 0``, ``hidden = [50, 50]``).  Those are the
+names a task may set, and their values fix the types it may pass.  The
+runner also injects ``profile`` and ``out_dir`` (always), ``data_dir`` and
+``upstream_dirs`` (where declared).
+"""
+
+from __future__ import annotations
+
+import ast
+import difflib
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from fnnlib.pipeline.spec import PipelineError, PipelineSpec, Task
+
+__all__ = ["INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters"]
+
+INJECTED = ("profile", "out_dir", "data_dir", "upstream_dirs")
+_REQUIRED_DECLARED = ("profile", "out_dir")
+
+
+def read_parameters(notebook: str | os.PathLike[str]) -> dict[str, Any]:
+    """Return the defaults declared in a notebook's ``parameters`` cell.
+
+    Parameters
+    ----------
+    notebook : path-like
+        An ``.ipynb`` file (nbformat 4).
+
+    Returns
+    -------
+    dict
+        Name -> default value, in the cell's order.
+
+    Raises
+    ------
+    PipelineError
+        If the notebook has no (or several) cells tagged ``parameters``, or
+        the cell holds anything but assignments of literals to plain names.
+    """
+    path = Path(notebook)
+    try:
+        nb = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise PipelineError(f"notebook {path} cannot be read as JSON: {exc}") from exc
+    if not isinstance(nb, dict) or nb.get("nbformat") != 4 or not isinstance(nb.get("cells"), list):
+        raise PipelineError(f"notebook {path} is not an nbformat-4 notebook")
+    cells = [c for c in nb["cells"]
+             if c.get("cell_type") == "code" and "parameters" in c.get("metadata", {}).get("tags", [])]
+    if not cells:
+        raise PipelineError(f"notebook {path.name}: no code cell is tagged 'parameters' "
+                            "(add the tag to the cell holding the defaults)")
+    if len(cells) > 1:
+        raise PipelineError(f"notebook {path.name}: {len(cells)} cells are tagged 'parameters'; "
+                            "keep exactly one")
+    source = cells[0].get("source", "")
+    if isinstance(source, list):
+        source = "".join(source)
+    try:
+        tree = ast.parse(source)
+    except SyntaxError as exc:
+        raise PipelineError(f"notebook {path.name}: the parameters cell is not plain Python "
+                            f"(line {exc.lineno}: {exc.msg})") from exc
+    defaults: dict[str, Any] = {}
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+            name, value = stmt.targets[0].id, stmt.value
+        elif isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None:
+            name, value = stmt.target.id, stmt.value
+        else:
+            raise PipelineError(f"notebook {path.name}: the parameters cell may hold only "
+                                f"`name = literal` lines; line {stmt.lineno} is "
+                                f"`{ast.get_source_segment(source, stmt)}`")
+        try:
+            literal = ast.literal_eval(value)
+        except ValueError as exc:
+            raise PipelineError(f"notebook {path.name}: parameter {name!r} (line {stmt.lineno}) "
+                                f"is not a literal: `{ast.get_source_segment(source, value)}`") from exc
+        if name in defaults:
+            raise PipelineError(f"notebook {path.name}: parameter {name!r} is assigned twice")
+        defaults[name] = literal
+    return defaults
+
+
+def _type_ok(default: Any, value: Any) -> bool:
+    """Whether ``value`` may replace ``default`` (see :func:`check_task_parameters`)."""
+    if default is None:
+        return True
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(default, bool) and isinstance(value, bool)
+    if isinstance(default, float):
+        return isinstance(value, (int, float))
+    if isinstance(default, (list, tuple)):
+        return isinstance(value, (list, tuple))
+    return isinstance(value, type(default))
+
+
+def _type_name(value: Any) -> str:
+    return "None" if value is None else type(value).__name__
+
+
+def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any]) -> None:
+    """Check one task's parameters for one profile against its notebook's defaults.
+
+    Types: a ``None`` default accepts anything; a float default accepts int
+    or float; a bool is accepted only where the default is a bool; a list
+    (or tuple) default accepts a list; otherwise the type must match.
+
+    Parameters
+    ----------
+    task : Task
+    profile : str
+    declared : mapping
+        The notebook's defaults, from :func:`read_parameters`.
+
+    Raises
+    ------
+    PipelineError
+        Naming task, profile and parameter, for a missing profile, an
+        injected name set by the task, an unknown name (with close matches)
+        or a wrong type; also when the notebook lacks ``profile``/``out_dir``
+        or, for a task with upstream tasks, ``upstream_dirs``.
+    """
+    nb = task.notebook.name
+    for name in _REQUIRED_DECLARED:
+        if name not in declared:
+            raise PipelineError(f"task {task.name!r}: notebook {nb} must declare {name!r} in its "
+                                "parameters cell (the runner injects it)")
+    if task.upstream and "upstream_dirs" not in declared:
+        raise PipelineError(f"task {task.name!r} has upstream tasks ({', '.join(task.upstream)}) "
+                            f"but notebook {nb} does not declare 'upstream_dirs' in its parameters cell")
+    if profile not in task.parameters:
+        raise PipelineError(f"task {task.name!r} has no parameters for profile {profile!r} "
+                            f"(it has: {', '.join(task.parameters)})")
+    choices = [n for n in declared if n not in INJECTED]
+    for name, value in task.parameters[profile].items():
+        where = f"task {task.name!r}, profile {profile!r}, parameter {name!r}"
+        if name in INJECTED:
+            raise PipelineError(f"{where}: {name!r} is injected by the runner; "
+                                "remove it from pipeline.yaml")
+        if name not in declared:
+            close = difflib.get_close_matches(name, choices, n=3)
+            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            raise PipelineError(f"{where}: not declared in the parameters cell of {nb}{hint}")
+        if not _type_ok(declared[name], value):
+            raise PipelineError(f"{where}: got {_type_name(value)} {value!r}, but the notebook's "
+                                f"default is {_type_name(declared[name])} {declared[name]!r}")
+    for name in INJECTED:
+        if name in declared and declared[name] is not None:
+            expected: Any = {} if name == "upstream_dirs" else ""
+            if not _type_ok(declared[name], expected):
+                raise PipelineError(f"task {task.name!r}: notebook {nb} declares {name!r} with a "
+                                    f"{_type_name(declared[name])} default; the runner injects "
+                                    f"a {_type_name(expected)}")
+
+
+def resolve_parameters(
+    spec: PipelineSpec,
+    task: Task,
+    profile: str,
+    declared: Mapping[str, Any],
+    *,
+    out_dir: str | os.PathLike[str],
+) -> dict[str, Any]:
+    """Return the parameters papermill injects into ``task``'s notebook.
+
+    The task's profile parameters plus ``profile``, ``out_dir``, and where
+    the notebook declares them ``data_dir`` (a string) and ``upstream_dirs``
+    (task name -> last good output folder of each upstream task).  Call
+    :func:`check_task_parameters` first.
+
+    Raises
+    ------
+    PipelineError
+        If the notebook declares ``data_dir`` and the pipeline has none, or
+        it does not exist.
+    """
+    params: dict[str, Any] = dict(task.parameters[profile])
+    params["profile"] = profile
+    params["out_dir"] = str(out_dir)
+    if "data_dir" in declared:
+        if spec.data_dir is None:
+            raise PipelineError(f"task {task.name!r}: notebook declares 'data_dir' but the pipeline "
+                                "has no data_dir (set it in pipeline.yaml or pass --data-dir)")
+        if not spec.data_dir.is_dir():
+            raise PipelineError(f"task {task.name!r}: data_dir {spec.data_dir} does not exist")
+        params["data_dir"] = str(spec.data_dir)
+    if "upstream_dirs" in declared:
+        params["upstream_dirs"] = {up: str(spec.output_dir(profile, up)) for up in task.upstream}
+    return params

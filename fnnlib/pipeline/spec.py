@@ -1,0 +1,334 @@
+"""Load and validate ``pipeline.yaml``, the contract between notebooks and runs.
+
+The file names the tasks (one notebook each), their upstream tasks, the files
+they must produce and their parameters per profile, and groups the tasks into
+the book's parts.  :func:`load_spec` turns it into a :class:`PipelineSpec` or
+raises :class:`PipelineError` naming what is wrong; nothing is executed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import os
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import yaml
+
+__all__ = ["Part", "PipelineError", "PipelineSpec", "Task", "load_spec"]
+
+NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+
+_TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
+_TOP_OPTIONAL = ("data_dir",)
+_TASK_REQUIRED = ("title", "notebook", "products", "parameters")
+_TASK_OPTIONAL = ("claims", "upstream")
+_PART_KEYS = ("title", "tasks")
+
+
+class PipelineError(Exception):
+    """A pipeline file, notebook or parameter set is invalid; nothing has run."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One pipeline task: a notebook executed with one profile's parameters.
+
+    Attributes
+    ----------
+    name : str
+        Key in ``tasks``; also the name of its output folder.
+    title : str
+        Human-readable title.
+    notebook : Path
+        Absolute path of the source notebook.
+    claims : tuple of str
+        Claim IDs (``CLAIMS.md``) the task's ``results.json`` must report.
+    upstream : tuple of str
+        Tasks whose outputs this task reads.
+    products : tuple of str
+        Files (relative to the task's output folder) a successful run leaves.
+    parameters : mapping of str to mapping
+        Profile name -> parameter name -> value.
+    """
+
+    name: str
+    title: str
+    notebook: Path
+    claims: tuple[str, ...]
+    upstream: tuple[str, ...]
+    products: tuple[str, ...]
+    parameters: Mapping[str, Mapping[str, Any]]
+
+
+@dataclass(frozen=True)
+class Part:
+    """A titled group of tasks; one part of the book."""
+
+    title: str
+    tasks: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class PipelineSpec:
+    """A validated ``pipeline.yaml``.
+
+    Attributes
+    ----------
+    path : Path
+        The pipeline file.
+    root : Path
+        Its folder; notebooks execute with this as working directory.
+    claims_file, output_root : Path
+        Absolute paths (relative entries resolved against ``root``).
+    data_dir : Path or None
+        Absolute path of the data folder, if given.
+    parts : tuple of Part
+    tasks : mapping of str to Task
+        In topological order (every task after its upstream tasks).
+    """
+
+    path: Path
+    root: Path
+    claims_file: Path
+    data_dir: Path | None
+    output_root: Path
+    parts: tuple[Part, ...]
+    tasks: Mapping[str, Task] = field(repr=False)
+
+    @property
+    def profiles(self) -> tuple[str, ...]:
+        """Every profile named by some task, sorted."""
+        return tuple(sorted({p for t in self.tasks.values() for p in t.parameters}))
+
+    def with_paths(
+        self,
+        *,
+        output_root: str | os.PathLike[str] | None = None,
+        data_dir: str | os.PathLike[str] | None = None,
+    ) -> PipelineSpec:
+        """Return a copy with ``output_root`` and/or ``data_dir`` replaced."""
+        changes: dict[str, Path] = {}
+        if output_root is not None:
+            changes["output_root"] = Path(output_root).resolve()
+        if data_dir is not None:
+            changes["data_dir"] = Path(data_dir).resolve()
+        return dataclasses.replace(self, **changes)
+
+    def closure(self, names: Iterable[str] | None = None) -> list[str]:
+        """Return ``names`` and all their upstream tasks, in topological order.
+
+        ``None`` selects every task.
+
+        Raises
+        ------
+        PipelineError
+            If a name is not a task.
+        """
+        if names is None:
+            return list(self.tasks)
+        wanted: set[str] = set()
+        stack = list(names)
+        for name in stack:
+            if name not in self.tasks:
+                raise PipelineError(f"no task named {name!r}{_suggest(name, self.tasks)}; "
+                                    f"tasks: {', '.join(self.tasks)}")
+        while stack:
+            name = stack.pop()
+            if name not in wanted:
+                wanted.add(name)
+                stack.extend(self.tasks[name].upstream)
+        return [n for n in self.tasks if n in wanted]
+
+    def output_dir(self, profile: str, task: str) -> Path:
+        """Folder holding the last good outputs of ``task`` in ``profile``."""
+        return self.output_root / profile / task
+
+
+def _suggest(name: str, choices: Iterable[str]) -> str:
+    close = difflib.get_close_matches(name, list(choices), n=3)
+    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
+
+
+def _check_keys(where: str, data: Mapping[str, Any], required: tuple[str, ...],
+                optional: tuple[str, ...] = ()) -> None:
+    allowed = required + optional
+    for key in data:
+        if key not in allowed:
+            raise PipelineError(f"{where}: unknown key {key!r}{_suggest(str(key), allowed)}; "
+                                f"allowed keys: {', '.join(allowed)}")
+    for key in required:
+        if key not in data:
+            raise PipelineError(f"{where}: missing key {key!r}")
+
+
+def _str_list(where: str, value: Any) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise PipelineError(f"{where} must be a list of strings, got {value!r}")
+    if len(set(value)) != len(value):
+        raise PipelineError(f"{where} lists a name twice: {value!r}")
+    return tuple(value)
+
+
+def _mapping(where: str, value: Any) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise PipelineError(f"{where} must be a mapping, got {type(value).__name__}")
+    for key in value:
+        if not isinstance(key, str):
+            raise PipelineError(f"{where}: key {key!r} is not a string")
+    return value
+
+
+def _path(root: Path, where: str, value: Any) -> Path:
+    if not isinstance(value, str) or not value:
+        raise PipelineError(f"{where} must be a non-empty path string, got {value!r}")
+    return (root / value).resolve()
+
+
+def _load_task(root: Path, name: str, data: Any) -> Task:
+    where = f"task {name!r}"
+    if not NAME_RE.match(name):
+        raise PipelineError(f"{where}: a task name must start with a letter and hold only "
+                            "letters, digits, '_' and '-'")
+    data = _mapping(where, data)
+    _check_keys(where, data, _TASK_REQUIRED, _TASK_OPTIONAL)
+    if not isinstance(data["title"], str):
+        raise PipelineError(f"{where}: title must be a string")
+    notebook = _path(root, f"{where}: notebook", data["notebook"])
+    if notebook.suffix != ".ipynb":
+        raise PipelineError(f"{where}: notebook {data['notebook']!r} is not an .ipynb file")
+    if not notebook.is_file():
+        raise PipelineError(f"{where}: notebook {data['notebook']!r} does not exist "
+                            f"(looked for {notebook})")
+    products = _str_list(f"{where}: products", data["products"])
+    for product in products:
+        pure = PurePosixPath(product)
+        if pure.is_absolute() or ".." in pure.parts or not pure.parts:
+            raise PipelineError(f"{where}: product {product!r} must be a relative path "
+                                "inside the task's output folder")
+    parameters = _mapping(f"{where}: parameters", data["parameters"])
+    if not parameters:
+        raise PipelineError(f"{where}: parameters must name at least one profile")
+    profiles: dict[str, Mapping[str, Any]] = {}
+    for profile, values in parameters.items():
+        if not NAME_RE.match(profile):
+            raise PipelineError(f"{where}: profile name {profile!r} must start with a letter and "
+                                "hold only letters, digits, '_' and '-'")
+        profiles[profile] = dict(_mapping(f"{where}: parameters.{profile}", values or {}))
+    return Task(
+        name=name,
+        title=data["title"],
+        notebook=notebook,
+        claims=_str_list(f"{where}: claims", data.get("claims")),
+        upstream=_str_list(f"{where}: upstream", data.get("upstream")),
+        products=products,
+        parameters=profiles,
+    )
+
+
+def _topological(tasks: Mapping[str, Task]) -> list[str]:
+    """Order tasks so that each follows its upstream tasks (file order otherwise)."""
+    order: list[str] = []
+    state: dict[str, str] = {}  # "visiting" | "done"
+
+    def visit(name: str, path: list[str]) -> None:
+        if state.get(name) == "done":
+            return
+        if state.get(name) == "visiting":
+            cycle = path[path.index(name):] + [name]
+            raise PipelineError(f"upstream tasks form a cycle: {' -> '.join(cycle)}")
+        state[name] = "visiting"
+        for up in tasks[name].upstream:
+            visit(up, path + [name])
+        state[name] = "done"
+        order.append(name)
+
+    for name in tasks:
+        visit(name, [])
+    return order
+
+
+def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
+    """Read and validate a pipeline file.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``pipeline.yaml``; relative paths inside it are relative to its folder.
+
+    Returns
+    -------
+    PipelineSpec
+
+    Raises
+    ------
+    PipelineError
+        On unknown or missing keys, a missing notebook, an unknown upstream
+        task, a cycle, or a task listed in no part (or in two).
+    """
+    file = Path(path).resolve()
+    if not file.is_file():
+        raise PipelineError(f"pipeline file {file} does not exist")
+    try:
+        data = yaml.safe_load(file.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise PipelineError(f"{file} is not valid YAML: {exc}") from exc
+    where = str(file.name)
+    data = _mapping(where, data)
+    _check_keys(where, data, _TOP_REQUIRED, _TOP_OPTIONAL)
+    root = file.parent
+
+    raw_tasks = _mapping(f"{where}: tasks", data["tasks"])
+    if not raw_tasks:
+        raise PipelineError(f"{where}: tasks is empty")
+    tasks = {name: _load_task(root, name, value) for name, value in raw_tasks.items()}
+    for task in tasks.values():
+        for up in task.upstream:
+            if up == task.name:
+                raise PipelineError(f"task {task.name!r} lists itself as upstream")
+            if up not in tasks:
+                raise PipelineError(f"task {task.name!r}: upstream task {up!r} does not exist"
+                                    f"{_suggest(up, tasks)}")
+    order = _topological(tasks)
+
+    if not isinstance(data["parts"], list) or not data["parts"]:
+        raise PipelineError(f"{where}: parts must be a non-empty list")
+    parts: list[Part] = []
+    placed: dict[str, str] = {}
+    for i, raw in enumerate(data["parts"]):
+        pwhere = f"{where}: parts[{i}]"
+        raw = _mapping(pwhere, raw)
+        _check_keys(pwhere, raw, _PART_KEYS)
+        if not isinstance(raw["title"], str):
+            raise PipelineError(f"{pwhere}: title must be a string")
+        names = _str_list(f"{pwhere}: tasks", raw["tasks"])
+        for name in names:
+            if name not in tasks:
+                raise PipelineError(f"{pwhere} ({raw['title']!r}) lists task {name!r}, which "
+                                    f"does not exist{_suggest(name, tasks)}")
+            if name in placed:
+                raise PipelineError(f"task {name!r} is listed in two parts: "
+                                    f"{placed[name]!r} and {raw['title']!r}")
+            placed[name] = raw["title"]
+        parts.append(Part(title=raw["title"], tasks=names))
+    missing = [n for n in order if n not in placed]
+    if missing:
+        raise PipelineError(f"{where}: tasks in no part: {', '.join(missing)} "
+                            "(every task must be listed under parts)")
+
+    data_dir = data.get("data_dir")
+    return PipelineSpec(
+        path=file,
+        root=root,
+        claims_file=_path(root, f"{where}: claims_file", data["claims_file"]),
+        data_dir=None if data_dir is None else _path(root, f"{where}: data_dir", data_dir),
+        output_root=_path(root, f"{where}: output_root", data["output_root"]),
+        parts=tuple(parts),
+        tasks={n: tasks[n] for n in order},
+    )

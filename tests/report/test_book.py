@@ -1,0 +1,136 @@
+"""Assemble and build the book from fake outputs, with warnings as errors."""
+
+from __future__ import annotations
+
+import shutil
+import struct
+import zlib
+from base64 import b64encode
+from pathlib import Path
+
+import nbformat
+import pytest
+import yaml
+
+from fnnlib.pipeline import PipelineError, PipelineSpec, load_spec
+from fnnlib.report.book import assemble_book, build_book
+from fnnlib.report.claims import claim_result, write_results
+
+REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
+
+CLAIMS = """# Claims
+
+## Spiral (Sec. 3)
+| ID | claim | paper figure |
+|---|---|---|
+| S1 | the neural ODE fits the nominal dynamics (change rate) | Fig. 4c |
+| S2 | feedback lowers the N=50 multi-step error; gamma/lambda_min(L) | Fig. 4d-f |
+
+## Beyond the paper
+| ID | what | why |
+|---|---|---|
+| B1 | tune L and beta | the paper's stated limitation |
+"""
+
+
+def _png() -> bytes:
+    """A valid 2x2 grey PNG, written by hand (no plotting library needed)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    raw = b"".join(b"\x00" + b"\x80\x80" for _ in range(2))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 2, 2, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def _executed_notebook(path: Path) -> None:
+    """What papermill leaves: title, parameters, injected parameters, outputs (text, stderr, image)."""
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.cells = [
+        nbformat.v4.new_markdown_cell("# Linear feedback on the spiral\n\n"
+                                      "Reproduces Fig. 4 ($L_i = L e^{-\\beta i}$)."),
+        nbformat.v4.new_code_cell('profile = "paper"\nout_dir = "."', metadata={"tags": ["parameters"]}),
+        nbformat.v4.new_code_cell('profile = "paper"\nout_dir = "/tmp/x"',
+                                  metadata={"tags": ["injected-parameters"]}),
+        nbformat.v4.new_markdown_cell("## Results"),
+        nbformat.v4.new_code_cell("print(1)", execution_count=3, outputs=[
+            nbformat.v4.new_output("stream", name="stdout", text="1\n"),
+            nbformat.v4.new_output("stream", name="stderr", text="a warning\n"),
+            nbformat.v4.new_output("display_data", data={"image/png": b64encode(_png()).decode(),
+                                                         "text/plain": "<Figure>"}),
+        ]),
+    ]
+    nbformat.write(nb, path)
+
+
+@pytest.fixture
+def fake_outputs(tmp_path: Path) -> PipelineSpec:
+    """A two-part pipeline where only task `alpha` has (paper-profile) outputs."""
+    for name in ("alpha", "beta"):
+        nb = nbformat.v4.new_notebook()
+        nb.cells = [nbformat.v4.new_code_cell('profile = ""\nout_dir = ""',
+                                              metadata={"tags": ["parameters"]})]
+        (tmp_path / "notebooks").mkdir(exist_ok=True)
+        nbformat.write(nb, tmp_path / "notebooks" / f"{name}.ipynb")
+    (tmp_path / "CLAIMS.md").write_text(CLAIMS)
+    task = {"notebook": "", "upstream": [], "products": ["results.json"], "parameters": {"paper": {}}}
+    doc = {"claims_file": "CLAIMS.md", "output_root": "outputs",
+           "parts": [{"title": "Linear feedback (Sec. 3)", "tasks": ["alpha"]},
+                     {"title": "Neural feedback (Sec. 4)", "tasks": ["beta"]}],
+           "tasks": {"alpha": {**task, "title": "Alpha", "notebook": "notebooks/alpha.ipynb",
+                               "claims": ["S1"]},
+                     "beta": {**task, "title": "Beta", "notebook": "notebooks/beta.ipynb",
+                              "claims": ["S2"]}}}
+    (tmp_path / "pipeline.yaml").write_text(yaml.safe_dump(doc))
+    spec = load_spec(tmp_path / "pipeline.yaml")
+
+    out = spec.output_dir("paper", "alpha")
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "fig4c.png").write_bytes(_png())
+    _executed_notebook(out / "alpha.ipynb")
+    write_results(out, task="alpha", profile="paper", claims=[
+        claim_result("S1", checks={"error below 0.1": True}, numbers={"rmse": 0.0421, "n": 1000},
+                     rule="rmse < 0.1", figure="figures/fig4c.png")])
+    return spec
+
+
+def _copy_book(tmp_path: Path) -> Path:
+    book = tmp_path / "book"
+    shutil.copytree(REPO_BOOK, book, ignore=shutil.ignore_patterns("_build", "_generated", "_toc.yml"))
+    return book
+
+
+def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
+    book = _copy_book(tmp_path)
+    toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book).read_text())
+    assert toc["root"] == "intro"
+    assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Results"]  # beta: no output
+    assert toc["parts"][0]["chapters"] == [{"file": "_generated/alpha/alpha"}]
+    assert toc["parts"][1]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
+    assert (book / "_generated" / "alpha" / "figures" / "fig4c.png").is_file()
+    scoreboard = (book / "_generated" / "scoreboard.md").read_text()
+    assert "3 claims, 1 reproduced, 0 partly, 0 not reproduced, 2 not run." in scoreboard
+
+    html = build_book(book, quiet=True)
+    assert (html / "intro.html").is_file() and (html / "paper_vs_release.html").is_file()
+    assert (html / "_generated" / "alpha" / "alpha.html").is_file()
+    page = (html / "_generated" / "scoreboard.html").read_text()
+    assert "sd-bg-success" in page and "reproduced" in page and "not run" in page
+    assert "alpha.html" in page and "fig4c.png" in page
+
+    with (book / "intro.md").open("a") as fh:  # a broken link is a warning, hence an error
+        fh.write("\nSee [nothing](missing-page.md).\n")
+    with pytest.raises(PipelineError, match="book build failed"):
+        build_book(book, quiet=True)
+
+
+def test_assemble_needs_the_hand_written_pages(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
+    book = _copy_book(tmp_path)
+    (book / "paper_vs_release.md").unlink()
+    with pytest.raises(PipelineError, match="paper_vs_release.md is missing"):
+        assemble_book(fake_outputs, "paper", book)
+
+
+def test_build_needs_an_assembled_book(tmp_path: Path) -> None:
+    with pytest.raises(PipelineError, match="has no _toc.yml; run assemble_book first"):
+        build_book(tmp_path)
