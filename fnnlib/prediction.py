@@ -91,11 +91,13 @@ def cascade_predict_loop(f: VectorField, x: Tensor, Ts: float, N: int, L: float 
     T, n = x.shape
     L0 = check_gain(L, n, Ts, allow_unstable=allow_unstable)
     gains = [gain_compact(Li, n, dtype=x.dtype) for Li in decayed_gains(L0, N, beta)]
-    x_hat = [x[0].clone() for _ in range(N)]  # each layer's estimate; the first input of layer i is x_0
+    x_hat: list[Tensor] = []  # each layer's estimate, started at that layer's first input
     out = torch.empty_like(x)
     for k in range(T):
         z = x[k]
         for i in range(N):
+            if k == 0:
+                x_hat.append(z.clone())
             f_hat = f(0.0, z[None])[0] + _times(gains[i], z - x_hat[i])  # Eq. (7)
             x_hat[i] = x_hat[i] + Ts * f_hat  # Eq. (8)
             z = z + Ts * f_hat

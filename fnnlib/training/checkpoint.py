@@ -91,7 +91,8 @@ def load_checkpoint(path: str | os.PathLike[str], *, expected_config: Mapping[st
         if diff:
             detail = ", ".join(f"{k}: file has {a!r}, expected {b!r}" for k, (a, b) in diff.items())
             raise CheckpointError(f"checkpoint {path} does not match the requested model ({detail})")
-    model = MODELS[kind](**config)
+    dtype = next((v.dtype for v in state.values() if v.is_floating_point()), torch.float32)
+    model = MODELS[kind](**config).to(dtype)  # rebuild in the saved precision, not torch's default
     try:
         model.load_state_dict(state)
     except RuntimeError as exc:
