@@ -1,0 +1,136 @@
+"""Checkpoints: exact round trip; corrupt, mismatched or missing files are refused with a clear error."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+import torch
+from torch import nn
+
+from fnnlib import CheckpointError, NeuralODE, load_checkpoint, save_checkpoint
+
+META = {"seed": 3, "final_loss": 0.0123, "method": "dopri5", "losses": [1.0, 0.5], "settings": {"lr": 1e-3}}
+
+
+@pytest.fixture
+def saved(tmp_path):
+    torch.manual_seed(0)
+    model = NeuralODE(2, (8, 8), "tanh")
+    path = save_checkpoint(tmp_path / "sub" / "model.pt", model, META)
+    return model, path
+
+
+def test_round_trip(saved):
+    model, path = saved
+    assert path.is_file()
+    assert not [p for p in path.parent.iterdir() if p.name.endswith(".tmp")]  # atomic write leaves no temp file
+    loaded, meta = load_checkpoint(path, expected_config=model.config, expected_kind="NeuralODE")
+    assert meta == META
+    assert loaded.config == model.config
+    x = torch.randn(16, 2)
+    assert torch.equal(loaded(0.0, x), model(0.0, x))
+    for (k1, v1), (k2, v2) in zip(model.state_dict().items(), loaded.state_dict().items()):
+        assert k1 == k2 and torch.equal(v1, v2)
+
+
+def test_round_trip_with_input_and_partial_expected_config(tmp_path):
+    model = NeuralODE(3, (4,), n_input=1)
+    path = save_checkpoint(tmp_path / "m.pt", model)
+    loaded, meta = load_checkpoint(path, expected_config={"n_state": 3})
+    assert meta == {}
+    x, u = torch.randn(5, 3), torch.randn(5, 1)
+    assert torch.equal(loaded.vector_field(x, u), model.vector_field(x, u))
+
+
+def test_round_trip_keeps_float64(tmp_path):
+    # a float64 model must come back float64 with bit-identical weights, not rounded to float32
+    model = NeuralODE(3, (4,), n_input=1).double()
+    path = save_checkpoint(tmp_path / "m.pt", model)
+    loaded, _ = load_checkpoint(path)
+    assert next(loaded.parameters()).dtype == torch.float64
+    x, u = torch.randn(5, 3, dtype=torch.float64), torch.randn(5, 1, dtype=torch.float64)
+    assert torch.equal(loaded.vector_field(x, u), model.vector_field(x, u))
+
+
+def test_truncated_file(saved):
+    _, path = saved
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match=r"model.pt is corrupt or not a torch file"):
+        load_checkpoint(path)
+
+
+def test_random_bytes(tmp_path):
+    path = tmp_path / "junk.pt"
+    path.write_bytes(random.Random(0).randbytes(4096))
+    with pytest.raises(CheckpointError, match=r"junk.pt is corrupt or not a torch file"):
+        load_checkpoint(path)
+
+
+def test_flipped_weight_fails_the_checksum(saved):
+    _, path = saved
+    payload = torch.load(path, weights_only=True)
+    w = payload["state_dict"]["net.0.weight"]
+    w.view(torch.uint8)[0] ^= 1  # one bit of one weight; sha256 left as it was
+    torch.save(payload, path)
+    with pytest.raises(CheckpointError, match="fails its checksum: the weights are corrupt"):
+        load_checkpoint(path)
+
+
+def test_changed_weight_value_fails_the_checksum(saved):
+    _, path = saved
+    payload = torch.load(path, weights_only=True)
+    payload["state_dict"]["net.2.bias"][1] += 1.0
+    torch.save(payload, path)
+    with pytest.raises(CheckpointError, match="fails its checksum"):
+        load_checkpoint(path)
+
+
+def test_expected_config_mismatch(saved):
+    _, path = saved
+    with pytest.raises(CheckpointError,
+                       match=r"does not match the requested model \(hidden: file has \[8, 8\], expected \[50, 50\]\)"):
+        load_checkpoint(path, expected_config={"hidden": [50, 50], "n_state": 2})
+
+
+def test_expected_kind_mismatch(saved):
+    _, path = saved
+    with pytest.raises(CheckpointError, match="holds a NeuralODE, expected a FeedbackNet"):
+        load_checkpoint(path, expected_kind="FeedbackNet")
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CheckpointError, match=r"nope.pt does not exist \(run the task that trains it first\)"):
+        load_checkpoint(tmp_path / "nope.pt")
+
+
+def test_not_an_fnnlib_checkpoint(tmp_path):
+    path = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(3)}, path)
+    with pytest.raises(CheckpointError, match="is not an fnnlib checkpoint"):
+        load_checkpoint(path)
+
+
+def test_wrong_version(saved):
+    _, path = saved
+    payload = torch.load(path, weights_only=True)
+    payload["version"] = 99
+    torch.save(payload, path)
+    with pytest.raises(CheckpointError, match="has checkpoint version 99, this fnnlib reads 1"):
+        load_checkpoint(path)
+
+
+def test_config_that_does_not_fit_the_weights(saved):
+    _, path = saved
+    payload = torch.load(path, weights_only=True)
+    payload["config"]["hidden"] = [8, 9]  # checksum covers the weights only; the shapes then disagree
+    torch.save(payload, path)
+    with pytest.raises(CheckpointError, match="weights do not fit its config"):
+        load_checkpoint(path)
+
+
+def test_unknown_model_type_refuses_to_save(tmp_path):
+    with pytest.raises(TypeError, match=r"cannot checkpoint a Linear; known models: \['NeuralODE'\]"):
+        save_checkpoint(tmp_path / "lin.pt", nn.Linear(2, 2))
+    assert not (tmp_path / "lin.pt").exists()
