@@ -41,3 +41,32 @@ def save_figure(fig: Figure, out_dir: str | Path, name: str) -> str:
     fig.savefig(fig_dir / f"{name}.png", dpi=DPI)
     fig.savefig(fig_dir / f"{name}.pdf")
     return f"figures/{name}.png"
+
+
+def plot_rate_curve(ax, f_true, f_est, *, title: str, label: str = "model", vmax: float | None = None):
+    """Change-rate curve in the (x_dot, y_dot) plane, as in Fig. 4c-e.
+
+    The truth is dashed grey; the estimate is coloured by its 2-norm error;
+    stars mark the start. ``f_true``, ``f_est``: arrays of shape (T, 2).
+    Returns the colour-mapped line (for a colour bar).
+    """
+    import numpy as np
+    from matplotlib.collections import LineCollection
+
+    f_true, f_est = np.asarray(f_true), np.asarray(f_est)
+    err = np.linalg.norm(f_est - f_true, axis=-1)
+    ax.plot(f_true[:, 0], f_true[:, 1], "--", color=COLORS["truth"], lw=1.2, label="truth")
+    seg = np.stack([f_est[:-1], f_est[1:]], axis=1)
+    lc = LineCollection(seg, cmap="viridis", norm=plt.Normalize(0, vmax or float(err.max()) or 1.0))
+    lc.set_array(err[:-1])
+    lc.set_linewidth(1.8)
+    ax.add_collection(lc)
+    ax.plot(*f_true[0], "*", color=COLORS["truth"], ms=10)
+    ax.plot(*f_est[0], "*", color=COLORS["feedback"], ms=10, label=f"{label} (start)")
+    ax.set_xlabel(r"$\dot x$")
+    ax.set_ylabel(r"$\dot y$")
+    ax.set_title(title)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.autoscale_view()
+    ax.legend(loc="lower right", fontsize=8)
+    return lc

@@ -1,0 +1,40 @@
+"""Source notebooks are clean and built from their cell scripts in notebooks/src/."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SOURCES = sorted((ROOT / "notebooks" / "src").glob("*.py"))
+
+
+def _nbbuild():
+    spec = importlib.util.spec_from_file_location("nbbuild", ROOT / "tools" / "nbbuild.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
+def test_notebook_matches_its_source(src: Path) -> None:
+    nb_path = ROOT / "notebooks" / f"{src.stem}.ipynb"
+    assert nb_path.is_file(), f"run: .venv/bin/python tools/nbbuild.py {src} {nb_path}"
+    built = _nbbuild().build(src)
+    committed = json.loads(nb_path.read_text(encoding="utf-8"))
+
+    def text(source: str | list[str]) -> str:
+        return "".join(source) if isinstance(source, list) else source
+
+    assert [text(c["source"]) for c in committed["cells"]] == [text(c.source) for c in built.cells], (
+        f"{nb_path.name} is out of date with {src.name}: rebuild it with tools/nbbuild.py")
+
+
+@pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
+def test_source_notebook_has_no_outputs(src: Path) -> None:
+    nb = json.loads((ROOT / "notebooks" / f"{src.stem}.ipynb").read_text(encoding="utf-8"))
+    for cell in nb["cells"]:
+        assert not cell.get("outputs") and not cell.get("execution_count"), "source notebooks carry no outputs"
