@@ -1,0 +1,39 @@
+# The two entry points (see README):
+#   make main   set up the venv from environment-lock.txt, run the pipeline (paper profile), build the book
+#   make test   set up the venv from environment-lock.txt, run the test suite
+#
+# Variables: PROFILE (paper|smoke), VENV (venv folder), PYTHON (interpreter that makes the venv),
+# PIP_ARGS (extra pip options, e.g. an index that serves the CPU build of torch 2.13.0).
+
+PYTHON ?= python3
+VENV ?= .venv
+PROFILE ?= paper
+PIP_ARGS ?=
+PY := $(VENV)/bin/python
+
+.PHONY: main test venv pipeline book lock
+
+main: pipeline book
+
+venv: $(VENV)/.installed
+
+$(VENV)/.installed: environment-lock.txt pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --require-hashes --no-deps $(PIP_ARGS) -r environment-lock.txt
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(PY) -m pip check
+	touch $@
+
+pipeline: venv
+	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE)
+
+book: venv
+	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
+
+test: venv
+	$(PY) -m pytest
+
+# Regenerate environment-lock.txt after changing pyproject.toml (needs pip-tools in some venv).
+lock:
+	pip-compile --quiet --generate-hashes --allow-unsafe --strip-extras --extra book --extra test \
+		--no-emit-index-url --no-emit-find-links -o environment-lock.txt pyproject.toml
