@@ -19,12 +19,28 @@ import yaml
 
 from fnnlib.pipeline.spec import PipelineError, PipelineSpec
 from fnnlib.report.claims import RESULTS_FILENAME, read_results
-from fnnlib.report.scoreboard import read_claims, render_scoreboard, score_rows
+from fnnlib.report.scoreboard import SELF_CHECK_ID, read_claims, render_scoreboard, score_rows, self_check
 
 __all__ = ["GENERATED", "assemble_book", "build_book"]
 
 GENERATED = "_generated"
 _STATIC_PAGES = ("intro.md", "paper_vs_release.md", "_config.yml")
+
+
+def _copy_for_book(src: Path, dst: Path) -> None:
+    """Copy an executed notebook, hiding the cell of default parameters.
+
+    papermill's injected cell right after it shows the values the run used,
+    so the defaults would only mislead a reader.
+    """
+    import nbformat
+
+    nb = nbformat.read(src, as_version=4)
+    for cell in nb.cells:
+        tags = cell.metadata.get("tags", [])
+        if "parameters" in tags and "remove-cell" not in tags:
+            cell.metadata["tags"] = [*tags, "remove-cell"]
+    nbformat.write(nb, dst)
 
 
 def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[str]) -> Path:
@@ -78,7 +94,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
                 raise PipelineError(f"task {name!r}: {out} has no executed notebook {executed.name}")
             target = generated / name
             target.mkdir()
-            shutil.copy2(executed, target / executed.name)
+            _copy_for_book(executed, target / executed.name)
             if (out / "figures").is_dir():
                 shutil.copytree(out / "figures", target / "figures")
             if (out / RESULTS_FILENAME).is_file():
@@ -90,6 +106,8 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         if chapters:
             parts.append({"caption": part.title, "numbered": True, "chapters": chapters})
 
+    if any(c.id == SELF_CHECK_ID for c in claims):
+        results = {**results, "scoreboard": {"claims": [self_check(claims, results)]}}
     rows = score_rows(claims, results, {n: t.claims for n, t in spec.tasks.items()})
     (generated / "scoreboard.md").write_text(
         render_scoreboard(rows, profile=profile, pages=pages, figures=figures), encoding="utf-8")

@@ -15,9 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.report.claims import VERDICTS
+from fnnlib.report.claims import VERDICTS, claim_result, verdict_from_checks
 
-__all__ = ["NOT_RUN", "Claim", "ScoreRow", "read_claims", "render_scoreboard", "score_rows"]
+__all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "read_claims", "render_scoreboard", "score_rows",
+           "self_check"]
+
+#: the claim the scoreboard reports on itself ("the scoreboard page, computed from the runs")
+SELF_CHECK_ID = "B3"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
@@ -239,3 +243,25 @@ def render_scoreboard(
             f"{{bdg-{_BADGE[row.verdict]}}}`{row.verdict}`", measured, entry.get("rule", ""),
             " ".join(where))) + " |")
     return "\n".join(out) + "\n"
+
+
+def self_check(claims: Sequence[Claim], results: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """The scoreboard's own claim (B3): it is computed from the runs.
+
+    Checks: at least one task has results; every claim a result reports is
+    an ID of the claims file; every reported verdict is the one its checks
+    imply (no verdict set by hand).
+    """
+    ids = {c.id for c in claims}
+    entries = [e for data in results.values() for e in data.get("claims", [])]
+    unknown = sorted({e["id"] for e in entries} - ids)
+    mismatched = sorted(e["id"] for e in entries
+                        if not e.get("checks") or verdict_from_checks(e["checks"]) != e.get("verdict"))
+    return claim_result(
+        SELF_CHECK_ID,
+        checks={"results_found": bool(results), "ids_known": not unknown, "verdicts_follow_checks": not mismatched},
+        numbers={"tasks_with_results": len(results), "claims_reported": len(entries), "claims_listed": len(ids),
+                 "unknown_ids": unknown, "verdicts_not_from_checks": mismatched},
+        rule="some task has results; every reported ID is in the claims file; every verdict equals the one "
+             "its checks imply",
+    )

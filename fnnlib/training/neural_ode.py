@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import Tensor, nn
 from torchdiffeq import odeint, odeint_adjoint
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
 

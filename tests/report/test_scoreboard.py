@@ -86,3 +86,17 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
     assert "{bdg-secondary}`not run`" in b1
     assert "## Spiral (Sec. 3-4)" in lines and "## Beyond the paper" in lines
     assert render_scoreboard(rows, profile="paper", pages={}).count(":::{warning}") == 0
+
+
+def test_self_check_flags_a_verdict_not_from_its_checks() -> None:
+    from fnnlib.report.claims import claim_result
+    from fnnlib.report.scoreboard import Claim, self_check
+
+    claims = [Claim(id="S1", group="g", text="t", figure=""), Claim(id="B3", group="g", text="t", figure="")]
+    good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")
+    assert self_check(claims, {"task": {"claims": [good]}})["verdict"] == "reproduced"
+    forged = {**good, "checks": {"a": False}}  # verdict says reproduced, checks say otherwise
+    result = self_check(claims, {"task": {"claims": [forged]}})
+    assert result["verdict"] == "partly"
+    assert result["numbers"]["verdicts_not_from_checks"] == ["S1"]
+    assert self_check(claims, {})["checks"]["results_found"] is False
