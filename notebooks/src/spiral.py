@@ -46,6 +46,10 @@ import torch
 import fnnlib as F
 from fnnlib.observers import eval_field
 
+# refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
+F.decayed_gains(F.check_gain(L, 2, Ts), N_max, beta)
+if not 1 <= N <= N_max < n_samples:
+    raise ValueError(f"need 1 <= N <= N_max < n_samples, got N={N}, N_max={N_max}, n_samples={n_samples}")
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
