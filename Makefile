@@ -2,13 +2,15 @@
 #   make main   set up the venv from environment-lock.txt, run the pipeline (paper profile), build the book
 #   make test   set up the venv from environment-lock.txt, run the test suite
 #
-# Variables: PROFILE (paper|smoke), VENV (venv folder), PYTHON (interpreter that makes the venv),
+# Variables: PROFILE (paper|smoke), DATA_DIR (data directory), VENV (venv folder), PYTHON (interpreter that makes the venv),
 # PIP_ARGS (extra pip options, e.g. an index that serves the CPU build of torch 2.13.0).
 
 PYTHON ?= python3
 VENV ?= .venv
 PROFILE ?= paper
 PIP_ARGS ?=
+# the real data (Sec. 5.1) live beside the checkout in our workspace; elsewhere put them under data/
+DATA_DIR ?= $(if $(wildcard ../shared/data/bottle),../shared/data,data)
 PY := $(VENV)/bin/python
 
 .PHONY: main test venv pipeline book lock
@@ -25,7 +27,7 @@ $(VENV)/.installed: environment-lock.txt pyproject.toml
 	touch $@
 
 pipeline: venv
-	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE)
+	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR)
 
 book: venv
 	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
