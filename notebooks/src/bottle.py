@@ -99,7 +99,7 @@ for name, e in err.items():
     ax.plot(t_test[N:], mu, color=c, label=name)
     ax.fill_between(t_test[N:], mu - sd, mu + sd, color=c, alpha=0.2)
 ax.set(xlabel="t [s] (time of the predicted position)", ylabel="0.5 s position error [m]",
-       title="Fig. 6: mean and std over the test throws")
+       title="Fig. 6: mean ± std over test throws")
 ax.legend()
 fig_6 = F.save_figure(fig, out, "fig6_bottle_errors")
 
