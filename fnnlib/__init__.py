@@ -10,6 +10,14 @@ from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
 from fnnlib.models import MODELS, NeuralODE, mlp
 from fnnlib.observers import (
     Estimate,
+    ExtendedKalmanObserver,
+    KalmanObserver,
+    LuenbergerObserver,
+    Observer,
+    evaluate_observer,
+    linear_feedback_gain,
+    place_observer_gain,
+    steady_state_gain,
     GainError,
     LinearFeedback,
     check_gain,
@@ -35,6 +43,8 @@ __version__ = "0.1.0"
 set_num_threads()
 
 __all__ = [
+    "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
+    "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
     "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",

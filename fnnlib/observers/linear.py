@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -73,13 +74,20 @@ class LinearFeedback:
     allow_unstable : bool
         Accept a gain that is not positive definite or has
         :math:`\rho(I - T_s L) \ge 1`.
+    beta : float
+        Gain decay rate of Eq. (11) used by :meth:`predict`.
     """
 
-    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int, *, allow_unstable: bool = False):
+    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int, *, allow_unstable: bool = False,
+                 beta: float = 0.0):
         self.f = f
         self.Ts = check_positive(Ts, name="Ts")
         self.n = int(n)
         self.L = check_gain(L, self.n, self.Ts, allow_unstable=allow_unstable)  # (n, n) float64
+        self.allow_unstable = bool(allow_unstable)
+        self.beta = float(beta)
+        if not (math.isfinite(self.beta) and self.beta >= 0):
+            raise ValueError(f"decay rate beta must be finite and >= 0, got {beta!r}")
 
     def observe(self, x: Tensor) -> Estimate:
         """Run the feedback network along measurements ``x`` (..., T, n).
@@ -92,3 +100,13 @@ class LinearFeedback:
             fx = eval_field(self.f, x)
         L = gain_compact(self.L, self.n, dtype=x.dtype)
         return feedback_layer(fx, x, L, self.Ts)
+
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        """N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
+
+        :func:`~fnnlib.prediction.cascade_predict` with this gain and the decay
+        ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}``.
+        """
+        from fnnlib.prediction import cascade_predict  # prediction builds on this module
+
+        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable)

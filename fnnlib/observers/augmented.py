@@ -1,0 +1,136 @@
+r"""The learned model with a constant-disturbance state: the plant every observer of S11 estimates.
+
+The true change rate is the learned one plus an unknown disturbance,
+:math:`\dot x = f_{neural}(x) + d` with :math:`d = \Delta f` (the residual of
+Assumption 1), modelled as constant, :math:`\dot d = 0`. Discretised by Euler
+at the sample step :math:`T_s` (the discretisation of Eq. (8)) and measured
+in full with noise, the augmented state :math:`z = [x; d]` (2n) obeys
+
+.. math::
+    z_{k+1} = A z_k + B f_{neural}(x_k), \qquad y_k = C z_k + v_k,
+    \qquad A = \begin{bmatrix} I & T_s I\\ 0 & I\end{bmatrix},\;
+    B = \begin{bmatrix} T_s I\\ 0\end{bmatrix},\; C = [I\;\; 0].
+
+An observer that evaluates the learned field at the *measurement*,
+:math:`u_k = f_{neural}(y_k)`, as the linear feedback of Eqs. (7)-(8) does,
+sees a linear plant with a known input, so its error dynamics are exactly
+:math:`A - LC` (up to :math:`f_{neural}(x_k) - f_{neural}(y_k)`, of the
+order of the noise): no linearisation is needed, and the estimate along a
+whole trajectory is one linear recursion solved by a scan.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+from fnnlib._scan import linear_recurrence
+from fnnlib.observers.linear import Estimate, VectorField, eval_field
+
+F64 = torch.float64
+
+
+class DisturbanceEstimate(NamedTuple):
+    """An augmented-state observer's output, each of shape (..., T, n).
+
+    ``x_hat`` and ``d_hat`` are the filtered estimates :math:`\\hat x_{k|k}`,
+    :math:`\\hat d_{k|k}` (measurements up to k); ``f_hat`` is the corrected
+    change rate :math:`f_{neural} + \\hat d_{k|k}`.
+    """
+
+    x_hat: Tensor
+    d_hat: Tensor
+    f_hat: Tensor
+
+    def as_estimate(self) -> Estimate:
+        """The ``(x_hat, f_hat)`` pair every observer returns."""
+        return Estimate(self.x_hat, self.f_hat)
+
+
+def augmented_matrices(n: int, Ts: float) -> tuple[Tensor, Tensor, Tensor]:
+    """``A`` (2n, 2n), ``B`` (2n, n), ``C`` (n, 2n) of the Euler model with a constant disturbance, float64."""
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"state dimension n must be >= 1, got {n}")
+    eye, zero = torch.eye(n, dtype=F64), torch.zeros(n, n, dtype=F64)
+    A = torch.cat([torch.cat([eye, Ts * eye], 1), torch.cat([zero, eye], 1)], 0)  # x += Ts d; d = d
+    B = torch.cat([Ts * eye, zero], 0)  # x += Ts u, u = f_neural
+    C = torch.cat([eye, zero], 1)  # y = x
+    return A, B, C
+
+
+def constant_gain_filter(A: Tensor, B: Tensor, C: Tensor, L: Tensor, u: Tensor, y: Tensor) -> Tensor:
+    r"""Filtered states of a constant-gain observer in predictor form, all steps at once.
+
+    The prior :math:`\hat z_{k|k-1}` follows
+    :math:`\hat z_{k+1|k} = (A - LC)\hat z_{k|k-1} + B u_k + L y_k` from
+    :math:`\hat z_{0|-1} = [y_0; 0]` (a linear recursion, solved by the
+    scan of :func:`~fnnlib._scan.linear_recurrence`), and the filtered state is
+    :math:`\hat z_{k|k} = \hat z_{k|k-1} + M(y_k - C\hat z_{k|k-1})` with
+    :math:`M = A^{-1}L`, so that :math:`\hat z_{k+1|k} = A\hat z_{k|k} + B u_k`.
+    For the Kalman filter :math:`M` is the filter gain :math:`K` and
+    :math:`L = AK` the gain of ``control.dlqe``.
+
+    Parameters
+    ----------
+    A, B, C : Tensor, shapes (m, m), (m, p), (q, m)
+        Plant; ``A`` invertible.
+    L : Tensor, shape (m, q)
+        Predictor-form observer gain.
+    u : Tensor, shape (..., T, p)
+        Known inputs.
+    y : Tensor, shape (..., T, q)
+        Measurements.
+
+    Returns
+    -------
+    Tensor, shape (..., T, m), float64
+        :math:`\hat z_{k|k}`.
+    """
+    u, y = u.to(F64), y.to(F64)
+    z0 = torch.cat([y[..., 0, :], torch.zeros(*y.shape[:-2], A.shape[0] - y.shape[-1], dtype=F64)], -1)
+    b = u @ B.T + y @ L.T  # z_{k+1|k} = (A - L C) z_{k|k-1} + B u_k + L y_k
+    prior = linear_recurrence(A - L @ C, b[..., :-1, :], z0)
+    M = torch.linalg.solve(A, L)
+    return prior + (y - prior @ C.T) @ M.T  # z_{k|k} = z_{k|k-1} + M (y_k - C z_{k|k-1})
+
+
+def split_estimate(f: VectorField, z: Tensor, y: Tensor) -> DisturbanceEstimate:
+    """Split filtered augmented states ``z`` (..., T, 2n) into the estimate, in ``y``'s dtype.
+
+    The change rate is the observer's own model, :math:`\\hat f_k = f_{neural}(y_k) + \\hat d_{k|k}`.
+    """
+    n = y.shape[-1]
+    x_hat, d_hat = z[..., :n].to(y.dtype), z[..., n:].to(y.dtype)
+    with torch.no_grad():
+        f_hat = eval_field(f, y) + d_hat
+    return DisturbanceEstimate(x_hat, d_hat, f_hat)
+
+
+@torch.no_grad()
+def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float, N: int) -> Tensor:
+    r"""N Euler steps of the corrected model from every start, the disturbance held frozen.
+
+    :math:`z_{j+1} = z_j + T_s\,(f_{neural}(z_j) + \hat d_k)`, :math:`z_0 = \hat x_k`,
+    for all start times k at once (the loop runs over the N steps, not over time).
+
+    Parameters
+    ----------
+    x_start, d_hat : Tensor, shape (..., T, n)
+        Start states and the disturbance estimate at each start.
+
+    Returns
+    -------
+    Tensor, shape (..., T, n)
+        Row k predicts the state at :math:`t_{k+N}`.
+    """
+    if x_start.shape != d_hat.shape:
+        raise ValueError(f"x_start {tuple(x_start.shape)} and d_hat {tuple(d_hat.shape)} differ in shape")
+    if int(N) != N or int(N) < 1:
+        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
+    z = x_start
+    for _ in range(int(N)):
+        z = z + Ts * (eval_field(f, z) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j) + d_hat)
+    return z

@@ -1,0 +1,126 @@
+"""The interface every observer shares, and the metrics the S11 comparison computes for each.
+
+An observer turns measurements into an :class:`~fnnlib.observers.linear.Estimate`
+(state and change rate) and predicts N steps ahead from every sample, so a
+comparison is a loop over objects: :class:`~fnnlib.observers.LinearFeedback`
+(Eqs. (7)-(8), cascade of Sec. 3.3), :class:`~fnnlib.observers.LuenbergerObserver`,
+:class:`~fnnlib.observers.KalmanObserver`, :class:`~fnnlib.observers.ExtendedKalmanObserver`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import NamedTuple, Protocol, runtime_checkable
+
+from torch import Tensor
+
+from fnnlib.metrics import error_norm, rmse
+from fnnlib.observers.linear import Estimate
+
+
+@runtime_checkable
+class Observer(Protocol):
+    """What the comparison needs from an observer.
+
+    Attributes
+    ----------
+    n : int
+        State dimension.
+    Ts : float
+        Sampling step.
+    """
+
+    n: int
+    Ts: float
+
+    def observe(self, x: Tensor) -> Estimate:
+        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n)."""
+
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        """Predictions (..., T, n) from every sample of ``x``; row k predicts the state at ``t_{k+N}``."""
+
+
+class ObserverReport(NamedTuple):
+    """One observer's outputs on one trajectory and its metrics (plain floats)."""
+
+    estimate: Estimate
+    z_N: Tensor
+    metrics: dict[str, float]
+
+
+def _best_seconds(fn, repeats: int):
+    """Run ``fn`` ``repeats`` times; return its last result and the fastest wall time."""
+    best, out = float("inf"), None
+    for _ in range(max(1, int(repeats))):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return out, best
+
+
+def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Tensor, N: int, *,
+                      settle: int = 0, repeats: int = 3) -> ObserverReport:
+    """Run ``observer`` on measurements ``y`` and score it against the truth.
+
+    Parameters
+    ----------
+    observer : Observer
+    y : Tensor, shape (T, n)
+        Measurements (noisy states).
+    x_true, f_true : Tensor, shape (T, n)
+        Clean states and true change rates at the same samples.
+    N : int
+        Prediction horizon.
+    settle : int
+        Samples of start-up transient (every observer starts knowing no
+        disturbance) left out of the ``*_settled`` metrics.
+    repeats : int
+        Timings are the fastest of this many runs.
+
+    Returns
+    -------
+    ObserverReport
+        ``metrics`` holds ``state_rmse`` (:math:`\\hat x` vs ``x_true``),
+        ``rate_rmse`` (:math:`\\hat f` vs ``f_true``), the same two over
+        samples ``k >= settle`` (``state_rmse_settled``, ``rate_rmse_settled``), ``err_N_mean`` (mean
+        2-norm error of the N-step predictions from every start with a truth
+        N steps later, the metric of Fig. 4f), ``us_per_step`` (observing, per
+        sample) and ``us_per_start`` (predicting N steps from every sample,
+        filtering included, per start).
+    """
+    if not isinstance(observer, Observer):
+        raise TypeError(f"{type(observer).__name__} does not implement the Observer interface "
+                        "(n, Ts, observe, predict)")
+    if not (y.shape == x_true.shape == f_true.shape) or y.ndim != 2:
+        raise ValueError(f"y, x_true, f_true must share one shape (T, n); got {tuple(y.shape)}, "
+                         f"{tuple(x_true.shape)}, {tuple(f_true.shape)}")
+    T = y.shape[0]
+    if not 1 <= int(N) < T:
+        raise ValueError(f"need 1 <= N < T = {T}, got N = {N}")
+    settle = int(settle)
+    if not 0 <= settle < T:
+        raise ValueError(f"need 0 <= settle < T = {T}, got settle = {settle}")
+    est, t_obs = _best_seconds(lambda: observer.observe(y), repeats)
+    z_N, t_pred = _best_seconds(lambda: observer.predict(y, int(N)), repeats)
+    metrics = {
+        "state_rmse": rmse(est.x_hat, x_true),
+        "rate_rmse": rmse(est.f_hat, f_true),
+        "state_rmse_settled": rmse(est.x_hat[settle:], x_true[settle:]),
+        "rate_rmse_settled": rmse(est.f_hat[settle:], f_true[settle:]),
+        "err_N_mean": float(error_norm(z_N[: T - N], x_true[N:]).mean()),
+        "us_per_step": 1e6 * t_obs / T,
+        "us_per_start": 1e6 * t_pred / T,
+    }
+    return ObserverReport(est, z_N, metrics)
+
+
+def metrics_table(rows: Mapping[str, Mapping[str, float]], *, digits: int = 4) -> str:
+    """A markdown table: one row per observer, one column per metric (the first row's keys)."""
+    if not rows:
+        raise ValueError("no rows to tabulate")
+    cols = list(next(iter(rows.values())))
+    lines = ["| observer | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+    for name, m in rows.items():
+        lines.append(f"| {name} | " + " | ".join(f"{float(m[c]):.{digits}g}" for c in cols) + " |")
+    return "\n".join(lines)

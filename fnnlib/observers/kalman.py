@@ -1,0 +1,272 @@
+r"""Kalman filters with a constant-disturbance state: filterpy's KF on the augmented model, its EKF on the learned one.
+
+Both estimate :math:`z = [x; d]` of :mod:`fnnlib.observers.augmented` with
+process noise :math:`w_k \sim \mathcal N(0, Q)` on :math:`z_{k+1}` (on
+:math:`x`: model error within a step; on :math:`d`: a random walk, how fast
+the disturbance drifts) and measurement noise :math:`v_k \sim \mathcal N(0, R)`
+on :math:`y_k = C z_k + v_k`.
+
+* :class:`KalmanObserver`: ``filterpy.kalman.KalmanFilter`` on the linear plant
+  :math:`z_{k+1} = A z_k + B f_{neural}(y_k)` (the learned field evaluated at
+  the measurement, as in Eq. (7)); exact, no linearisation. With
+  ``steady_state=True`` it uses the stationary gain of the Riccati equation
+  instead (:func:`steady_state_gain`, equal to ``control.dlqe``), which runs
+  as one scan over time.
+* :class:`ExtendedKalmanObserver`: ``filterpy.kalman.ExtendedKalmanFilter``
+  propagating the estimate through the learned model itself,
+  :math:`\hat x_{k+1|k} = \hat x_{k|k} + T_s(f_{neural}(\hat x_{k|k}) + \hat d_{k|k})`,
+  with the Jacobian of :math:`f_{neural}` by autograd. filterpy steps one
+  sample at a time, so this one loops over time (and over batch) in Python.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
+from torch import Tensor
+
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.observers.augmented import (
+    DisturbanceEstimate,
+    augmented_matrices,
+    constant_gain_filter,
+    rollout_corrected,
+    split_estimate,
+)
+from fnnlib.observers.gains import gain_matrix
+from fnnlib.observers.linear import Estimate, VectorField, eval_field
+
+
+class SteadyState(NamedTuple):
+    """Stationary Kalman filter of :func:`steady_state_gain` (numpy float64 arrays)."""
+
+    K: np.ndarray  # filter gain (m, q):    z_{k|k} = z_{k|k-1} + K (y_k - C z_{k|k-1})
+    L: np.ndarray  # predictor gain (m, q): L = A K, the gain control.dlqe returns
+    P: np.ndarray  # a-priori error covariance (m, m), the Riccati solution control.dlqe returns
+
+
+def as_covariance(M: float | Tensor | list, m: int, *, name: str, definite: bool = False) -> Tensor:
+    """A covariance (m, m) float64 from a scalar (times I), a vector (diagonal) or a matrix; checked PSD (or PD)."""
+    try:
+        M = gain_matrix(M, m)
+    except ValueError:
+        raise ValueError(f"{name} must be a scalar, a vector of length {m} or an ({m}, {m}) matrix; "
+                         f"got shape {tuple(torch.as_tensor(M).shape)}") from None
+    if not bool(torch.isfinite(M).all()) or not torch.allclose(M, M.T):
+        raise ValueError(f"{name} must be a finite symmetric matrix, got {M.tolist()}")
+    low = float(torch.linalg.eigvalsh(M).min())
+    if low < 0 or (definite and low <= 0):
+        need = "positive definite" if definite else "positive semi-definite"
+        raise ValueError(f"{name} must be {need} (smallest eigenvalue {low:.3g})")
+    return M
+
+
+def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000) -> SteadyState:
+    r"""Stationary Kalman gain by iterating the Riccati difference equation to its fixed point.
+
+    .. math::
+        P \leftarrow A P A^T + Q - A P C^T (C P C^T + R)^{-1} C P A^T,
+        \qquad K = P C^T (C P C^T + R)^{-1}, \qquad L = A K,
+
+    from :math:`P = Q`, until the relative change of :math:`P` is below
+    ``tol``. :math:`P` is the a-priori covariance, the solution of the
+    discrete algebraic Riccati equation that ``control.dlqe(A, I, C, Q, R)``
+    returns with its gain :math:`L` (predictor form); filterpy's
+    ``KalmanFilter.K`` converges to :math:`K` (filter form).
+
+    Parameters
+    ----------
+    A : array, shape (m, m)
+    C : array, shape (q, m)
+    Q : array, shape (m, m)
+        Process noise covariance (on the state directly, G = I).
+    R : array, shape (q, q)
+        Measurement noise covariance, positive definite.
+    """
+    A, C, Q, R = (np.asarray(M, dtype=float) for M in (A, C, Q, R))
+    P = Q.copy()
+    for _ in range(int(max_iter)):
+        S = C @ P @ C.T + R
+        AK = A @ np.linalg.solve(S, C @ P).T  # A P C^T S^{-1}
+        P_next = A @ P @ A.T + Q - AK @ S @ AK.T  # P = A P A' + Q - A P C' S^-1 C P A'
+        P_next = 0.5 * (P_next + P_next.T)
+        done = np.max(np.abs(P_next - P)) <= tol * max(1.0, np.max(np.abs(P_next)))
+        P = P_next
+        if done:
+            K = np.linalg.solve(C @ P @ C.T + R, C @ P).T  # K = P C' (C P C' + R)^-1
+            return SteadyState(K=K, L=A @ K, P=P)
+    raise RuntimeError(f"the Riccati iteration did not converge in {max_iter} steps: is (A, C) detectable "
+                       "and Q positive definite on the unstable modes?")
+
+
+class _KalmanBase:
+    """Shared set-up: the augmented plant, Q, R, P0, and the prediction."""
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None):
+        self.f = f
+        self.Ts = check_positive(Ts, name="Ts")
+        self.n = int(n)
+        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+        m = 2 * self.n
+        self.Q = as_covariance(Q, m, name="Q")
+        self.R = as_covariance(R, self.n, name="R", definite=True)
+        if P0 is None:  # first measurement's noise on x; a disturbance of order 10 (rate units) on d
+            P0 = torch.block_diag(self.R, 100.0 * torch.eye(self.n, dtype=torch.float64))
+        self.P0 = as_covariance(P0, m, name="P0")
+
+    def _new(self, cls, *args):
+        """A filterpy filter with this plant's matrices (numpy), started at P0."""
+        kf = cls(*args, dim_x=2 * self.n, dim_z=self.n)
+        kf.F, kf.H = self.A.numpy().copy(), self.C.numpy().copy()
+        kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
+        return kf
+
+    def estimate(self, x: Tensor) -> DisturbanceEstimate:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def observe(self, x: Tensor) -> Estimate:
+        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n)."""
+        return self.estimate(x).as_estimate()
+
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
+        est = self.estimate(x)
+        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
+
+
+class KalmanObserver(_KalmanBase):
+    r"""Kalman filter on the augmented learned model (filterpy ``KalmanFilter``).
+
+    Parameters
+    ----------
+    f : callable
+        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
+    Ts : float
+        Sampling step.
+    n : int
+        State dimension.
+    Q : float, Tensor (2n,) or (2n, 2n)
+        Process noise covariance of :math:`z = [x; d]`.
+    R : float, Tensor (n,) or (n, n)
+        Measurement noise covariance (the noise variance, e.g. ``std**2``).
+    P0 : float, Tensor (2n,) or (2n, 2n), optional
+        Prior covariance at k = 0 (around :math:`[y_0; 0]`); default
+        ``blockdiag(R, 100 I)``.
+    steady_state : bool
+        Use the stationary gain (:func:`steady_state_gain`) in one scan over
+        time instead of filterpy's time-varying filter (a Python loop inside
+        ``KalmanFilter.batch_filter``).
+    """
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False):
+        super().__init__(f, Ts, n, Q, R, P0=P0)
+        self.steady_state = bool(steady_state)
+        self.stationary = steady_state_gain(self.A, self.C, self.Q, self.R)
+
+    def make_filter(self) -> KalmanFilter:
+        """A filterpy ``KalmanFilter`` with F = A, B, H = C, Q, R and P = P0 (state left at zero)."""
+        kf = self._new(KalmanFilter)
+        kf.B = self.B.numpy().copy()
+        return kf
+
+    def gain_history(self, T: int) -> np.ndarray:
+        """filterpy's gains ``K_k`` for k = 0..T-1, shape (T, 2n, n); they do not depend on the data."""
+        kf = self.make_filter()
+        K = np.empty((int(T), 2 * self.n, self.n))
+        for k in range(int(T)):
+            kf.update(np.zeros(self.n))  # K = P C' (C P C' + R)^-1, then P = (I - K C) P ...
+            K[k] = kf.K
+            kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
+        return K
+
+    def estimate(self, x: Tensor) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
+        x = as_trajectory(x, self.n)
+        with torch.no_grad():
+            u = eval_field(self.f, x)  # u_k = f_neural(y_k), as in Eq. (7)
+        if self.steady_state:
+            L = torch.as_tensor(self.stationary.L)
+            return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x)
+        ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
+        z = np.empty((*ys.shape[:2], 2 * self.n))
+        for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time
+            kf = self.make_filter()
+            kf.x = np.concatenate([y[0], np.zeros(self.n)])  # prior z_{0|-1} = [y_0; 0]
+            means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
+            z[i] = means
+        z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
+        return split_estimate(self.f, z, x)
+
+    def __repr__(self) -> str:
+        return f"KalmanObserver(n={self.n}, Ts={self.Ts}, steady_state={self.steady_state})"
+
+
+class _LearnedModelEKF(ExtendedKalmanFilter):
+    """filterpy's EKF predicts linearly (``F x + B u``); here ``predict_x`` runs the learned model.
+
+    ``step(z)`` returns the next state and the Jacobian at ``z``; setting
+    ``self.F`` there makes the following ``P = F P F' + Q`` of ``predict`` use it.
+    """
+
+    def __init__(self, step, dim_x: int, dim_z: int):
+        super().__init__(dim_x=dim_x, dim_z=dim_z)
+        self.step = step
+
+    def predict_x(self, u=0):
+        self.x, self.F = self.step(self.x)
+
+
+class ExtendedKalmanObserver(_KalmanBase):
+    r"""Extended Kalman filter on the learned model with a constant-disturbance state (filterpy).
+
+    Prediction :math:`\hat z_{k+1|k} = \Phi(\hat z_{k|k})` with
+    :math:`\Phi(x, d) = (x + T_s(f_{neural}(x) + d),\; d)` and Jacobian
+    :math:`F_k = \begin{bmatrix} I + T_s J(\hat x_{k|k}) & T_s I\\ 0 & I\end{bmatrix}`,
+    :math:`J = \partial f_{neural}/\partial x` by autograd; the measurement
+    update is linear (:math:`H = C`). The change rate is the model's own,
+    :math:`\hat f_k = f_{neural}(\hat x_{k|k}) + \hat d_{k|k}`.
+
+    Parameters are those of :class:`KalmanObserver` (no ``steady_state``).
+    filterpy advances one sample per call, so :meth:`estimate` loops over
+    time and over the leading batch axes in Python.
+    """
+
+    def _step(self, z: np.ndarray, dtype: torch.dtype):
+        """The prediction :math:`\\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (2n, 1)."""
+        n, Ts = self.n, self.Ts
+        x, d = z[:n, 0], z[n:, 0]
+        with torch.enable_grad():  # J by one batched backward pass: row i of f(X), X = n copies of x
+            X = torch.as_tensor(x, dtype=dtype).expand(n, n).clone().requires_grad_(True)
+            out = self.f(0.0, X)
+            (J,) = torch.autograd.grad(out.diagonal().sum(), X)  # J[i, j] = d f_i / d x_j
+        F = self.A.numpy().copy()
+        F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts I], [0, I]]
+        x_next = x + Ts * (out[0].detach().double().numpy() + d)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}) + d_{k|k})
+        return np.concatenate([x_next, d])[:, None], F
+
+    def estimate(self, x: Tensor) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
+        x = as_trajectory(x, self.n)
+        ys = x.reshape(-1, *x.shape[-2:]).double().numpy()
+        C = self.C.numpy()
+        z = np.empty((*ys.shape[:2], 2 * self.n))
+        for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
+            ekf = self._new(_LearnedModelEKF, lambda s: self._step(s, x.dtype))
+            ekf.x = np.concatenate([y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [y_0; 0]
+            for k in range(y.shape[0]):
+                if k:
+                    ekf.predict()  # z = Phi(z); P = F P F' + Q
+                ekf.update(y[k][:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s)  # K, z += K (y - C z)
+                z[i, k] = ekf.x[:, 0]
+        z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
+        n = self.n
+        x_hat, d_hat = z[..., :n].to(x.dtype), z[..., n:].to(x.dtype)
+        with torch.no_grad():
+            f_hat = eval_field(self.f, x_hat) + d_hat  # the EKF's own model: f(x_hat) + d_hat
+        return DisturbanceEstimate(x_hat, d_hat, f_hat)
+
+    def __repr__(self) -> str:
+        return f"ExtendedKalmanObserver(n={self.n}, Ts={self.Ts})"

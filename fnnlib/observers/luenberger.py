@@ -1,0 +1,196 @@
+r"""A Luenberger observer with a constant-disturbance state, its gain placed by ``control.place``.
+
+The observer runs on the augmented learned model of
+:mod:`fnnlib.observers.augmented` (Euler at :math:`T_s`, :math:`z = [x; d]`,
+:math:`u_k = f_{neural}(y_k)` as in Eq. (7)):
+
+.. math:: \hat z_{k+1|k} = A\hat z_{k|k-1} + B f_{neural}(y_k) + L(y_k - C\hat z_{k|k-1}),
+
+whose error obeys :math:`e_{k+1} = (A - LC)e_k` plus the noise terms, so the
+requested discrete poles are the eigenvalues of :math:`A - LC` exactly
+(Luenberger 1966; pole placement by the dual :math:`A^T - C^T L^T`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import control
+import numpy as np
+import torch
+from torch import Tensor
+
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.observers.augmented import (
+    DisturbanceEstimate,
+    augmented_matrices,
+    constant_gain_filter,
+    rollout_corrected,
+    split_estimate,
+)
+from fnnlib.observers.gains import gain_matrix
+from fnnlib.observers.linear import Estimate, VectorField, eval_field
+
+
+def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: Sequence[complex], *,
+                        allow_unstable: bool = False) -> Tensor:
+    r"""Observer gain :math:`L` with :math:`\operatorname{eig}(A - LC)` = ``poles`` (discrete time).
+
+    By duality, :math:`L^T` is the state-feedback gain that places ``poles``
+    for :math:`(A^T, C^T)`: ``L = control.place(A.T, C.T, poles).T``.
+
+    Parameters
+    ----------
+    A : array, shape (m, m)
+    C : array, shape (q, m)
+    poles : sequence of m complex
+        Requested eigenvalues of :math:`A - LC`; complex ones in conjugate
+        pairs, each repeated at most ``rank(C)`` times, inside the unit disc
+        (a stable observer) unless ``allow_unstable``.
+
+    Returns
+    -------
+    Tensor, shape (m, q), float64
+
+    Raises
+    ------
+    ValueError
+        If (A, C) is not observable, or the poles are of the wrong number,
+        not in conjugate pairs, repeated too often, or outside the unit disc.
+    """
+    A = np.asarray(A, dtype=float)
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    m = A.shape[0]
+    if A.shape != (m, m) or C.shape[1] != m:
+        raise ValueError(f"A must be square and C have as many columns; got A {A.shape}, C {C.shape}")
+    p = np.asarray(poles, dtype=complex).ravel()
+    if p.size != m:
+        raise ValueError(f"need {m} poles for a {m}-state observer, got {p.size}: {p.tolist()}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"poles must be finite, got {p.tolist()}")
+    if not np.allclose(np.sort_complex(p), np.sort_complex(p.conj())):
+        raise ValueError(f"complex poles must come in conjugate pairs for a real gain, got {p.tolist()}")
+    if not allow_unstable and np.any(np.abs(p) >= 1):
+        bad = [complex(z) for z in p if abs(z) >= 1]
+        raise ValueError(f"discrete observer poles must lie inside the unit disc |z| < 1; got {bad} "
+                         "(the estimation error would not decay). Pass allow_unstable=True to place them anyway.")
+    rank = np.linalg.matrix_rank(control.obsv(A, C))
+    if rank < m:
+        raise ValueError(f"(A, C) is not observable (observability matrix rank {rank} < {m}): "
+                         "no gain can place every pole")
+    q = np.linalg.matrix_rank(C)
+    for z in p:
+        if np.sum(np.isclose(p, z)) > q:
+            raise ValueError(f"pole {complex(z)} is requested {int(np.sum(np.isclose(p, z)))} times; pole placement "
+                             f"(Tits-Yang) can repeat a pole at most rank(C) = {q} times")
+    with warnings.catch_warnings():
+        # Tits-Yang stops refining the *robustness* of the eigenvectors after maxiter; the poles are still
+        # placed, which the check below verifies instead
+        warnings.filterwarnings("ignore", message="Convergence was not reached", category=UserWarning)
+        L = control.place(A.T, C.T, p).T  # eig(A^T - C^T L^T) = poles  <=>  eig(A - L C) = poles
+    L = np.real_if_close(L).real
+    got = np.sort_complex(np.linalg.eigvals(A - L @ C))
+    miss = float(np.abs(got - np.sort_complex(p)).max())
+    if miss > 1e-6 * max(1.0, float(np.abs(p).max())):
+        raise RuntimeError(f"pole placement missed the requested poles by {miss:.3g}: got {got.tolist()}")
+    return torch.as_tensor(L, dtype=torch.float64)
+
+
+class LuenbergerObserver:
+    r"""Luenberger observer on the learned model with a constant-disturbance state.
+
+    The model and gain are those of :mod:`fnnlib.observers.augmented` and
+    :func:`place_observer_gain`. With every state measured, the augmented
+    plant is linear in :math:`z` once :math:`f_{neural}` is evaluated at the
+    measurement (as Eq. (7) does), so the design needs no linearisation and
+    the placed poles are the true error poles.
+
+    Parameters
+    ----------
+    f : callable
+        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
+    Ts : float
+        Sampling step.
+    n : int
+        State dimension.
+    poles : sequence of 2n complex, optional
+        Discrete poles of :math:`A - LC`, placed by :func:`place_observer_gain`.
+    L : Tensor, shape (2n, n), optional
+        A ready gain instead of ``poles`` (e.g. :func:`linear_feedback_gain`).
+    allow_unstable : bool
+        Accept poles on or outside the unit circle.
+
+    Attributes
+    ----------
+    A, B, C : Tensor
+        Augmented plant, (2n, 2n), (2n, n), (n, 2n).
+    L : Tensor, shape (2n, n)
+        Observer gain (predictor form).
+    """
+
+    def __init__(self, f: VectorField, Ts: float, n: int, poles: Sequence[complex] | None = None, *,
+                 L: Tensor | None = None, allow_unstable: bool = False):
+        self.f = f
+        self.Ts = check_positive(Ts, name="Ts")
+        self.n = int(n)
+        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+        if (poles is None) == (L is None):
+            raise ValueError("give exactly one of poles (to place) or L (a ready observer gain)")
+        if poles is not None:
+            self.L = place_observer_gain(self.A, self.C, poles, allow_unstable=allow_unstable)
+        else:
+            self.L = torch.as_tensor(L, dtype=torch.float64)
+            if self.L.shape != (2 * self.n, self.n):
+                raise ValueError(f"observer gain L must have shape {(2 * self.n, self.n)}, got {tuple(self.L.shape)}")
+            rho = float(np.abs(self.error_poles()).max())
+            if rho >= 1 and not allow_unstable:
+                raise ValueError(f"observer gain L gives error poles with |z| = {rho:.4g} >= 1 (unstable); "
+                                 "pass allow_unstable=True to use it anyway")
+        self.poles = [complex(z) for z in (poles if poles is not None else self.error_poles())]
+
+    def estimate(self, x: Tensor) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
+        x = as_trajectory(x, self.n)
+        with torch.no_grad():
+            u = eval_field(self.f, x)  # u_k = f_neural(y_k), as in Eq. (7)
+        z = constant_gain_filter(self.A, self.B, self.C, self.L, u, x)
+        return split_estimate(self.f, z, x)
+
+    def observe(self, x: Tensor) -> Estimate:
+        """``x_hat`` (:math:`\\hat x_{k|k}`), ``f_hat`` (:math:`f_{neural}(y_k) + \\hat d_{k|k}`), (..., T, n)."""
+        return self.estimate(x).as_estimate()
+
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
+        est = self.estimate(x)
+        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
+
+    def error_poles(self) -> np.ndarray:
+        """Eigenvalues of :math:`A - LC` (complex, shape (2n,))."""
+        return np.linalg.eigvals((self.A - self.L @ self.C).numpy())
+
+    def __repr__(self) -> str:
+        poles = [z.real if z.imag == 0 else z for z in self.poles]
+        return f"LuenbergerObserver(n={self.n}, Ts={self.Ts}, poles={poles})"
+
+
+def linear_feedback_gain(L: float | Tensor, Ts: float, n: int) -> Tensor:
+    r"""The Luenberger gain that *is* the linear feedback of Eqs. (7)-(8) with gain ``L``.
+
+    With :math:`L_{obs} = \begin{bmatrix} I + T_s L\\ L\end{bmatrix}` the filter
+    gain is :math:`M = A^{-1}L_{obs} = [I;\, L]`, so :math:`\hat x_{k|k} = y_k` (the
+    state part is deadbeat) and the disturbance estimate obeys
+    :math:`\hat d_{k+1} = (I - T_s L)\hat d_k + T_s L\, r_k`,
+    :math:`r_k = (y_{k+1} - y_k)/T_s - f_{neural}(y_k)`: the recursion of
+    :math:`L(y_k - \hat x_k)` in Eqs. (7)-(8) (both start at 0). Hence
+    :math:`\hat f = f_{neural}(y) + \hat d` equals Eq. (7)'s, and the error
+    poles are :math:`\{0\} \cup \operatorname{eig}(I - T_s L)`, the matrix of
+    Eq. (25).
+
+    Returns
+    -------
+    Tensor, shape (2n, n), float64
+    """
+    Lm = gain_matrix(L, int(n))
+    return torch.cat([torch.eye(int(n), dtype=torch.float64) + float(Ts) * Lm, Lm], 0)
