@@ -29,7 +29,26 @@ from fnnlib.plotting import new_figure, save_figure
 from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
 from fnnlib.report import claim_result, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
-from fnnlib.systems import DynamicalSystem, Spiral, add_measurement_noise
+from fnnlib.stability import (
+    discrete_residual,
+    gain_eigen_bounds,
+    growth_factor,
+    iss_bound,
+    observe_continuous,
+    reconvergence,
+    settling_time,
+    theorem1_balls,
+)
+from fnnlib.sweeps import (
+    cascade_sweep,
+    colon_range,
+    n_step_errors,
+    observe_gains,
+    outward_increase_fraction,
+    paired_levels,
+    simulate_levels,
+)
+from fnnlib.systems import DynamicalSystem, Spiral, SwitchedSystem, add_measurement_noise
 from fnnlib.training import (
     CheckpointError,
     TrainHistory,
@@ -45,6 +64,9 @@ set_num_threads()
 __all__ = [
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
+    "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
+    "settling_time", "theorem1_balls", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
+    "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
     "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",

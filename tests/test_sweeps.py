@@ -1,0 +1,181 @@
+"""Batched sweeps equal the one-gain-at-a-time library calls; grids read like the paper's; bad inputs."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict, mlp
+from fnnlib._scan import linear_recurrence
+from fnnlib.sweeps import (
+    _diagonal_recurrence,
+    cascade_sweep,
+    colon_range,
+    n_step_errors,
+    observe_gains,
+    outward_increase_fraction,
+    paired_levels,
+    simulate_levels,
+)
+
+F64 = torch.float64
+TS = 0.05
+
+
+@pytest.fixture(scope="module")
+def f():
+    torch.manual_seed(0)
+    net = mlp(2, 2, (8,), "tanh").double()
+    return lambda t, x: net(x)
+
+
+@pytest.fixture(scope="module")
+def x():
+    """Two trajectories (levels) of 40 samples: shape (2, 40, 2)."""
+    t = torch.arange(40, dtype=F64) * TS
+    return simulate_levels([Spiral(3.0, 0.05, 1.0), Spiral(1.5, 0.2, -1.0)], torch.tensor([2.0, 0.0]), t)
+
+
+# --- grids ------------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("grid, count, last", [
+    ((0, 5, 45), 10, 45.0),
+    ((0.8, 0.4, 4.4), 10, 4.4),
+    ((0.04, 0.02, 0.22), 10, 0.22),       # 0.18 / 0.02 is 8.999... in floating point
+    ((-0.03, 0.005, 0.025), 12, 0.025),
+    ((-14.4, 2.4, 12), 12, 12.0),
+    ((-24, 8, 96), 16, 96.0),              # the paper's eps grid of Fig. 3 has 16 values, not 10
+    ((0, 0.01, 0.06), 7, 0.06),
+    ((1, 0.3, 2), 4, 1.9),                 # stop not on the grid: MATLAB stops before it
+    ((5, -2, 0), 3, 1.0),
+])
+def test_colon_range_is_matlab_colon(grid, count, last):
+    r = colon_range(*grid)
+    assert r.dtype == F64 and r.numel() == count
+    assert float(r[0]) == float(grid[0]) and float(r[-1]) == pytest.approx(last, abs=1e-12)
+
+
+@pytest.mark.parametrize("grid", [(0, 0, 1), (0, -1, 1), (0, 1, float("nan"))])
+def test_colon_range_refuses_empty_or_bad_grids(grid):
+    with pytest.raises(ValueError, match="empty|non-finite"):
+        colon_range(*grid)
+
+
+def test_paired_levels_pairs_columns():
+    levels = paired_levels(colon_range(0.8, 0.4, 4.4), colon_range(0.04, 0.02, 0.22), colon_range(-24, 8, 48))
+    assert levels.shape == (10, 3)
+    assert levels[3].tolist() == pytest.approx([2.0, 0.1, 0.0])  # level 3 is the nominal spiral
+    with pytest.raises(ValueError, match=r"same length, got lengths \[10, 16\]"):
+        paired_levels(colon_range(0.8, 0.4, 4.4), colon_range(-24, 8, 96))
+    with pytest.raises(ValueError, match="at least one grid"):
+        paired_levels()
+
+
+def test_simulate_levels_stacks(x):
+    assert x.shape == (2, 40, 2) and x.dtype == F64
+    exact = Spiral(1.5, 0.2, -1.0).exact_solution(torch.tensor([2.0, 0.0]), torch.arange(40, dtype=F64) * TS)
+    torch.testing.assert_close(x[1], exact, rtol=0, atol=1e-8)
+    with pytest.raises(ValueError, match="at least one system"):
+        simulate_levels([], torch.zeros(2), torch.arange(3.0))
+
+
+# --- the batched scan and observer -------------------------------------------------------------------------------
+
+def test_diagonal_recurrence_matches_the_library_scan_per_batch():
+    g = torch.Generator().manual_seed(1)
+    a = torch.tensor([[0.9, -0.5], [1.05, 0.2], [-1.1, 0.0]], dtype=F64)  # stable, unstable, alternating
+    b = torch.randn(3, 4, 33, 2, generator=g, dtype=F64)
+    h0 = torch.randn(3, 4, 2, generator=g, dtype=F64)
+    out = _diagonal_recurrence(a[:, None, :], b, h0)
+    for i in range(3):
+        torch.testing.assert_close(out[i], linear_recurrence(a[i], b[i], h0[i]), rtol=1e-13, atol=1e-13)
+    h, ref = h0[1, 2], [h0[1, 2]]
+    for k in range(33):  # and one by hand: h_{k+1} = a h_k + b_k
+        h = a[1] * h + b[1, 2, k]
+        ref.append(h)
+    torch.testing.assert_close(out[1, 2], torch.stack(ref), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("L", [torch.tensor([0.0, 2.0, 7.5]), torch.tensor([[1.0, 3.0], [4.0, 0.5]])],
+                         ids=["scalar_gains", "diagonal_gains"])
+def test_observe_gains_equals_linear_feedback_per_gain(f, x, L):
+    est = observe_gains(f, x, TS, L)
+    assert est.x_hat.shape == est.f_hat.shape == (L.shape[0], 2, 40, 2)
+    for g in range(L.shape[0]):
+        one = LinearFeedback(f, L[g], TS, 2).observe(x)
+        torch.testing.assert_close(est.x_hat[g], one.x_hat, rtol=0, atol=1e-12)
+        torch.testing.assert_close(est.f_hat[g], one.f_hat, rtol=0, atol=1e-12)
+
+
+def test_observe_gains_refuses_unstable_unless_allowed(f, x):
+    with pytest.raises(GainError, match=r"rho\(I - Ts L\)"):
+        observe_gains(f, x, TS, torch.tensor([1.0, 50.0]))  # Ts L = 2.5
+    est = observe_gains(f, x, TS, torch.tensor([1.0, 50.0]), allow_unstable=True)
+    err = (x - est.x_hat).norm(dim=-1)
+    assert float(err[1, :, -1].min()) > 1e3 * float(err[0, :, -1].max())  # |1 - Ts L| = 1.5: 1.5^39 ~ 7e6
+
+
+# --- the batched cascade -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("L, beta", [
+    (torch.tensor([0.0, 3.0, 10.0]), 0.0),
+    (torch.tensor([0.0, 3.0, 10.0]), 0.1),
+    (torch.tensor([[2.0, 6.0], [9.0, 1.0]]), torch.tensor([0.0, 0.2])),
+    (5.0, torch.tensor([0.0, 0.05, 0.3])),
+])
+def test_cascade_sweep_equals_cascade_predict_per_pair(f, x, L, beta):
+    z = cascade_sweep(f, x, TS, 7, L, beta)
+    Lb = torch.as_tensor(L, dtype=F64).reshape(-1, *torch.as_tensor(L).shape[1:])
+    bb = torch.as_tensor(beta, dtype=F64).reshape(-1)
+    G = max(Lb.shape[0], bb.numel())
+    assert z.shape == (G, 2, 40, 2)
+    for g in range(G):
+        Lg, bg = Lb[g % Lb.shape[0]], float(bb[g % bb.numel()])
+        torch.testing.assert_close(z[g], cascade_predict(f, x, TS, 7, Lg, bg), rtol=0, atol=1e-12)
+
+
+def test_cascade_sweep_zero_gain_is_an_euler_rollout(f, x):
+    z = cascade_sweep(f, x[0], TS, 5, 0.0)[0]
+    ref = x[0]
+    for _ in range(5):
+        ref = ref + TS * f(0.0, ref)  # Euler: z <- z + Ts f(z)
+    torch.testing.assert_close(z, ref, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("kwargs, err, match", [
+    (dict(N=0), ValueError, "N must be an integer >= 1"),
+    (dict(N=2.5), ValueError, "N must be an integer >= 1"),
+    (dict(beta=-0.1), ValueError, "decay rates beta must be finite and >= 0"),
+    (dict(beta=torch.tensor([0.0, 0.1])), ValueError, "3 gains and 2 decay rates do not pair up"),
+    (dict(L=torch.ones(3, 3)), ValueError, r"shape \(G,\) \(scalar gains\) or \(G, 2\)"),
+    (dict(L=torch.tensor([])), ValueError, "gain batch L is empty"),
+    (dict(L=torch.tensor([1.0, -1.0, 2.0])), GainError, "not positive definite"),
+    (dict(Ts=0.0), ValueError, "Ts must be a finite positive"),
+])
+def test_cascade_sweep_bad_inputs(f, x, kwargs, err, match):
+    args = dict(Ts=TS, N=3, L=torch.tensor([1.0, 2.0, 3.0]), beta=0.0) | kwargs
+    with pytest.raises(err, match=match):
+        cascade_sweep(f, x, args["Ts"], args["N"], args["L"], args["beta"])
+
+
+# --- metrics of a sweep ------------------------------------------------------------------------------------------
+
+def test_n_step_errors_pairs_row_k_with_truth_k_plus_N():
+    truth = torch.arange(10, dtype=F64)[:, None].expand(10, 2)
+    pred = truth + 3.0  # row k holds truth[k] + 3 = truth[k + 3] + 0: exact for N = 3
+    assert torch.equal(n_step_errors(pred, truth, 3), torch.zeros(7, dtype=F64))
+    assert n_step_errors(pred, truth, 1).tolist() == pytest.approx([2 * math.sqrt(2)] * 9)
+    with pytest.raises(ValueError, match="need 1 <= N < T"):
+        n_step_errors(pred, truth, 10)
+
+
+def test_outward_increase_fraction():
+    v = torch.tensor([[5.0, 3.0, 1.0, 2.0, 4.0],   # V around index 2: every outward step grows
+                      [1.0, 3.0, 5.0, 4.0, 2.0],   # peak: every outward step shrinks
+                      [5.0, 3.0, 1.0, 0.5, 4.0]])  # 3 of 4 grow
+    assert outward_increase_fraction(v, 2).tolist() == [1.0, 0.0, 0.75]
+    assert outward_increase_fraction(v[0], 0).tolist() == 0.5  # from the left end: 5->3, 3->1 shrink; 1->2, 2->4 grow
+    with pytest.raises(ValueError, match="centre level 5"):
+        outward_increase_fraction(v, 5)
