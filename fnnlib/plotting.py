@@ -70,3 +70,18 @@ def plot_rate_curve(ax, f_true, f_est, *, title: str, label: str = "model", vmax
     ax.autoscale_view()
     ax.legend(loc="lower right", fontsize=8)
     return lc
+
+
+def trajectory_grid(n: int, ncols: int = 3) -> tuple[Figure, list]:
+    """A figure with one panel per trajectory (``ncols`` per row); unused panels are hidden.
+
+    Returns the figure and the list of the ``n`` panels in order.
+    """
+    if int(n) < 1:
+        raise ValueError(f"need at least one trajectory, got n={n}")
+    ncols = min(int(ncols), int(n))
+    fig, axes = new_figure(-(-int(n) // ncols), ncols)
+    flat = list(axes.flat)
+    for ax in flat[int(n):]:
+        ax.axis("off")
+    return fig, flat[: int(n)]

@@ -59,3 +59,16 @@ def test_plot_rate_curve_colours_by_error():
     assert len(lc.get_segments()) == 30
     np.testing.assert_allclose(lc.get_array(), 0.5)
     assert ax.get_title() == "(e)"
+
+
+def test_trajectory_grid_gives_one_panel_per_trajectory() -> None:
+    import matplotlib.pyplot as plt
+
+    from fnnlib.plotting import trajectory_grid
+
+    fig, axes = trajectory_grid(5)
+    assert len(axes) == 5 and len(fig.axes) == 6  # 2 x 3 grid, last panel hidden
+    assert not fig.axes[5].axison
+    plt.close(fig)
+    with pytest.raises(ValueError, match="at least one"):
+        trajectory_grid(0)

@@ -115,24 +115,18 @@ with torch.no_grad():
 acc_fb, acc_meas = est.f_hat[..., 3:], test.acc.float()
 acc_rmse = {"neural ODE": F.rmse(acc_nn, acc_meas), "feedback": F.rmse(acc_fb, acc_meas)}
 n_throws = x_test.shape[0]
-fig, axes = F.new_figure(int(np.ceil(n_throws / 3)), min(3, n_throws))
-for i, ax in enumerate(axes.flat):
-    if i >= n_throws:
-        ax.axis("off")
-        continue
-    for j, c in enumerate("xyz"):
+fig, axes = F.plotting.trajectory_grid(n_throws)
+for i, ax in enumerate(axes):
+    for j in range(3):
         ax.plot(t_test, x_test[i, :, j], color=F.plotting.COLORS["truth"], lw=1)
         ax.plot(t_test[N:], pred["feedback"][i, :-N, j], "--", color=F.plotting.COLORS["feedback"], lw=1)
     ax.set(title=f"test throw {i + 1}", xlabel="t [s]", ylabel="position [m]")
 fig_s2 = F.save_figure(fig, out, "figS2_positions")
 
 # %%
-fig, axes = F.new_figure(int(np.ceil(n_throws / 3)), min(3, n_throws))
-for i, ax in enumerate(axes.flat):
-    if i >= n_throws:
-        ax.axis("off")
-        continue
-    for j, c in enumerate("xyz"):
+fig, axes = F.plotting.trajectory_grid(n_throws)
+for i, ax in enumerate(axes):
+    for j in range(3):
         ax.plot(t_test, acc_meas[i, :, j], color=F.plotting.COLORS["truth"], lw=1)
         ax.plot(t_test, acc_nn[i, :, j], ":", color=F.plotting.COLORS["neural_ode"], lw=1)
         ax.plot(t_test, acc_fb[i, :, j], "--", color=F.plotting.COLORS["feedback"], lw=1)
