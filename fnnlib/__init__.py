@@ -7,12 +7,13 @@ networks); call :func:`set_num_threads` to change it.
 
 from fnnlib._threads import set_num_threads
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
-from fnnlib.models import MODELS, NeuralODE, mlp
+from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
 from fnnlib.observers import (
     Estimate,
     ExtendedKalmanObserver,
     KalmanObserver,
     LuenbergerObserver,
+    NeuralFeedbackObserver,
     Observer,
     evaluate_observer,
     linear_feedback_gain,
@@ -54,6 +55,7 @@ from fnnlib.training import (
     TrainHistory,
     load_checkpoint,
     save_checkpoint,
+    train_neural_feedback,
     train_neural_ode,
 )
 
@@ -67,6 +69,7 @@ __all__ = [
     "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
     "settling_time", "theorem1_balls", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
+    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
     "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",

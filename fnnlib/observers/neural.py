@@ -1,0 +1,152 @@
+"""The neural feedback network: a frozen neural ODE corrected by a learned h_neural (Sec. 4).
+
+Eq. (7) with the linear term replaced by a network,
+:math:`\\hat f_k = f_{neural}(x_k) + h_{neural}(x_k - \\hat x_k)`, and Eq. (8)
+`sys2_2`, :math:`\\hat x_{k+1} = \\hat x_k + T_s \\hat f_k`. The recursion for
+:math:`\\hat x` is nonlinear, so it runs as a loop over time, batched over all
+leading axes (cases, levels, start times); the N-step cascade of Sec. 3.3 runs
+its layers as anti-diagonal wavefronts (T + N - 1 sequential steps, not T * N).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import torch
+from torch import Tensor
+
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.observers.linear import Estimate, VectorField, eval_field
+
+Feedback = Callable[[Tensor], Tensor]
+
+
+def _check_N(N: int) -> int:
+    if int(N) != N or int(N) < 1:
+        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
+    return int(N)
+
+
+def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: float) -> Estimate:
+    r"""Run the neural feedback along measurements ``x`` (..., T, n), all leading axes at once.
+
+    ``fx = f_neural(x)`` (same shape) is given, so the frozen model is evaluated once, outside
+    the loop. For k = 0 .. T-1, with :math:`\hat x_0 = x_0`:
+
+    * :math:`\hat f_k = f_{neural}(x_k) + h_{neural}(x_k - \hat x_k)`  (Eq. (7), neural form)
+    * :math:`\hat x_{k+1} = \hat x_k + T_s \hat f_k`  (Eq. (8) `sys2_2`)
+
+    Gradients flow through ``h`` unless the caller disables them.
+
+    Returns
+    -------
+    Estimate
+        ``x_hat`` and ``f_hat``, both (..., T, n).
+    """
+    lead, (T, n) = x.shape[:-2], x.shape[-2:]
+    xs = x.reshape(-1, T, n)
+    fs = fx.reshape(-1, T, n)
+    x_hat_k = xs[:, 0]
+    x_hats, f_hats = [], []
+    for k in range(T):
+        f_hat_k = fs[:, k] + h(xs[:, k] - x_hat_k)  # f_hat = f_neural(x) + h_neural(x - x_hat)
+        x_hats.append(x_hat_k)
+        f_hats.append(f_hat_k)
+        x_hat_k = x_hat_k + Ts * f_hat_k  # x_hat += Ts * f_hat   (Eq. 8)
+    x_hat = torch.stack(x_hats, dim=1).reshape(*lead, T, n)
+    f_hat = torch.stack(f_hats, dim=1).reshape(*lead, T, n)
+    return Estimate(x_hat, f_hat)
+
+
+class NeuralFeedbackObserver:
+    r"""A frozen neural ODE with a learned neural feedback, behind the :class:`~fnnlib.observers.Observer` interface.
+
+    Parameters
+    ----------
+    f : callable
+        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n) (frozen).
+    h : callable
+        The feedback ``h(e)``, ``e = x - x_hat`` of shape (batch, n), e.g. a
+        :class:`~fnnlib.models.NeuralFeedback`.
+    Ts : float
+        Sampling step of the measurements (also the prediction step).
+    n : int
+        State dimension.
+    beta : float
+        Decay of the feedback along the cascade, the analogue of Eq. (11): layer ``i`` uses
+        :math:`e^{-\beta i} h_{neural}`. 0 (the default) keeps the learned feedback unchanged.
+    """
+
+    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int, *, beta: float = 0.0):
+        self.f = f
+        self.h = h
+        self.Ts = check_positive(Ts, name="Ts")
+        self.n = int(n)
+        self.beta = float(beta)
+        if not (math.isfinite(self.beta) and self.beta >= 0):
+            raise ValueError(f"decay rate beta must be finite and >= 0, got {beta!r}")
+
+    @torch.no_grad()
+    def observe(self, x: Tensor) -> Estimate:
+        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n)."""
+        x = as_trajectory(x, self.n)
+        return feedback_rollout(eval_field(self.f, x), x, self.h, self.Ts)
+
+    @torch.no_grad()
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        r"""N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
+
+        Layer ``i`` takes the previous layer's one-step predictions :math:`z^{(i)}_k`
+        (:math:`z^{(0)} = x`), keeps its own :math:`\hat x^{(i)}` (started at :math:`z^{(i)}_0`)
+        and outputs :math:`z^{(i+1)}_k = z^{(i)}_k + T_s \hat f^{(i)}_k`. Layer ``i`` at time ``k``
+        needs layer ``i-1`` at time ``k`` and itself at ``k-1``, so every cell with ``i + k = w``
+        is computed at once: T + N - 1 batched steps. Row k of the result predicts ``x(t_{k+N})``.
+        """
+        N = _check_N(N)
+        x = as_trajectory(x, self.n)
+        lead, (T, n) = x.shape[:-2], x.shape[-2:]
+        xs = x.reshape(-1, T, n)
+        B = xs.shape[0]
+        decay = torch.exp(-self.beta * torch.arange(N, dtype=x.dtype))[:, None, None]  # (N, 1, 1)
+        z_in = xs.new_zeros(N, B, n)  # z_in[i]: layer i's input at its current time w - i
+        x_hat = xs.new_zeros(N, B, n)  # x_hat[i]: layer i's estimate at its current time
+        out = torch.empty_like(xs)
+        for w in range(T + N - 1):
+            lo, hi = max(0, w - T + 1), min(N - 1, w)  # active layers: 0 <= w - i <= T - 1
+            if w < T:
+                z_in[0] = xs[:, w]
+            if hi == w:
+                x_hat[w] = z_in[w]  # a layer's estimate starts at its first input
+            z = z_in[lo:hi + 1].clone()
+            m = hi + 1 - lo
+            e = z - x_hat[lo:hi + 1]
+            f_hat = (self.f(0.0, z.reshape(-1, n)) + self.h(e.reshape(-1, n))
+                     * decay[lo:hi + 1].expand(m, B, 1).reshape(-1, 1)).reshape(m, B, n)
+            x_hat[lo:hi + 1] += self.Ts * f_hat  # x_hat^(i) += Ts * f_hat^(i)   (Eq. 8)
+            z_next = z + self.Ts * f_hat  # z^(i+1)_k = z^(i)_k + Ts * f_hat^(i)_k
+            if hi == N - 1:
+                out[:, w - N + 1] = z_next[-1]
+                z_next = z_next[:-1]
+            z_in[lo + 1:lo + 1 + z_next.shape[0]] = z_next
+        return out.reshape(*lead, T, n)
+
+    @torch.no_grad()
+    def predict_loop(self, x: Tensor, N: int) -> Tensor:
+        """Reference for :meth:`predict`: a plain loop over start times and depths; ``x`` (T, n)."""
+        N = _check_N(N)
+        x = as_trajectory(x, self.n)
+        if x.ndim != 2:
+            raise ValueError(f"the loop reference takes one trajectory of shape (T, n), got {tuple(x.shape)}")
+        x_hat: list[Tensor] = []
+        out = torch.empty_like(x)
+        for k in range(x.shape[0]):
+            z = x[k]
+            for i in range(N):
+                if k == 0:
+                    x_hat.append(z.clone())
+                f_hat = self.f(0.0, z[None])[0] + math.exp(-self.beta * i) * self.h((z - x_hat[i])[None])[0]
+                x_hat[i] = x_hat[i] + self.Ts * f_hat
+                z = z + self.Ts * f_hat
+            out[k] = z
+        return out

@@ -1,0 +1,123 @@
+"""Learning the neural feedback part by domain randomization: Eq. (12) `learn_feedback_part`, Alg. 1."""
+
+from __future__ import annotations
+
+import time
+
+import torch
+from torch import Tensor, nn
+from tqdm import tqdm
+
+from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
+from fnnlib.observers.neural import feedback_rollout
+from fnnlib.training.neural_ode import OPTIMIZERS, TrainHistory
+
+
+def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float) -> Tensor:
+    r"""Eq. (12) on a mini-batch: mean of :math:`\|x^*_j - x_j\|` over the batch.
+
+    The one-step Euler prediction is
+    :math:`x_j = x_{j-1} + T_s (f_{neural}(x_{j-1}) + h_{neural}(x_{j-1} - \hat x_{j-1}))`;
+    ``x_prev``, ``fx_prev``, ``e_prev = x_{j-1} - x_hat_{j-1}`` and the label ``x_next`` are (batch, n).
+    """
+    x_pred = x_prev + Ts * (fx_prev + h(e_prev))
+    return torch.linalg.vector_norm(x_next - x_pred, dim=-1).mean()
+
+
+def train_neural_feedback(
+    f: nn.Module,
+    h: nn.Module,
+    t: Tensor,
+    X: Tensor,
+    *,
+    iterations: int = 2000,
+    batch_size: int = 100,
+    lr: float = 0.01,
+    optimizer: str = "rmsprop",
+    refresh_every: int = 1,
+    seed: int = 0,
+    progress: bool = True,
+) -> TrainHistory:
+    r"""Train the feedback ``h`` on randomized cases with the neural ODE ``f`` frozen (Alg. 1).
+
+    Repeat: run the feedback network (``f`` + current ``h``, Eq. (8)) over all cases at once,
+    without gradients, to get :math:`\hat x_{i,j}`; build the data sets
+    :math:`\{x_{i,j-1}, \hat x_{i,j-1}, x^*_{i,j}\}`; minimise Eq. (12) on random mini-batches drawn
+    from all cases. The rollout is refreshed every ``refresh_every`` iterations.
+
+    ``f`` is frozen: it gets no optimizer, ``requires_grad`` is off while training (and restored
+    afterwards), and it is evaluated once on ``X``; its parameters are left bitwise unchanged.
+
+    Parameters
+    ----------
+    f : nn.Module
+        Trained neural ODE ``f(t, x)``, ``x`` (batch, n).
+    h : nn.Module
+        Feedback ``h(e)``, ``e`` (batch, n), e.g. :class:`~fnnlib.models.NeuralFeedback`.
+    t : Tensor, shape (T,)
+        Uniform sample times (step ``Ts``).
+    X : Tensor, shape (n_case, T, n)
+        One trajectory per randomized case.
+    refresh_every : int
+        Iterations between two rollouts of the current ``h`` (1: Alg. 1 literally).
+
+    Returns
+    -------
+    TrainHistory
+        The Eq. (12) loss per iteration and the wall time.
+    """
+    if not isinstance(X, Tensor) or X.ndim != 3:
+        raise ValueError(f"X must have shape (n_case, T, n), got {tuple(getattr(X, 'shape', ()))}")
+    X = as_trajectory(X, name="X")
+    n_case, T, n = X.shape
+    Ts = check_uniform_grid(t)
+    if t.numel() != T:
+        raise ValueError(f"t has {t.numel()} points but X has {T} samples per case")
+    if T < 2:
+        raise ValueError("each case needs at least 2 samples")
+    if optimizer not in OPTIMIZERS:
+        raise ValueError(f"unknown optimizer {optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
+    if int(iterations) < 1 or int(batch_size) < 1 or int(refresh_every) < 1:
+        raise ValueError(f"need iterations, batch_size and refresh_every >= 1; got {iterations}, {batch_size}, "
+                         f"{refresh_every}")
+    pool = n_case * (T - 1)
+    if int(batch_size) > pool:
+        raise ValueError(f"batch_size={batch_size} exceeds the {pool} available samples")
+    check_positive(lr, name="lr")
+    if any(p is q for p in f.parameters() for q in h.parameters()):
+        raise ValueError("f and h share parameters; the neural ODE must stay frozen")
+
+    dtype = next(h.parameters()).dtype
+    X = X.to(dtype)
+    flags = [p.requires_grad for p in f.parameters()]
+    history = TrainHistory()
+    start = time.perf_counter()
+    try:
+        for p in f.parameters():
+            p.requires_grad_(False)
+        with torch.no_grad():
+            fdtype = next(f.parameters(), X).dtype
+            fx = f(0.0, X.to(fdtype).reshape(-1, n)).to(dtype).reshape(n_case, T, n)  # frozen: evaluated once
+        x_prev, fx_prev = X[:, :-1].reshape(-1, n), fx[:, :-1].reshape(-1, n)
+        x_next = X[:, 1:].reshape(-1, n)  # the labels x*_{i,j}
+        opt = OPTIMIZERS[optimizer](h.parameters(), lr=float(lr))
+        gen = torch.Generator().manual_seed(int(seed))
+        e_prev = None
+        bar = tqdm(range(int(iterations)), desc="train neural feedback", disable=not progress, leave=False)
+        for it in bar:
+            if it % int(refresh_every) == 0:
+                with torch.no_grad():  # Alg. 1: run the feedback network over all cases, build the data sets
+                    x_hat = feedback_rollout(fx, X, h, Ts).x_hat
+                e_prev = (X[:, :-1] - x_hat[:, :-1]).reshape(-1, n)
+            pick = torch.randperm(pool, generator=gen)[: int(batch_size)]
+            opt.zero_grad()
+            value = feedback_loss(h, x_prev[pick], fx_prev[pick], e_prev[pick], x_next[pick], Ts)
+            value.backward()
+            opt.step()
+            history.loss.append(value.item())
+            bar.set_postfix(loss=f"{history.loss[-1]:.4f}", refresh=False)
+    finally:
+        for p, flag in zip(f.parameters(), flags):
+            p.requires_grad_(flag)
+    history.seconds = time.perf_counter() - start
+    return history

@@ -1,0 +1,93 @@
+"""Learning the neural feedback (Eq. (12), Alg. 1): one step descends, cases batch, f stays frozen."""
+
+import copy
+
+import pytest
+import torch
+
+from fnnlib.models import NeuralFeedback, NeuralODE
+from fnnlib.observers import feedback_rollout
+from fnnlib.systems import Spiral
+from fnnlib.training import feedback_loss, train_neural_feedback
+
+TS = 0.05
+
+
+def _cases(n_case=3, T=40):
+    t = torch.arange(T, dtype=torch.float64) * TS
+    X = torch.stack([Spiral(w, 0.1, e).exact_solution(torch.tensor([2.0, 0.0]), t)
+                     for w, e in zip([1.5, 2.0, 2.5][:n_case], [-1.0, 0.0, 1.0][:n_case])])
+    return t, X
+
+
+def _nets(seed=0):
+    torch.manual_seed(seed)
+    return NeuralODE(2, (16,), "tanh").double(), NeuralFeedback(2, (16,), "relu").double()
+
+
+def test_one_step_lowers_the_full_batch_loss():
+    t, X = _cases()
+    f, h = _nets()
+    with torch.no_grad():
+        fx = f(0.0, X.reshape(-1, 2)).reshape(X.shape)
+        e = X - feedback_rollout(fx, X, h, TS).x_hat
+    args = (X[:, :-1].reshape(-1, 2), fx[:, :-1].reshape(-1, 2), e[:, :-1].reshape(-1, 2), X[:, 1:].reshape(-1, 2), TS)
+    with torch.no_grad():
+        before = feedback_loss(h, *args).item()
+    pool = X.shape[0] * (X.shape[1] - 1)
+    hist = train_neural_feedback(f, h, t, X, iterations=1, batch_size=pool, lr=1e-3, optimizer="adam",
+                                 progress=False)
+    with torch.no_grad():
+        after = feedback_loss(h, *args).item()
+    assert hist.loss[0] == pytest.approx(before, rel=1e-12)
+    assert after < before
+
+
+def test_training_leaves_f_bitwise_unchanged():
+    t, X = _cases()
+    f, h = _nets()
+    f_state = copy.deepcopy(f.state_dict())
+    flags = [p.requires_grad for p in f.parameters()]
+    hist = train_neural_feedback(f, h, t, X, iterations=60, batch_size=32, lr=0.01, refresh_every=5, progress=False)
+    assert len(hist.loss) == 60 and hist.seconds > 0
+    assert all(torch.equal(f_state[k], v) for k, v in f.state_dict().items())
+    assert [p.requires_grad for p in f.parameters()] == flags  # restored after training
+    assert all(p.grad is None for p in f.parameters())
+
+
+def test_rollout_batched_over_cases_equals_per_case():
+    t, X = _cases()
+    f, h = _nets()
+    with torch.no_grad():
+        fx = f(0.0, X.reshape(-1, 2)).reshape(X.shape)
+        batched = feedback_rollout(fx, X, h, TS)
+        for i in range(X.shape[0]):
+            one = feedback_rollout(fx[i], X[i], h, TS)
+            torch.testing.assert_close(batched.x_hat[i], one.x_hat, rtol=0, atol=1e-12)
+            torch.testing.assert_close(batched.f_hat[i], one.f_hat, rtol=0, atol=1e-12)
+
+
+def test_same_seed_same_result():
+    t, X = _cases()
+    runs = []
+    for _ in range(2):
+        f, h = _nets()
+        runs.append(train_neural_feedback(f, h, t, X, iterations=5, batch_size=16, progress=False).loss)
+    assert runs[0] == runs[1]
+
+
+def test_bad_inputs():
+    t, X = _cases()
+    f, h = _nets()
+    with pytest.raises(ValueError, match="n_case, T, n"):
+        train_neural_feedback(f, h, t, X[0], progress=False)
+    with pytest.raises(ValueError, match="points but X has"):
+        train_neural_feedback(f, h, t[:-1], X, progress=False)
+    with pytest.raises(ValueError, match="exceeds"):
+        train_neural_feedback(f, h, t, X, batch_size=10_000, progress=False)
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        train_neural_feedback(f, h, t, X, optimizer="sgd", progress=False)
+    with pytest.raises(ValueError, match="refresh_every"):
+        train_neural_feedback(f, h, t, X, refresh_every=0, progress=False)
+    with pytest.raises(ValueError, match="share parameters"):
+        train_neural_feedback(f, f.net, t, X, progress=False)
