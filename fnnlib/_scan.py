@@ -6,12 +6,7 @@ import torch
 from torch import Tensor
 
 
-def _apply(P: Tensor, y: Tensor) -> Tensor:
-    """P y for row-vector batches ``y`` (..., n); ``P`` is (n,) diagonal or (n, n)."""
-    return y * P if P.ndim == 1 else y @ P.T
-
-
-def linear_recurrence(A: Tensor, b: Tensor, h0: Tensor) -> Tensor:
+def linear_recurrence(A: Tensor, b: Tensor, h0: Tensor, *, diagonal: bool | None = None) -> Tensor:
     r"""Solve :math:`h_{k+1} = A h_k + b_k` for every step at once.
 
     Hillis-Steele doubling: after the pass with offset d, each entry holds the
@@ -22,24 +17,31 @@ def linear_recurrence(A: Tensor, b: Tensor, h0: Tensor) -> Tensor:
 
     Parameters
     ----------
-    A : Tensor, shape (n,) or (n, n)
-        Constant transition; a vector means a diagonal matrix.
+    A : Tensor, shape (n, n), (n,) or (..., n)
+        Constant transition: a full matrix, or with ``diagonal`` its diagonal,
+        which may differ across the batch (broadcast with ``h0``).
     b : Tensor, shape (..., T-1, n)
         Inputs.
     h0 : Tensor, shape (..., n)
         Initial state.
+    diagonal : bool, optional
+        Whether ``A`` holds diagonals; by default a 1-D ``A`` is a diagonal
+        and a 2-D one a matrix.
 
     Returns
     -------
     Tensor, shape (..., T, n)
         ``h_0 .. h_{T-1}``.
     """
+    if diagonal is None:
+        diagonal = A.ndim == 1
     y = torch.cat([h0.unsqueeze(-2), b], dim=-2)
     T = y.shape[-2]
-    P = A
+    P = A.unsqueeze(-2) if diagonal else A  # diagonal: (..., 1, n), the same transition at every step
     d = 1
     while d < T:
-        y = torch.cat([y[..., :d, :], y[..., d:, :] + _apply(P, y[..., :-d, :])], dim=-2)
-        P = P * P if P.ndim == 1 else P @ P
+        shifted = y[..., :-d, :] * P if diagonal else y[..., :-d, :] @ P.T  # A^d h_{k-d}
+        y = torch.cat([y[..., :d, :], y[..., d:, :] + shifted], dim=-2)
+        P = P * P if diagonal else P @ P
         d *= 2
     return y

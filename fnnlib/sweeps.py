@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
+from fnnlib._scan import linear_recurrence
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.observers.gains import check_gain
 from fnnlib.observers.linear import Estimate, VectorField, eval_field
@@ -98,25 +99,6 @@ def _decay_batch(beta: float | Sequence[float] | Tensor, G: int) -> tuple[Tensor
     return beta, max(G, beta.numel())
 
 
-def _diagonal_recurrence(a: Tensor, b: Tensor, h0: Tensor) -> Tensor:
-    r"""Solve :math:`h_{k+1} = a \odot h_k + b_k` for all k by a doubling scan.
-
-    ``a`` (..., n) is a diagonal transition per batch element (broadcast with
-    ``h0`` (..., n)); ``b`` is (..., T-1, n). Returns (..., T, n). The batched
-    twin of :func:`fnnlib._scan.linear_recurrence` for a diagonal ``A`` that
-    differs across the batch (one per gain of a sweep).
-    """
-    y = torch.cat([h0.unsqueeze(-2), b], dim=-2)
-    T = y.shape[-2]
-    P = a.unsqueeze(-2)  # (..., 1, n): the same transition at every step
-    d = 1
-    while d < T:
-        y = torch.cat([y[..., :d, :], y[..., d:, :] + P * y[..., :-d, :]], dim=-2)  # add A^d h_{k-d}
-        P = P * P
-        d *= 2
-    return y
-
-
 def _lead(v: Tensor, ndim: int) -> Tensor:
     """(G, n) -> (G, 1, ..., 1, n) to broadcast against a (G, ..., T, n) trajectory batch of ``ndim`` axes."""
     return v.reshape(v.shape[0], *([1] * (ndim - 2)), v.shape[-1])
@@ -126,7 +108,7 @@ def _feedback_batch(fz: Tensor, z: Tensor, L: Tensor, Ts: float) -> Estimate:
     """Eqs. (7)-(8) for a batch of diagonal gains: ``z``, ``fz`` (G, ..., T, n), ``L`` (G, n)."""
     Lb = _lead(L, z.ndim)
     b = Ts * (fz + Lb * z)  # x_hat_{k+1} = (1 - Ts L) x_hat_k + Ts (f(z_k) + L z_k)   (Eq. 8)
-    x_hat = _diagonal_recurrence((1.0 - Ts * Lb).squeeze(-2), b[..., :-1, :], z[..., 0, :])
+    x_hat = linear_recurrence((1.0 - Ts * Lb).squeeze(-2), b[..., :-1, :], z[..., 0, :], diagonal=True)
     f_hat = fz + Lb * (z - x_hat)  # f_hat = f_neural + L (z - x_hat)   (Eq. 7)
     return Estimate(x_hat, f_hat)
 

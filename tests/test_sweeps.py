@@ -10,7 +10,6 @@ import torch
 from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict, mlp
 from fnnlib._scan import linear_recurrence
 from fnnlib.sweeps import (
-    _diagonal_recurrence,
     cascade_sweep,
     colon_range,
     n_step_errors,
@@ -83,12 +82,12 @@ def test_simulate_levels_stacks(x):
 
 # --- the batched scan and observer -------------------------------------------------------------------------------
 
-def test_diagonal_recurrence_matches_the_library_scan_per_batch():
+def test_batched_diagonal_recurrence_matches_the_scan_per_batch():
     g = torch.Generator().manual_seed(1)
     a = torch.tensor([[0.9, -0.5], [1.05, 0.2], [-1.1, 0.0]], dtype=F64)  # stable, unstable, alternating
     b = torch.randn(3, 4, 33, 2, generator=g, dtype=F64)
     h0 = torch.randn(3, 4, 2, generator=g, dtype=F64)
-    out = _diagonal_recurrence(a[:, None, :], b, h0)
+    out = linear_recurrence(a[:, None, :], b, h0, diagonal=True)
     for i in range(3):
         torch.testing.assert_close(out[i], linear_recurrence(a[i], b[i], h0[i]), rtol=1e-13, atol=1e-13)
     h, ref = h0[1, 2], [h0[1, 2]]
