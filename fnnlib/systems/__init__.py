@@ -1,8 +1,10 @@
-"""Dynamical systems: the spiral (Eq. 26) and switched systems (Fig. S12); the thrown object and quadrotor come later."""
+"""Dynamical systems: the spiral (Eq. 26), switched systems (Fig. S12), the thrown object and the quadrotor (Eq. 27)."""
 
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.noise import add_measurement_noise
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
 from fnnlib.systems.spiral import Spiral
 from fnnlib.systems.switched import SwitchedSystem
 
-__all__ = ["DynamicalSystem", "Spiral", "SwitchedSystem", "add_measurement_noise"]
+__all__ = ["NOMINAL", "TEST_TRUTH", "TRAINING_TRUTH", "DynamicalSystem", "Quadrotor", "QuadrotorParams", "Spiral",
+           "SwitchedSystem", "add_measurement_noise"]

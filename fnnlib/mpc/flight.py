@@ -1,0 +1,159 @@
+r"""The closed-loop flight test of Sec. 5.2: linearized MPC (Eq. (28)) with a prediction model, on a truth vehicle."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+from tqdm.auto import tqdm
+
+from fnnlib._validation import check_finite, check_positive
+from fnnlib.control.flatness import flat_reference
+from fnnlib.control.trajectories import lissajous
+from fnnlib.mpc.linearize import linearize
+from fnnlib.mpc.linearized import LinearizedMPC
+from fnnlib.mpc.models import PredictionModel
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
+
+__all__ = ["FlightResult", "fly", "lissajous_reference", "tracking_rmse"]
+
+
+def lissajous_reference(steps: int, N: int, *, dt: float = 0.02, params: QuadrotorParams = NOMINAL,
+                        **lissajous_params: float) -> tuple[Tensor, Tensor]:
+    """The flight-test reference (App. A.5.5) on the control grid, by differential flatness (zero yaw).
+
+    Returns ``x_r`` (steps + N + 1, 12) and ``u_r`` (steps + N, 4), float64, for
+    ``t = 0, dt, ...``; the extra ``N`` rows feed the last horizons.
+    """
+    t = np.arange(int(steps) + int(N) + 1) * check_positive(dt, name="dt")
+    ref = lissajous(t, **lissajous_params)
+    as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64)  # noqa: E731
+    Psi = torch.cat([as_t(ref.p), as_t(ref.v), as_t(ref.a), as_t(ref.j)], dim=-1)
+    x_r, u_r = flat_reference(Psi, as_t(ref.s), params=params)
+    return x_r, u_r[:-1]
+
+
+@dataclass
+class FlightResult:
+    """One MPC flight: what happened and what the model predicted.
+
+    Shapes: ``x`` (T+1, 12) flown states, ``u`` (T, 4) applied thrusts,
+    ``x_ref`` (T+1, 12), ``xdot_true`` / ``xdot_pred`` (T, 12) the truth's and
+    the model's change rate at each measured state and applied input (Fig.
+    S8), ``x_tilde`` (T, 12) the layer-0 observation error (NaN where the model
+    has none), ``delta`` (T, 12) the model's one-step residual
+    :math:`(x_{t+1} - \\Phi(x_t, u_t)) / dt` without feedback (for Theorems 1-2).
+    """
+
+    name: str
+    x: np.ndarray
+    u: np.ndarray
+    x_ref: np.ndarray
+    xdot_true: np.ndarray
+    xdot_pred: np.ndarray
+    x_tilde: np.ndarray
+    delta: np.ndarray
+    t_linearize: np.ndarray
+    t_solve: np.ndarray
+    n_fallbacks: int
+    statuses: list[str] = field(default_factory=list)
+
+    @property
+    def wall_time(self) -> float:
+        return float(self.t_linearize.sum() + self.t_solve.sum())
+
+
+def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
+    """Position tracking RMSE: per axis, their mean (the paper's number) and the RMSE of the error norm."""
+    e = np.asarray(x)[:, :3] - np.asarray(x_ref)[:, :3]
+    per_axis = np.sqrt(np.mean(e**2, axis=0))
+    return {"x": float(per_axis[0]), "y": float(per_axis[1]), "z": float(per_axis[2]),
+            "mean_axis": float(per_axis.mean()), "norm": float(np.sqrt(np.mean(np.sum(e**2, axis=1))))}
+
+
+def fly(model: PredictionModel, mpc: LinearizedMPC, truth: Quadrotor, x_r: Tensor, u_r: Tensor, *, steps: int,
+        x0: Tensor | None = None, dt: float = 0.02, substeps: int = 4, linearize_method: str = "central",
+        progress: bool = False) -> FlightResult:
+    r"""Fly ``steps`` control steps of the MPC with ``model`` on the ``truth`` vehicle.
+
+    At step ``t``: the model observes the measured state; the model is
+    linearized along the previous plan shifted by one step (the reference at
+    the first step), with the measured state as the first point; the QP of
+    Eq. (28) is solved against the reference ``x_r[t+1 .. t+N]``,
+    ``u_r[t .. t+N-1]``; ``u_0`` is applied to the truth for ``dt`` (RK4 with
+    ``substeps``); the model commits the plan.
+
+    Parameters
+    ----------
+    x_r, u_r : Tensor, shapes (steps + N + 1, 12) and (steps + N, 4)
+        Reference states and inputs on the control grid (from flatness).
+    x0 : Tensor, shape (12,), optional
+        Initial state; default ``x_r[0]``.
+    """
+    check_positive(dt, name="dt")
+    steps, N = int(steps), int(mpc.N)
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    x_r = torch.as_tensor(x_r, dtype=torch.float64)
+    u_r = torch.as_tensor(u_r, dtype=torch.float64)
+    if x_r.shape != (steps + N + 1, 12) or u_r.shape != (steps + N, 4):
+        raise ValueError(f"reference must be x_r ({steps + N + 1}, 12) and u_r ({steps + N}, 4) for steps={steps}, "
+                         f"N={N}; got {tuple(x_r.shape)} and {tuple(u_r.shape)}")
+    check_finite(x_r, name="x_r")
+    check_finite(u_r, name="u_r")
+    x = (x_r[0] if x0 is None else torch.as_tensor(x0, dtype=torch.float64)).clone()
+    check_finite(x, name="x0")
+    model.reset()
+    mpc.reset()
+    fallbacks_before = int(mpc.n_fallbacks)
+    u_lb = torch.as_tensor(np.asarray(mpc.u_lb), dtype=torch.float64)
+    u_ub = torch.as_tensor(np.asarray(mpc.u_ub), dtype=torch.float64)
+    k_idx = torch.arange(N)
+
+    xs, us = [x.clone()], []
+    xdot_true, xdot_pred, x_tilde, delta = [], [], [], []
+    t_lin, t_sol, statuses = np.zeros(steps), np.zeros(steps), []
+    plan_x: Tensor | None = None
+    plan_u: Tensor | None = None
+    bar = tqdm(range(steps), desc=model.name, disable=not progress, leave=False)
+    for t in bar:
+        model.observe(x)
+        e = model.observer_error
+        x_tilde.append(np.full(12, np.nan) if e is None else e.numpy().copy())
+        # linearisation point: the previous plan shifted by one step, starting at the measured state
+        if plan_x is None:
+            x_bar = torch.cat([x[None], x_r[t + 1:t + N]])
+            u_bar = u_r[t:t + N].clone()
+        else:
+            x_bar = torch.cat([x[None], plan_x[2:N + 1]])
+            u_bar = torch.cat([plan_u[1:], plan_u[-1:]])
+        tic = time.perf_counter()
+        lin = linearize(model.step, x_bar, u_bar, k_idx, method=linearize_method)  # type: ignore[arg-type]
+        t_lin[t] = time.perf_counter() - tic
+        tic = time.perf_counter()
+        sol = mpc.solve(x.numpy(), lin.A, lin.B, lin.c, x_r[t + 1:t + N + 1].numpy(), u_r[t:t + N].numpy())
+        t_sol[t] = time.perf_counter() - tic
+        statuses.append(str(sol.status))
+        plan_u = torch.as_tensor(sol.u, dtype=torch.float64)
+        plan_x = torch.as_tensor(sol.x, dtype=torch.float64)
+        plan_x[0] = x
+        u = torch.minimum(torch.maximum(plan_u[0], u_lb), u_ub)  # solver tolerance
+        plan_u[0] = u  # the models are told the input actually applied (commit's contract)
+        with torch.no_grad():
+            xdot_true.append(truth.f(x, u).numpy())
+            xdot_pred.append(model.xdot(x, u).numpy())
+            x_next = truth.step(x, u, dt=dt, substeps=substeps)
+            delta.append(((x_next - model.phi(x, u)) / dt).numpy())
+        model.commit(plan_x, plan_u)
+        check_finite(x_next, name=f"truth state at step {t + 1}")
+        us.append(u.numpy().copy())
+        x = x_next
+        xs.append(x.clone())
+    return FlightResult(
+        name=model.name, x=torch.stack(xs).numpy(), u=np.stack(us), x_ref=x_r[:steps + 1].numpy(),
+        xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
+        delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
+        statuses=statuses)

@@ -1,0 +1,262 @@
+r"""Prediction models for the quadrotor MPC of Sec. 5.2 and App. A.5.3-A.5.4, behind one interface.
+
+Every model is a discrete map for horizon step ``k``,
+``step(x, u, k) -> x_next`` (batched, torch), which the MPC linearizes along
+its previous plan. Between control steps the MPC loop calls
+
+* :meth:`PredictionModel.observe` with the new measured state (before solving),
+* :meth:`PredictionModel.commit` with the plan it applied (after solving),
+
+which is where the feedback cascade and the adaptive laws learn online.
+
+The seven models of the paper's comparison (App. A.5.4):
+
+===========  ==============================================================
+``Nomi``     the nominal model, Eq. (27)
+``Neural``   nominal + the residual neural ODE trained with App. A.1
+``MLP``      nominal + a feed-forward residual trained on single-step labels
+``FB``       nominal + the linear feedback cascade (Eqs. (7)-(8), (11))
+``AdapNN``   nominal + residual with an adaptive last layer (Cheng et al.)
+``FNN``      nominal + residual neural ODE + the feedback cascade
+``AdapFNN``  ``FNN`` with the adaptive last layer, Eqs. (29)-(30)
+===========  ==============================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from torch import Tensor, nn
+
+from fnnlib._validation import check_finite, check_positive
+from fnnlib.models.residual import AdaptiveResidual
+from fnnlib.observers.gains import check_gain, decayed_gains
+from fnnlib.systems.quadrotor import Quadrotor
+
+__all__ = ["AdaptiveNNModel", "FeedbackCascadeModel", "PredictionModel", "paper_models"]
+
+
+class PredictionModel:
+    r"""Nominal dynamics Eq. (27) plus an optional learned residual, discretised by RK4.
+
+    :math:`\Phi(x, u)`: one RK4 step of length ``dt`` (``substeps`` sub-steps) of
+    :math:`\dot x = f(x, u) + [0, f_{neural}(v, \Theta), 0, 0]`.
+
+    Parameters
+    ----------
+    name : str
+        Label used in tables and figures.
+    plant : Quadrotor
+        The model's own (nominal) quadrotor; never the test vehicle.
+    residual : callable or None
+        ``residual(x) -> (..., 3)`` acceleration, e.g. an
+        :class:`~fnnlib.models.AeroResidual`; ``None`` for the nominal model.
+    dt : float
+        Control / prediction step (0.02 s in the paper).
+    substeps : int
+        RK4 sub-steps per ``dt``.
+    """
+
+    def __init__(self, name: str, plant: Quadrotor, residual: Callable[[Tensor], Tensor] | None = None, *,
+                 dt: float = 0.02, substeps: int = 1) -> None:
+        self.name = str(name)
+        self.plant = plant
+        self.residual = residual
+        self.dt = check_positive(dt, name="dt")
+        self.substeps = int(substeps)
+        if isinstance(residual, nn.Module):
+            for p in residual.parameters():
+                p.requires_grad_(False)
+
+    # -- the model --------------------------------------------------------
+    def f(self, x: Tensor, u: Tensor) -> Tensor:
+        """Continuous change rate of the model, (..., 12)."""
+        return self.plant.f(x, u, a_res=None if self.residual is None else self.residual(x))
+
+    def phi(self, x: Tensor, u: Tensor) -> Tensor:
+        r""":math:`\Phi(x, u)`, the RK4 step of :meth:`f` (no feedback)."""
+        return self.plant.step(x, u, dt=self.dt, substeps=self.substeps, a_res_fn=self.residual)
+
+    def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
+        """The discrete model for horizon steps ``k`` (LongTensor, batch); here the same for every ``k``."""
+        return self.phi(x, u)
+
+    def xdot(self, x: Tensor, u: Tensor) -> Tensor:
+        """The model's first-step change-rate prediction at the measured state (Fig. S8)."""
+        return self.f(x, u)
+
+    # -- online hooks -----------------------------------------------------
+    def observe(self, x_meas: Tensor) -> None:
+        """A new measured state (12,), before the MPC solves."""
+
+    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
+        """The plan just solved: states (N+1, 12) from the measured state, inputs (N, 4); ``plan_u[0]`` is applied."""
+
+    def reset(self) -> None:
+        """Forget everything learned online."""
+
+    @property
+    def observer_error(self) -> Tensor | None:
+        r"""The layer-0 observation error :math:`\tilde x = x - \hat x` at the last measurement, if any."""
+        return None
+
+
+class AdaptiveNNModel(PredictionModel):
+    r"""AdapNN: nominal + a residual whose last layer adapts from the one-step velocity error.
+
+    The adaptive-network baseline (Cheng et al. 2019, App. A.5.4): the update
+    has the form of Eq. (30) with the error signal taken as the one-step
+    acceleration prediction error :math:`\tilde a_t = (v_{t+1} - \hat v_{t+1}) / dt`, where
+    :math:`\hat v_{t+1}` is the model's prediction from :math:`(x_t, u_t)` (there is no
+    observer to supply :math:`\tilde x`).
+    """
+
+    def __init__(self, name: str, plant: Quadrotor, residual: AdaptiveResidual, *, dt: float = 0.02,
+                 substeps: int = 1) -> None:
+        if not isinstance(residual, AdaptiveResidual):
+            raise TypeError(f"AdaptiveNNModel needs an AdaptiveResidual, got {type(residual).__name__}")
+        super().__init__(name, plant, residual, dt=dt, substeps=substeps)
+        self._last: tuple[Tensor, Tensor] | None = None  # (x_t, predicted x_{t+1})
+
+    def observe(self, x_meas: Tensor) -> None:
+        check_finite(x_meas, name="x_meas")
+        if self._last is not None:
+            x_prev, x_pred = self._last
+            a_tilde = (x_meas[3:6] - x_pred[3:6]) / self.dt
+            self.residual.adapt(x_prev, a_tilde, self.dt)  # type: ignore[union-attr]
+
+    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
+        with torch.no_grad():
+            self._last = (plan_x[0].clone(), self.phi(plan_x[0], plan_u[0]))
+
+    def reset(self) -> None:
+        self._last = None
+        self.residual.reset()  # type: ignore[union-attr]
+
+
+class FeedbackCascadeModel(PredictionModel):
+    r"""A model corrected by the linear feedback cascade inside the MPC horizon (Sec. 3.3, App. A.5.3).
+
+    Layer ``k = 0 .. N-1`` of the cascade keeps an estimate :math:`\hat x^{(k)}` and
+    corrects horizon step ``k`` by Eq. (7) with the decayed gain of Eq. (11),
+    :math:`L_k = L e^{-\beta k}`, in the discrete form
+
+    .. math:: x_{k+1} = \Phi(x_k, u_k) + T_s L_k (x_k - \hat x^{(k)}).
+
+    Layer 0 observes the measured state; layer ``k`` observes the plan's state
+    ``k`` steps ahead. After each solve every layer advances one step along
+    the new plan ``(X_k, u_k)`` by the RK4 form of Eq. (8):
+
+    .. math:: \hat x^{(k)} \leftarrow \hat x^{(k)} + [\Phi(X_k, u_k) - X_k] + T_s L_k (X_k - \hat x^{(k)}),
+
+    so that for layer 0 the error obeys Eq. (25),
+    :math:`\tilde x_{t+1} = (I - T_s L)\tilde x_t + T_s\Delta_t` with :math:`\Delta_t` the
+    model's one-step residual, and :math:`L\tilde x \to \Delta`.
+
+    With an :class:`~fnnlib.models.AdaptiveResidual` (``adaptive=True``) this is
+    AdapFNN: at each measurement the last layer moves by Eq. (30) with the
+    velocity part of :math:`\tilde x = x - \hat x^{(0)}` (Eqs. (29)-(30), Theorem 2).
+
+    Parameters
+    ----------
+    base : PredictionModel
+        The model being corrected (nominal, or nominal + residual).
+    L : float or Tensor
+        Feedback gain (scalar, (12,) diagonal or (12, 12)); the paper: 3 I.
+    beta : float
+        Gain decay rate of Eq. (11); the paper: 0.1.
+    N : int
+        Horizon length (number of cascade layers).
+    name : str, optional
+        Defaults to ``"FB-" + base.name``.
+    """
+
+    def __init__(self, base: PredictionModel, L: float | Tensor, beta: float, N: int, *, name: str | None = None,
+                 adaptive: bool = False) -> None:
+        super().__init__(name or f"FB-{base.name}", base.plant, base.residual, dt=base.dt, substeps=base.substeps)
+        self.base = base
+        # positive definite and stable at Ts = dt, as Theorem 1 needs
+        L_mat = check_gain(L, 12, self.dt)
+        self.L = torch.stack(decayed_gains(L_mat, int(N), beta))  # (N, 12, 12)
+        self.N = int(N)
+        self.beta = float(beta)
+        if adaptive and not isinstance(base.residual, AdaptiveResidual):
+            raise TypeError("adaptive=True needs a base model whose residual is an AdaptiveResidual")
+        self.adaptive = bool(adaptive)
+        self.x_hat: Tensor | None = None  # (N, 12)
+        self._x_tilde: Tensor | None = None
+
+    def _correction(self, x: Tensor, k: Tensor) -> Tensor:
+        if self.x_hat is None:
+            return torch.zeros_like(x)
+        L_k = self.L.to(x.dtype)[k]  # (..., 12, 12)
+        # L_k (x - x_hat^(k))   (Eq. 7)
+        return (L_k @ (x - self.x_hat.to(x.dtype)[k]).unsqueeze(-1)).squeeze(-1)
+
+    def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
+        return self.phi(x, u) + self.dt * self._correction(x, k)
+
+    def xdot(self, x: Tensor, u: Tensor) -> Tensor:
+        k = torch.zeros(x.shape[:-1], dtype=torch.long)
+        return self.f(x, u) + self._correction(x, k)
+
+    def observe(self, x_meas: Tensor) -> None:
+        check_finite(x_meas, name="x_meas")
+        if self.x_hat is None:
+            return
+        self._x_tilde = (x_meas - self.x_hat[0]).detach().clone()
+        if self.adaptive:
+            # chi_hat' = Gamma Xi^T x_tilde   (Eq. 30), velocity rows
+            self.residual.adapt(x_meas, self._x_tilde[3:6], self.dt)  # type: ignore[union-attr]
+
+    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
+        if plan_x.shape != (self.N + 1, 12) or plan_u.shape != (self.N, 4):
+            raise ValueError(f"plan must be x (N+1, 12), u (N, 4) with N = {self.N}; got {tuple(plan_x.shape)}, "
+                             f"{tuple(plan_u.shape)}")
+        with torch.no_grad():
+            X, U = plan_x[:-1], plan_u
+            if self.x_hat is None:  # start every layer on the plan: zero correction
+                self.x_hat = X.clone()
+            Lk = self.L.to(X.dtype)
+            # x_hat <- x_hat + [Phi(X, u) - X] + Ts L_k (X - x_hat)   (Eq. 8, RK4 form)
+            fb = (Lk @ (X - self.x_hat).unsqueeze(-1)).squeeze(-1)
+            self.x_hat = self.x_hat + (self.phi(X, U) - X) + self.dt * fb
+            check_finite(self.x_hat, name="x_hat")
+
+    def reset(self) -> None:
+        self.x_hat = None
+        self._x_tilde = None
+        if self.adaptive:
+            self.residual.reset()  # type: ignore[union-attr]
+
+    @property
+    def observer_error(self) -> Tensor | None:
+        return self._x_tilde
+
+
+def paper_models(residual: nn.Module, mlp: nn.Module, *, L: float | Tensor = 3.0, beta: float = 0.1, N: int = 10,
+                 Gamma: float = 8.0, dt: float = 0.02, substeps: int = 1,
+                 plant: Quadrotor | None = None) -> list[PredictionModel]:
+    """The seven prediction models of App. A.5.4 (see the module docstring), in the paper's order.
+
+    ``residual`` is the neural ODE's :class:`~fnnlib.models.AeroResidual` (trained with App. A.1),
+    ``mlp`` the single-step one. AdapNN and AdapFNN adapt the last layer of a copy of ``residual``
+    (the same network as Neural and FNN, so the comparison isolates the online part).
+    """
+    from fnnlib.systems.quadrotor import NOMINAL
+
+    plant = plant if plant is not None else Quadrotor(NOMINAL)
+    kw = {"dt": dt, "substeps": substeps}
+    nomi = PredictionModel("Nomi", plant, None, **kw)
+    neural = PredictionModel("Neural", plant, residual, **kw)
+    return [
+        nomi,
+        neural,
+        PredictionModel("MLP", plant, mlp, **kw),
+        FeedbackCascadeModel(nomi, L, beta, N, name="FB"),
+        AdaptiveNNModel("AdapNN", plant, AdaptiveResidual(residual, Gamma), **kw),
+        FeedbackCascadeModel(neural, L, beta, N, name="FNN"),
+        FeedbackCascadeModel(PredictionModel("AdapNeural", plant, AdaptiveResidual(residual, Gamma), **kw), L, beta,
+                             N, name="AdapFNN", adaptive=True),
+    ]

@@ -1,0 +1,148 @@
+"""Learning the quadrotor's aerodynamic residual (App. A.5.2) with App. A.1's training, and the MLP baseline."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import torch
+from torch import Tensor, nn
+from tqdm.auto import tqdm
+
+from fnnlib.control.dfbc import DFBC
+from fnnlib.data.quadrotor import Flights
+from fnnlib.models.residual import AeroResidual, EnsembleResidual
+from fnnlib.systems.quadrotor import Quadrotor
+from fnnlib.training.external import InputTrainHistory, make_segments, rollout, train_with_inputs
+
+__all__ = ["EnsembleFit", "closed_loop_step", "predict_flights", "train_residual_ensemble", "train_single_step"]
+
+#: Loss weights of App. A.1's quadratic loss: the 12 vehicle states count, the 6 controller states do not
+#: (as in the authors' release).
+STATE_WEIGHTS = [1.0] * 12 + [0.0] * 6
+
+
+def closed_loop_step(residual: Callable[[Tensor], Tensor] | None, controller: DFBC, plant: Quadrotor, *,
+                     dt: float = 0.02, substeps: int = 1, members: int | None = None) -> Callable[[Tensor, Tensor], Tensor]:
+    r"""The discrete closed loop :math:`[x, z]_{i+1} = \Phi^d([x, z]_i, \bar\Psi_i)` of App. A.5.2 with the residual.
+
+    ``step(x, I)``: ``x`` (B, 18) closed-loop states, ``I`` (B, 12) commands. With ``members = E`` (an
+    :class:`EnsembleResidual`) the state is (B, 18 E): E closed loops side by side, one per member.
+    """
+    def step(x: Tensor, I: Tensor) -> Tensor:
+        if members is None:
+            return controller.closed_loop_step(x, I, plant, dt=dt, substeps=substeps, a_res_fn=residual)
+        B = x.shape[0]
+        xe = x.reshape(B, members, 18)
+        Ie = I[:, None, :].expand(B, members, I.shape[-1])
+        return controller.closed_loop_step(xe, Ie, plant, dt=dt, substeps=substeps,
+                                           a_res_fn=residual).reshape(B, members * 18)
+
+    return step
+
+
+@dataclass
+class EnsembleFit:
+    """Result of :func:`train_residual_ensemble`.
+
+    ``member_loss[k][e]``: member ``e``'s mean training loss (Eq. (13), per segment) after epoch ``k``
+    (row 0 = before training); ``val_loss[k][e]`` on the validation flights at epochs ``val_epochs[k]``.
+    """
+
+    members: list[AeroResidual]
+    history: InputTrainHistory
+    member_loss: list[list[float]] = field(default_factory=list)
+    val_loss: list[list[float]] = field(default_factory=list)
+    val_epochs: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def _member_losses(step: Callable[[Tensor, Tensor], Tensor], x_r: Tensor, I: Tensor, E: int) -> list[float]:
+    """Per-member mean loss of Eq. (13) over the segments (rollouts from each segment's first state)."""
+    x = rollout(step, x_r[:, 0], I)
+    e = (x[:, 1:] - x_r[:, 1:]).reshape(x.shape[0], x.shape[1] - 1, E, 18)[..., :12]
+    return (0.5 * (e**2).sum(dim=(1, 3)).mean(dim=0)).tolist()
+
+
+def train_residual_ensemble(seeds: Sequence[int], train: Flights, *, controller: DFBC, plant: Quadrotor,
+                            hidden: Sequence[int] = (36, 36), activation: str = "tanh",
+                            segment_length: int = 20, batch_size: int | None = 80, epochs: int = 50,
+                            lr: float = 5e-3, val: Flights | None = None, dtype: torch.dtype = torch.float32,
+                            val_every: int = 10, substeps: int = 1, progress: bool = True) -> EnsembleFit:
+    """Train one residual per seed (its random initialisation) with Alg. 3, all as one batch (Q1, Q6).
+
+    Every member sees the same segment order (shuffled with ``seeds[0]``); they differ in their initial
+    weights. Per-member training losses are recorded after every epoch, validation losses (full-length
+    rollouts of the validation flights) before training, every ``val_every`` epochs and after the last.
+    """
+    if not seeds:
+        raise ValueError("need at least one seed")
+    if val is not None and val.dt != train.dt:
+        raise ValueError(f"validation flights have dt = {val.dt}, training flights dt = {train.dt}; they must match")
+    members = []
+    for s in seeds:
+        torch.manual_seed(int(s))
+        members.append(AeroResidual(hidden, activation).to(dtype))
+    E = len(members)
+    ens = EnsembleResidual(members).to(dtype)
+    step = closed_loop_step(ens, controller, plant, dt=train.dt, substeps=substeps, members=E)
+    tile = lambda X: X.to(dtype).repeat(1, 1, E)  # noqa: E731  (K, T, 18) -> (K, T, 18 E)
+    x_r, I = tile(train.x), train.Psi.to(dtype)
+    x_seg, I_seg = make_segments(x_r, I, segment_length)
+    fit = EnsembleFit(members=[], history=None)  # type: ignore[arg-type]
+
+    def record(epoch: int, hist: object = None) -> None:
+        fit.member_loss.append(_member_losses(step, x_seg, I_seg, E))
+        if val is not None and ((epoch + 1) % int(val_every) == 0 or epoch + 1 == epochs):
+            fit.val_epochs.append(epoch + 1)
+            fit.val_loss.append(_member_losses(step, tile(val.x), val.Psi.to(dtype), E))
+
+    tic = time.perf_counter()
+    record(-1)
+    fit.history = train_with_inputs(ens, step, (x_r, I), segment_length=segment_length, batch_size=batch_size,
+                                    epochs=epochs, lr=lr, W=STATE_WEIGHTS * E, seed=int(seeds[0]),
+                                    progress=progress, callback=lambda e, h: record(e))
+    fit.seconds = time.perf_counter() - tic
+    fit.members = [ens.member(e) for e in range(E)]
+    return fit
+
+
+def predict_flights(residual: Callable[[Tensor], Tensor] | None, flights: Flights, *, controller: DFBC,
+                    plant: Quadrotor, substeps: int = 1, dtype: torch.dtype = torch.float64) -> Tensor:
+    """Roll the closed loop with the model from each flight's first state, driven by its commands (Q2).
+
+    Returns the predicted closed-loop states (K, T+1, 18).
+    """
+    step = closed_loop_step(residual, controller, plant, dt=flights.dt, substeps=substeps)
+    return rollout(step, flights.x[:, 0].to(dtype), flights.Psi.to(dtype))
+
+
+def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int = 500, batch_size: int = 256,
+                      lr: float = 1e-3, seed: int = 0, progress: bool = False) -> list[float]:
+    """Fit a feed-forward residual to single-step labels by mean squared error (the MLP baseline).
+
+    ``x`` (M, 12) states, ``labels`` (M, 3) accelerations; Adam, shuffled mini-batches. Returns the
+    per-epoch mean loss.
+    """
+    if x.shape[0] != labels.shape[0] or labels.shape[-1] != 3 or x.shape[-1] != 12:
+        raise ValueError(f"need x (M, 12) and labels (M, 3), got {tuple(x.shape)} and {tuple(labels.shape)}")
+    if not (torch.isfinite(x).all() and torch.isfinite(labels).all()):
+        raise ValueError("training pairs hold NaN or inf")
+    dtype = next(net.parameters()).dtype
+    x, labels = x.to(dtype), labels.to(dtype)
+    g = torch.Generator().manual_seed(int(seed))
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    losses = []
+    for _ in tqdm(range(int(epochs)), desc="MLP", disable=not progress, leave=False):
+        perm = torch.randperm(x.shape[0], generator=g)
+        total = 0.0
+        for i in range(0, x.shape[0], batch_size):
+            idx = perm[i:i + batch_size]
+            loss = torch.mean((net(x[idx]) - labels[idx]) ** 2)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += float(loss) * idx.numel()
+        losses.append(total / x.shape[0])
+    return losses
