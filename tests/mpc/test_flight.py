@@ -1,0 +1,195 @@
+"""The MPC flight test of Sec. 5.2: the Lissajous reference, the closed loop `fly`, and the tracking RMSE."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from fnnlib.control.trajectories import lissajous
+from fnnlib.mpc import LinearizedMPC
+from fnnlib.mpc.flight import FlightResult, fly, lissajous_reference, tracking_rmse
+from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+
+F64 = torch.float64
+N, DT, STEPS = 10, 0.02, 15
+HOVER_EACH = NOMINAL.mass * NOMINAL.g / 4
+
+
+def _mpc() -> LinearizedMPC:
+    """Eq. (28) with App. A.5.3's weights and boxes.
+
+    Q = diag(100 x3, 50 x6, 1 x3), R = I, 0 <= u <= 4, |Theta| <= pi/2.
+    """
+    Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
+    x_lb, x_ub = np.full(12, -np.inf), np.full(12, np.inf)
+    x_lb[6:9], x_ub[6:9] = -np.pi / 2, np.pi / 2
+    return LinearizedMPC(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub)
+
+
+@pytest.fixture(scope="module")
+def reference() -> tuple[torch.Tensor, torch.Tensor]:
+    return lissajous_reference(STEPS, N)
+
+
+# --------------------------------------------------------------------------- the reference
+
+
+def test_reference_shapes_and_start(reference):
+    x_r, u_r = reference
+    assert x_r.shape == (STEPS + N + 1, 12) and u_r.shape == (STEPS + N, 4)
+    assert x_r.dtype == u_r.dtype == F64
+    # p(0) = [0, 0, h + r_z] = [0, 0, 1] for the paper's curve, v(0) = [r_x w_x, r_y w_y, 0]
+    torch.testing.assert_close(x_r[0, :3], torch.tensor([0.0, 0.0, 1.0], dtype=F64), rtol=0, atol=1e-14)
+    torch.testing.assert_close(x_r[0, 3:6], torch.tensor([math.pi, 2 * math.pi, 0.0], dtype=F64), rtol=0, atol=1e-12)
+    # every row on the control grid t = k dt
+    ref = lissajous(np.arange(STEPS + N + 1) * DT)
+    torch.testing.assert_close(x_r[:, :3], torch.as_tensor(ref.p), rtol=0, atol=1e-14)
+    torch.testing.assert_close(x_r[:, 3:6], torch.as_tensor(ref.v), rtol=0, atol=1e-12)
+    # other parameters reach the curve
+    x_r2, _ = lissajous_reference(2, 3, h=-0.5, r_z=0.3, r_x=1.0, T_x=4.0)
+    torch.testing.assert_close(x_r2[0, :3], torch.tensor([0.0, 0.0, -0.2], dtype=F64), rtol=0, atol=1e-14)
+    assert x_r2.shape == (6, 12)
+
+
+def test_reference_thrust(reference):
+    _, u_r = reference
+    # the collective thrust of flatness: sum_i u_i = m |g e3 - a|
+    a = torch.as_tensor(lissajous(np.arange(STEPS + N) * DT).a)
+    T = NOMINAL.mass * torch.linalg.norm(torch.tensor([0.0, 0.0, NOMINAL.g], dtype=F64) - a, dim=-1)
+    torch.testing.assert_close(u_r.sum(-1), T, rtol=1e-10, atol=1e-10)
+    # hover-like on average: m g / 4 per motor, more where the curve accelerates (Jensen), under the 4 N box
+    assert HOVER_EACH <= float(u_r.mean()) < 1.5 * HOVER_EACH
+    assert float(u_r.min()) > 0 and float(u_r.max()) < 4.0
+    # a slow Lissajous is a hover: m g / 4 within 1 %
+    _, u_slow = lissajous_reference(50, N, T_x=60.0, T_y=60.0, T_z=60.0)
+    assert float(u_slow.mean()) == pytest.approx(HOVER_EACH, rel=1e-2)
+    # the model's mass enters
+    heavy = NOMINAL.replace(mass=1.33)
+    _, u_heavy = lissajous_reference(50, N, T_x=60.0, T_y=60.0, T_z=60.0, params=heavy)
+    assert float(u_heavy.mean()) == pytest.approx(heavy.mass * heavy.g / 4, rel=1e-2)
+
+
+# --------------------------------------------------------------------------- fly
+
+
+def _check_shapes(res: FlightResult, steps: int) -> None:
+    assert res.x.shape == (steps + 1, 12) and res.u.shape == (steps, 4) and res.x_ref.shape == (steps + 1, 12)
+    for arr in (res.xdot_true, res.xdot_pred, res.x_tilde, res.delta):
+        assert arr.shape == (steps, 12)
+    assert res.t_linearize.shape == res.t_solve.shape == (steps,) and len(res.statuses) == steps
+    for arr in (res.x, res.u, res.x_ref, res.xdot_true, res.xdot_pred, res.delta, res.t_linearize, res.t_solve):
+        assert np.isfinite(arr).all()
+
+
+def test_nominal_model_on_the_nominal_vehicle(reference):
+    x_r, u_r = reference
+    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), _mpc(), Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    _check_shapes(res, STEPS)
+    assert res.name == "Nomi" and res.n_fallbacks == 0 and set(res.statuses) == {"optimal"}
+    np.testing.assert_array_equal(res.x[0], x_r[0].numpy())
+    np.testing.assert_array_equal(res.x_ref, x_r[:STEPS + 1].numpy())
+    assert (res.u >= 0).all() and (res.u <= 4).all()
+    rmse = tracking_rmse(res.x, res.x_ref)
+    assert rmse["norm"] < 1e-3 and rmse["mean_axis"] < 1e-3  # starts on a feasible reference of its own model
+    # the model is the vehicle: same change rates, one-step residual only from 1 vs 4 RK4 sub-steps
+    np.testing.assert_array_equal(res.xdot_pred, res.xdot_true)
+    assert np.abs(res.delta).max() < 1e-5
+    assert np.isnan(res.x_tilde).all()  # no observer in the nominal model
+    assert res.wall_time > 0
+
+
+def test_feedback_model_on_the_test_vehicle_obeys_eq_25(reference):
+    """In the loop, the recorded layer-0 error follows Eq. (25) with the recorded residual delta, exactly."""
+    x_r, u_r = reference
+    steps, L = 12, 3.0  # the thrust saturates at 4 N from step 7 on
+    model = FeedbackCascadeModel(PredictionModel("Nomi", Quadrotor(NOMINAL)), L, beta=0.1, N=N)
+    res = fly(model, _mpc(), Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps)
+    _check_shapes(res, steps)
+    assert res.name == "FB-Nomi" and res.n_fallbacks == 0
+    assert res.u.max() == 4.0  # the input box is active: the applied, clipped input is what the model is told
+    assert np.isnan(res.x_tilde[0]).all() and np.isfinite(res.x_tilde[1:]).all()
+    np.testing.assert_allclose(res.x_tilde[1], DT * res.delta[0], rtol=0, atol=1e-12)
+    for t in range(1, steps - 1):
+        np.testing.assert_allclose(res.x_tilde[t + 1], (1 - DT * L) * res.x_tilde[t] + DT * res.delta[t],
+                                   rtol=0, atol=1e-12)
+    # the vehicle differs from the model, and the model's change rate includes the correction L x_tilde
+    assert np.abs(res.delta).max() > 1.0
+    assert np.abs(res.xdot_pred - res.xdot_true).max() > 0
+
+
+def test_linearizes_along_the_shifted_plan_from_the_measured_state(reference, monkeypatch):
+    import fnnlib.mpc.flight as flight
+
+    x_r, u_r = reference
+    calls, plans = [], []
+    real_linearize = flight.linearize
+
+    def spy(step, x_bar, u_bar, k, **kw):
+        calls.append((x_bar.clone(), u_bar.clone(), k.clone()))
+        return real_linearize(step, x_bar, u_bar, k, **kw)
+
+    monkeypatch.setattr(flight, "linearize", spy)
+    mpc = _mpc()
+    real_solve = mpc.solve
+
+    def solve(*args):
+        sol = real_solve(*args)
+        plans.append((sol.x.copy(), sol.u.copy()))
+        return sol
+
+    mpc.solve = solve
+    steps = 4
+    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1],
+              u_r[:steps + N], steps=steps)
+    assert len(calls) == steps
+    for t, (x_bar, u_bar, k) in enumerate(calls):
+        assert x_bar.shape == (N, 12) and u_bar.shape == (N, 4) and torch.equal(k, torch.arange(N))
+        np.testing.assert_array_equal(x_bar[0].numpy(), res.x[t])  # the measured state first
+        if t == 0:  # the reference at the first step
+            torch.testing.assert_close(x_bar[1:], x_r[1:N], rtol=0, atol=0)
+            torch.testing.assert_close(u_bar, u_r[:N], rtol=0, atol=0)
+        else:  # then the previous plan shifted by one step, last input repeated
+            px, pu = plans[t - 1]
+            np.testing.assert_array_equal(x_bar[1:].numpy(), px[2:N + 1])
+            np.testing.assert_array_equal(u_bar.numpy(), np.concatenate([pu[1:], pu[-1:]]))
+
+
+def test_fly_refuses_a_reference_of_the_wrong_length(reference):
+    x_r, u_r = reference
+    model = PredictionModel("Nomi", Quadrotor(NOMINAL))
+    mpc = _mpc()
+    with pytest.raises(ValueError, match="reference must be"):
+        fly(model, mpc, Quadrotor(NOMINAL), x_r[:-1], u_r, steps=STEPS)
+    with pytest.raises(ValueError, match="reference must be"):
+        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r[:-1], steps=STEPS)
+    with pytest.raises(ValueError, match="reference must be"):
+        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS + 1)
+    with pytest.raises(ValueError, match="reference must be"):
+        fly(model, mpc, Quadrotor(NOMINAL), x_r[:, :9], u_r, steps=STEPS)
+    with pytest.raises(ValueError, match="steps"):
+        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=0)
+    bad = x_r.clone()
+    bad[3, 4] = float("nan")
+    with pytest.raises(ValueError, match="x_r"):
+        fly(model, mpc, Quadrotor(NOMINAL), bad, u_r, steps=STEPS)
+
+
+# --------------------------------------------------------------------------- tracking_rmse
+
+
+def test_tracking_rmse_by_hand():
+    x_ref = np.zeros((4, 12))
+    x = np.zeros((4, 12))
+    x[:, :3] = [[1.0, 0.0, 0.0], [-1.0, 2.0, 0.0], [1.0, 0.0, 3.0], [-1.0, -2.0, 0.0]]
+    x[:, 3:] = 7.0  # only positions count
+    r = tracking_rmse(x, x_ref)
+    assert r["x"] == pytest.approx(1.0)
+    assert r["y"] == pytest.approx(math.sqrt(2.0))
+    assert r["z"] == pytest.approx(1.5)
+    assert r["mean_axis"] == pytest.approx((1.0 + math.sqrt(2.0) + 1.5) / 3)
+    assert r["norm"] == pytest.approx(math.sqrt((1 + 5 + 10 + 5) / 4))
+    assert tracking_rmse(x_ref + 1.0, x_ref + 1.0) == {"x": 0.0, "y": 0.0, "z": 0.0, "mean_axis": 0.0, "norm": 0.0}
