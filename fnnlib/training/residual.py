@@ -143,6 +143,6 @@ def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int 
             opt.zero_grad()
             loss.backward()
             opt.step()
-            total += float(loss) * idx.numel()
+            total += loss.item() * idx.numel()
         losses.append(total / x.shape[0])
     return losses

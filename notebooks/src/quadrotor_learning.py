@@ -196,14 +196,14 @@ q2_checks = {
     "neural ODE below nominal for p and v": all(rel["neural ODE"][g] < rel["nominal"][g] for g in ("p", "v")),
 }
 claims = [
-    F.claim_result("Q1", checks=q1_checks, figure="training_curves",
+    F.claim_result("Q1", checks=q1_checks, figure="figures/training_curves.png",
                    numbers={"seeds": seeds, "initial_loss": first.tolist(), "final_loss": final.tolist(),
                             "val_loss_final": val_loss[-1].tolist()},
                    rule="final <= 10 % of initial and flat over the last 10 % of epochs for every seed; max/min final <= 2"),
-    F.claim_result("Q2", checks=q2_checks, figure="validation_flight_1",
+    F.claim_result("Q2", checks=q2_checks, figure="figures/validation_flight_1.png",
                    numbers={name: {g: round(v, 5) for g, v in r.items()} for name, r in rel.items()},
                    rule="relative RMSE per state group <= 10 %; below the nominal model for p and v"),
-    F.claim_result("Q6", checks=q6_checks, figure="training_curves",
+    F.claim_result("Q6", checks=q6_checks, figure="figures/training_curves.png",
                    numbers={"seconds_all_members": round(fit.seconds, 1), "members": len(seeds),
                             "seconds_per_model_50_epochs": round(per_model_s * 50 / epochs, 1),
                             "ms_per_update": round(fit.history.ms_per_update, 1), "updates": fit.history.n_updates,

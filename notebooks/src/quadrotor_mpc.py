@@ -194,13 +194,13 @@ for umax, rows in table.items():
     q5[f"{umax} N: Theorem 2 ball holds >= 95 % after the transient"] = thm2[umax]["inside_fraction"] >= 0.95
 rmse_numbers = {u: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for u, rows in table.items()}
 claims = [
-    F.claim_result("Q3", checks=q3, figure=f"tracking_u{u_max[0]:g}", numbers={"mean_axis_rmse_m": rmse_numbers},
+    F.claim_result("Q3", checks=q3, figure=f"figures/tracking_u{u_max[0]:g}.png", numbers={"mean_axis_rmse_m": rmse_numbers},
                    rule="FNN lowest mean per-axis RMSE of the six; Neural < Nomi; MLP > Neural (every thrust bound)"),
-    F.claim_result("Q4", checks=q4, figure=f"acc_prediction_u{u_max[0]:g}",
+    F.claim_result("Q4", checks=q4, figure=f"figures/acc_prediction_u{u_max[0]:g}.png",
                    numbers={"acc_pred_rmse": {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()}
                                               for u, rows in table.items()}},
                    rule="lowest first-step acceleration RMSE of the six is FB or FNN; FNN < Neural"),
-    F.claim_result("Q5", checks=q5, figure=f"adapfnn_u{u_max[0]:g}",
+    F.claim_result("Q5", checks=q5, figure=f"figures/adapfnn_u{u_max[0]:g}.png",
                    numbers={"mean_axis_rmse_m": {u: {n: rmse_numbers[u][n] for n in ("FNN", "AdapFNN")} for u in rmse_numbers},
                             "theorem2": thm2},
                    rule="AdapFNN within 25 % of FNN and >= FNN; Theorem 2 ball holds >= 95 % after the transient"),
