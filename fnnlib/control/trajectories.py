@@ -738,19 +738,7 @@ def lissajous(
     return FlatDerivatives(*out)
 
 
-def lissajous_flat_outputs(
-    t0: float,
-    n_nodes: int,
-    dt: float,
-    *,
-    r_x: float = 3.0,
-    r_y: float = 3.0,
-    r_z: float = 0.5,
-    T_x: float = 6.0,
-    T_y: float = 3.0,
-    T_z: float = 3.0,
-    h: float = 0.5,
-) -> FloatArray:
+def lissajous_flat_outputs(t0: float, n_nodes: int, dt: float, **curve: float) -> FloatArray:
     """Flat-output reference ``Psi = [p, v, a, j]`` of :func:`lissajous` on ``t0 + i dt``.
 
     Parameters
@@ -761,8 +749,9 @@ def lissajous_flat_outputs(
         Number of nodes, >= 1 (the test flight uses 300 at 0.02 s).
     dt : float
         Node spacing [s], > 0.
-    r_x, r_y, r_z, T_x, T_y, T_z, h : float, keyword-only
-        Curve parameters, see :func:`lissajous` (defaults: the paper's).
+    **curve : float
+        Curve parameters ``r_x, r_y, r_z, T_x, T_y, T_z, h`` passed to :func:`lissajous`
+        (defaults: the paper's).
 
     Returns
     -------
@@ -771,5 +760,5 @@ def lissajous_flat_outputs(
     start = _check_finite_real(t0, name="t0")
     n = _check_int(n_nodes, name="n_nodes", minimum=1)
     step = _check_positive(dt, name="dt")
-    d = lissajous(start + step * np.arange(n), r_x=r_x, r_y=r_y, r_z=r_z, T_x=T_x, T_y=T_y, T_z=T_z, h=h)
+    d = lissajous(start + step * np.arange(n), **curve)
     return np.concatenate([d.p, d.v, d.a, d.j], axis=1)

@@ -15,6 +15,18 @@ from fnnlib.models.neural_ode import mlp
 RESIDUAL_INPUTS = slice(3, 9)
 
 
+def _run(layers: nn.Sequential, h: Tensor) -> Tensor:
+    """``layers(h)`` calling each module's ``forward`` directly.
+
+    Skips ``nn.Module.__call__`` (hook dispatch, ~5-10 us a layer): the residual runs at
+    every RK4 stage of every MPC step, where per-call overhead is the cost. No hooks are
+    used on these networks.
+    """
+    for layer in layers:
+        h = layer.forward(h)
+    return h
+
+
 class AeroResidual(nn.Module):
     r"""An acceleration residual :math:`f_{neural}(v, \Theta, \theta)` added to Eq. (27) (App. A.5.2).
 
@@ -64,10 +76,10 @@ class AeroResidual(nn.Module):
 
     def features(self, x: Tensor) -> Tensor:
         r"""The front layers :math:`\Xi` of Eq. (29): (..., 12) -> (..., hidden[-1])."""
-        return self.net[:-1](self._check(x))
+        return _run(self.net[:-1], self._check(x))
 
     def forward(self, x: Tensor) -> Tensor:
-        return self.net(self._check(x))
+        return _run(self.net, self._check(x))
 
 
 class AdaptiveResidual(nn.Module):
@@ -111,7 +123,7 @@ class AdaptiveResidual(nn.Module):
         r""":math:`\phi(x)`, the output of the front layers: (..., 12) -> (..., h)."""
         if x.shape[-1] != 12:
             raise ValueError(f"the residual takes the 12-dimensional quadrotor state, got shape {tuple(x.shape)}")
-        return self.front(x[..., RESIDUAL_INPUTS])
+        return _run(self.front, x[..., RESIDUAL_INPUTS])
 
     def forward(self, x: Tensor) -> Tensor:
         # f_neural = Xi(x) chi_hat   (Eq. 29)

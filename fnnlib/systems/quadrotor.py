@@ -183,17 +183,78 @@ def _mat3(entries: list[Tensor]) -> Tensor:
     return M.reshape(*M.shape[:-1], 3, 3)
 
 
+def _elementary_rotations() -> tuple[Tensor, Tensor, Tensor]:
+    """``Rx``, ``Ry``, ``Rz`` as (3, 3, 3) tensors ``T[i, j, c]``, linear in ``b = (1, cos, sin)`` of their angle.
+
+    ``Rx(phi)[i, j] = sum_c T_x[i, j, c] b_phi[c]`` and likewise for ``Ry(theta)``, ``Rz(psi)``.
+    """
+    T_x, T_y, T_z = (torch.zeros(3, 3, 3, dtype=torch.float64) for _ in range(3))
+    one, cos, sin = 0, 1, 2
+    # Rx = [[1, 0, 0], [0, c, -s], [0, s, c]]
+    T_x[0, 0, one], T_x[1, 1, cos], T_x[1, 2, sin], T_x[2, 1, sin], T_x[2, 2, cos] = 1, 1, -1, 1, 1
+    # Ry = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
+    T_y[0, 0, cos], T_y[0, 2, sin], T_y[1, 1, one], T_y[2, 0, sin], T_y[2, 2, cos] = 1, 1, 1, -1, 1
+    # Rz = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    T_z[0, 0, cos], T_z[0, 1, sin], T_z[1, 0, sin], T_z[1, 1, cos], T_z[2, 2, one] = 1, -1, 1, 1, 1
+    return T_x, T_y, T_z
+
+
+def _trilinear_maps() -> tuple[Tensor, Tensor]:
+    r"""Constant maps that turn Eq. (27)'s trigonometry into one matmul each (float64).
+
+    With ``b_a = (1, cos a, sin a)`` for each Euler angle:
+
+    * ``R = Rz(psi) Ry(theta) Rx(phi)`` is trilinear in ``(b_psi, b_theta, b_phi)``, so
+      ``vec(R) = (b_psi (x) b_theta (x) b_phi) @ T_R`` with ``T_R`` (27, 9);
+    * ``cos(theta) W(Theta) omega`` is trilinear in ``(b_phi, b_theta, omega)``:
+      ``[[ct, sf st, cf st], [0, cf ct, -sf ct], [0, sf, cf]] omega``, so
+      ``Theta' = ((b_phi (x) b_theta (x) omega) @ T_W) / cos(theta)`` with ``T_W`` (27, 3).
+
+    A handful of batched ops instead of dozens of scalar products: the
+    quadrotor right-hand side is bound by per-op overhead at MPC batch sizes.
+    """
+    T_x, T_y, T_z = _elementary_rotations()
+    T_R = torch.einsum("ija,jkb,klc->abcil", T_z, T_y, T_x).reshape(27, 9)
+    T_W = torch.zeros(3, 3, 3, 3, dtype=torch.float64)  # [b_phi, b_theta, omega, row]
+    one, cos, sin = 0, 1, 2
+    T_W[one, cos, 0, 0] = 1.0  # ct w1
+    T_W[sin, sin, 1, 0] = 1.0  # sf st w2
+    T_W[cos, sin, 2, 0] = 1.0  # cf st w3
+    T_W[cos, cos, 1, 1] = 1.0  # cf ct w2
+    T_W[sin, cos, 2, 1] = -1.0  # -sf ct w3
+    T_W[sin, one, 1, 2] = 1.0  # sf w2
+    T_W[cos, one, 2, 2] = 1.0  # cf w3
+    return T_R, T_W.reshape(27, 3)
+
+
+_T_R, _T_W = _trilinear_maps()
+
+
+def _trig_basis(Theta: Tensor) -> Tensor:
+    """``(..., 3 angles, 3)``: row ``a`` is ``(1, cos a, sin a)`` for ``a = phi, theta, psi``."""
+    c = torch.cos(Theta)
+    return torch.stack([torch.ones_like(c), c, torch.sin(Theta)], dim=-1)
+
+
+def _outer3(a: Tensor, b: Tensor, c: Tensor) -> Tensor:
+    """``a (x) b (x) c`` flattened: (..., 3) x3 -> (..., 27), index ``9 i + 3 j + k``."""
+    return ((a.unsqueeze(-1) * b.unsqueeze(-2)).unsqueeze(-1) * c.unsqueeze(-2).unsqueeze(-2)).flatten(-3)
+
+
+def _rotation_from_basis(basis: Tensor, T_R: Tensor) -> Tensor:
+    return (_outer3(basis[..., 2, :], basis[..., 1, :], basis[..., 0, :]) @ T_R).unflatten(-1, (3, 3))
+
+
 def _rotation_matrix(Theta: Tensor) -> Tensor:
-    cs, sn = torch.cos(Theta), torch.sin(Theta)
-    cf, ct, cp = cs.unbind(-1)
-    sf, st, sp = sn.unbind(-1)
-    return _mat3(
-        [
-            cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf,
-            sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf,
-            -st, ct * sf, ct * cf,
-        ]
-    )  # fmt: skip
+    """``R = Rz(psi) Ry(theta) Rx(phi)``, i.e. ::
+
+        [[cp ct, cp st sf - sp cf, cp st cf + sp sf],
+         [sp ct, sp st sf + cp cf, sp st cf - cp sf],
+         [-st,   ct sf,            ct cf           ]]
+
+    (``c``/``s`` cos/sin, ``f`` phi, ``t`` theta, ``p`` psi), by the trilinear map of :func:`_trilinear_maps`.
+    """
+    return _rotation_from_basis(_trig_basis(Theta), _T_R.to(dtype=Theta.dtype, device=Theta.device))
 
 
 def rotation_matrix(Theta: Tensor) -> Tensor:
@@ -342,6 +403,10 @@ class _Constants(NamedTuple):
     F: Tensor  # (3,) force disturbance
     C_T: Tensor  # (4, 4) allocation, transposed (u @ C_T = [T, tau])
     C_inv_T: Tensor  # (4, 4) inverse allocation, transposed ([T, tau] @ C_inv_T = u)
+    S_T: Tensor  # (4, 4) scaled allocation: u @ S_T = [T / m, tau / J]
+    a0: Tensor  # (3,) input-free acceleration g e3 + F / m
+    T_R: Tensor  # (27, 9) trilinear map of the rotation matrix
+    T_W: Tensor  # (27, 3) trilinear map of cos(theta) W(Theta) omega
 
 
 @functools.lru_cache(maxsize=64)
@@ -356,20 +421,29 @@ def constants(params: QuadrotorParams, dtype: torch.dtype, device: torch.device)
 
 
 def _make_constants(params: QuadrotorParams, dtype: torch.dtype, device: torch.device) -> _Constants:
+    e3 = torch.tensor([0.0, 0.0, 1.0], dtype=dtype, device=device)
+    J = torch.tensor(params.inertia, dtype=dtype, device=device)
+    F = torch.tensor(params.force_disturbance, dtype=dtype, device=device)
+    C_T = allocation_matrix(params, dtype=dtype, device=device).T.contiguous()
+    scale = torch.cat([torch.tensor([params.mass], dtype=dtype, device=device), J])
     return _Constants(
-        e3=torch.tensor([0.0, 0.0, 1.0], dtype=dtype, device=device),
-        J=torch.tensor(params.inertia, dtype=dtype, device=device),
+        e3=e3,
+        J=J,
         D=torch.tensor(params.drag, dtype=dtype, device=device),
-        F=torch.tensor(params.force_disturbance, dtype=dtype, device=device),
-        C_T=allocation_matrix(params, dtype=dtype, device=device).T.contiguous(),
+        F=F,
+        C_T=C_T,
         C_inv_T=allocation_inverse(params, dtype=dtype, device=device).T.contiguous(),
+        S_T=(C_T / scale).contiguous(),
+        a0=params.g * e3 + F / params.mass,
+        T_R=_T_R.to(dtype=dtype, device=device),
+        T_W=_T_W.to(dtype=dtype, device=device),
     )
 
 
 # --------------------------------------------------------------------------- integration
 
 
-def rk4(fun: Callable[[Tensor], Tensor], y: Tensor, dt: float, substeps: int = 1) -> Tensor:
+def rk4(fun: Callable[[Tensor], Tensor], y: Tensor, dt: float, substeps: int = 1, k1: Tensor | None = None) -> Tensor:
     """Classical fourth-order Runge-Kutta over ``dt`` in ``substeps`` equal sub-steps of ``y' = fun(y)``.
 
     Parameters
@@ -381,18 +455,23 @@ def rk4(fun: Callable[[Tensor], Tensor], y: Tensor, dt: float, substeps: int = 1
         Step length (> 0; not checked here, see :func:`check_step`).
     substeps : int
         Number of equal RK4 sub-steps (>= 1).
+    k1 : Tensor, shape (..., n), optional
+        ``fun(y)`` if the caller has it already (it is the change rate at the start);
+        used for the first sub-step only.
 
     Returns
     -------
     Tensor, shape (..., n)
     """
     h = dt / substeps
-    for _ in range(substeps):
-        k1 = fun(y)
-        k2 = fun(y + 0.5 * h * k1)
-        k3 = fun(y + 0.5 * h * k2)
-        k4 = fun(y + h * k3)
-        y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    for i in range(substeps):
+        if i > 0 or k1 is None:
+            k1 = fun(y)
+        k2 = fun(torch.add(y, k1, alpha=0.5 * h))
+        k3 = fun(torch.add(y, k2, alpha=0.5 * h))
+        k4 = fun(torch.add(y, k3, alpha=h))
+        # y + h/6 (k1 + 2 k2 + 2 k3 + k4), in fused adds (the step is bound by per-op overhead)
+        y = torch.add(y, torch.add(torch.add(k1, k4), torch.add(k2, k3), alpha=2.0), alpha=h / 6.0)
     return y
 
 
@@ -466,29 +545,40 @@ class Quadrotor:
 
     # ----------------------------------------------------------------- dynamics
     def _drag(self, v: Tensor, R: Tensor) -> Tensor:
-        D = constants(self.params, v.dtype, v.device).D
+        D = self._constants(v).D
         return -matvec(R, D * rmatvec(R, v))
 
+    def _constants(self, like: Tensor) -> _Constants:
+        key = (like.dtype, like.device)
+        cache = self.__dict__.setdefault("_constants_cache", {})
+        if key not in cache:
+            cache[key] = constants(self.params, like.dtype, like.device)
+        return cache[key]
+
     def _f(self, x: Tensor, u: Tensor, a_res: Tensor | None = None) -> Tensor:
+        """Eq. (27) without checks, in few batched ops (see :func:`_trilinear_maps`)."""
         prm = self.params
-        k = constants(prm, x.dtype, x.device)
-        v, Theta, omega = x[..., 3:6], x[..., 6:9], x[..., 9:12]
-        R = _rotation_matrix(Theta)
-        wrench = u @ k.C_T
-        T, tau = wrench[..., :1], wrench[..., 1:]
-        v_dot = (-T / prm.mass) * R[..., :, 2] + prm.g * k.e3
+        k = self._constants(x)
+        v, omega = x[..., 3:6], x[..., 9:12]
+        basis = _trig_basis(x[..., 6:9])  # rows (1, cos, sin) of phi, theta, psi
+        b_phi, b_theta = basis[..., 0, :], basis[..., 1, :]
+        R = (_outer3(basis[..., 2, :], b_theta, b_phi) @ k.T_R).unflatten(-1, (3, 3))
+        s = u @ k.S_T  # [T / m, tau / J]
+        # v' = -(T / m) R e3 + g e3 + F / m - R D R^T v + a_res
+        v_dot = k.a0 - s[..., :1] * R[..., :, 2]
         if any(prm.drag):
-            v_dot = v_dot + self._drag(v, R)
-        if any(prm.force_disturbance):
-            v_dot = v_dot + k.F / prm.mass
+            v_dot = v_dot - matvec(R, k.D * rmatvec(R, v))
         if a_res is not None:
             v_dot = v_dot + a_res
-        Theta_dot = matvec(_euler_rate_matrix(Theta), omega)
-        omega_dot = (tau - torch.linalg.cross(omega, k.J * omega)) / k.J
-        lead = torch.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        if a_res is not None:
-            lead = torch.broadcast_shapes(lead, a_res.shape[:-1])
-        return torch.cat([p.expand(*lead, 3) for p in (v, v_dot, Theta_dot, omega_dot)], dim=-1)
+        # Theta' = W(Theta) omega ;  omega' = J^{-1} (tau - omega x J omega)
+        Theta_dot = (_outer3(b_phi, b_theta, omega) @ k.T_W) / b_theta[..., 1:2]
+        omega_dot = s[..., 1:] - torch.linalg.cross(omega, k.J * omega) / k.J
+        parts = (v, v_dot, Theta_dot, omega_dot)
+        if not all(p.shape == v_dot.shape for p in parts):  # leading dims of x, u, a_res broadcast
+            lead = v_dot.shape[:-1] if v_dot.ndim >= v.ndim else v.shape[:-1]
+            lead = torch.broadcast_shapes(lead, *(p.shape[:-1] for p in parts))
+            parts = tuple(p.expand(*lead, 3) for p in parts)
+        return torch.cat(parts, dim=-1)
 
     def f(self, x: Tensor, u: Tensor, a_res: Tensor | None = None) -> Tensor:
         """Right-hand side of Eq. (27) `quadrotor_model`.
@@ -527,10 +617,11 @@ class Quadrotor:
         self.check_inputs(x)
         return self._drag(x[..., 3:6], _rotation_matrix(x[..., 6:9]))
 
-    def _step(self, x: Tensor, u: Tensor, dt: float, substeps: int, a_res_fn: AccelerationFn | None) -> Tensor:
+    def _step(self, x: Tensor, u: Tensor, dt: float, substeps: int, a_res_fn: AccelerationFn | None,
+              k1: Tensor | None = None) -> Tensor:
         if a_res_fn is None:
-            return rk4(lambda y: self._f(y, u), x, dt, substeps)
-        return rk4(lambda y: self._f(y, u, a_res_fn(y)), x, dt, substeps)
+            return rk4(lambda y: self._f(y, u), x, dt, substeps, k1)
+        return rk4(lambda y: self._f(y, u, a_res_fn(y)), x, dt, substeps, k1)
 
     def step(
         self,
@@ -539,6 +630,7 @@ class Quadrotor:
         dt: float = 0.02,
         substeps: int = 1,
         a_res_fn: AccelerationFn | None = None,
+        k1: Tensor | None = None,
     ) -> Tensor:
         """One classical RK4 step of Eq. (27) with the input held (zero-order hold).
 
@@ -553,6 +645,8 @@ class Quadrotor:
             Equal RK4 sub-steps within ``dt``.
         a_res_fn : callable, Tensor (..., 12) -> Tensor (..., 3), optional
             Residual acceleration, evaluated at every RK4 stage.
+        k1 : Tensor, shape (broadcast(...), 12), optional
+            ``f(x, u, a_res_fn(x))`` if the caller computed it already (saves one evaluation).
 
         Returns
         -------
@@ -560,7 +654,9 @@ class Quadrotor:
         """
         dt, substeps = check_step(dt, substeps)
         lead = self.check_inputs(x, u)
-        return self._step(x.expand(*lead, self.n), u, dt, substeps, a_res_fn)
+        if k1 is not None and tuple(k1.shape) != (*lead, self.n):
+            raise ValueError(f"k1 must have shape {(*lead, self.n)}, got {tuple(k1.shape)}")
+        return self._step(x.expand(*lead, self.n), u, dt, substeps, a_res_fn, k1)
 
     def rollout(
         self,

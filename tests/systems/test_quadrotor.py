@@ -294,3 +294,59 @@ def test_float32_and_gradients() -> None:
     assert torch.allclose(f32.double(), quad.f(x, u), rtol=1e-5, atol=1e-4)
     xg, ug = x[:2].clone().requires_grad_(True), u[:2].clone().requires_grad_(True)
     assert torch.autograd.gradcheck(lambda a, b: quad.step(a, b, dt=0.02), (xg, ug))
+
+
+# --------------------------------------------------------------------------- the few-op right-hand side
+
+
+def test_trilinear_rotation_equals_the_explicit_zyx_product():
+    """R from the (1, cos, sin) basis map equals Rz(psi) Ry(theta) Rx(phi) multiplied out by hand."""
+    torch.manual_seed(3)
+    Theta = (torch.rand(50, 3, dtype=torch.float64) - 0.5) * 6.0
+    phi, theta, psi = Theta.unbind(-1)
+    c, s = torch.cos, torch.sin
+    zero, one = torch.zeros_like(phi), torch.ones_like(phi)
+    Rx = torch.stack([one, zero, zero, zero, c(phi), -s(phi), zero, s(phi), c(phi)], -1).reshape(-1, 3, 3)
+    Ry = torch.stack([c(theta), zero, s(theta), zero, one, zero, -s(theta), zero, c(theta)], -1).reshape(-1, 3, 3)
+    Rz = torch.stack([c(psi), -s(psi), zero, s(psi), c(psi), zero, zero, zero, one], -1).reshape(-1, 3, 3)
+    torch.testing.assert_close(rotation_matrix(Theta), Rz @ Ry @ Rx, rtol=0, atol=1e-14)
+
+
+def test_rhs_attitude_rates_and_drag_equal_the_matrix_forms():
+    """Theta' = W(Theta) omega, v' = -(T/m) R e3 + g e3 - R D R^T v + F/m, omega' = J^-1(tau - omega x J omega)."""
+    torch.manual_seed(4)
+    q = Quadrotor(TEST_TRUTH)
+    prm = TEST_TRUTH
+    x = torch.randn(40, 12, dtype=torch.float64)
+    x[:, 6:9] = (torch.rand(40, 3, dtype=torch.float64) - 0.5) * 2.5  # |theta| < 1.25
+    u = torch.rand(40, 4, dtype=torch.float64) * 5
+    xd = q.f(x, u)
+    v, Theta, omega = x[:, 3:6], x[:, 6:9], x[:, 9:12]
+    R = rotation_matrix(Theta)
+    wrench = u @ allocation_matrix(prm).T
+    J = torch.tensor(prm.inertia, dtype=torch.float64)
+    D = torch.diag(torch.tensor(prm.drag, dtype=torch.float64))
+    e3 = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    F = torch.tensor(prm.force_disturbance, dtype=torch.float64)
+    v_dot = (-(wrench[:, :1] / prm.mass) * (R @ e3) + prm.g * e3 - (R @ D @ R.transpose(1, 2) @ v[..., None])[..., 0]
+             + F / prm.mass)
+    torch.testing.assert_close(xd[:, :3], v, rtol=0, atol=0)
+    torch.testing.assert_close(xd[:, 3:6], v_dot, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(xd[:, 6:9], (euler_rate_matrix(Theta) @ omega[..., None])[..., 0], rtol=1e-12,
+                               atol=1e-12)
+    torch.testing.assert_close(xd[:, 9:12], (wrench[:, 1:] - torch.linalg.cross(omega, J * omega)) / J, rtol=1e-12,
+                               atol=1e-9)
+
+
+def test_rk4_with_a_given_first_stage_is_the_same_step():
+    q = Quadrotor(TEST_TRUTH)
+    x = torch.randn(5, 12, dtype=torch.float64) * 0.3
+    u = torch.full((5, 4), 3.0, dtype=torch.float64)
+    for substeps in (1, 3):
+        plain = q.step(x, u, dt=0.02, substeps=substeps)
+        given = q.step(x, u, dt=0.02, substeps=substeps, k1=q.f(x, u))
+        torch.testing.assert_close(given, plain, rtol=0, atol=0)
+    # a wrong first stage changes the step (it is used), a wrong shape is refused
+    assert not torch.equal(q.step(x, u, k1=torch.zeros(5, 12, dtype=torch.float64)), q.step(x, u))
+    with pytest.raises(ValueError, match="k1 must have shape"):
+        q.step(x, u, k1=torch.zeros(12, dtype=torch.float64))
