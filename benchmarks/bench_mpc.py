@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from fnnlib.mpc import LinearizedMPC, RebuildMPC, linearize
+from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC, linearize
 
 N, NX, NU, DT = 10, 12, 4, 0.05
 Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
@@ -158,7 +158,7 @@ def main() -> None:
     exact = LinearizedMPC(N, Q, R, **BOX, solver="CLARABEL", eps_abs=1e-10, eps_rel=1e-10)
     u_exact = [exact.solve(d[0], lin.A, lin.B, lin.c, d[2], u_bar).u for d, lin in zip(data, lins)]
 
-    def run(mpc: LinearizedMPC | RebuildMPC, steps: int) -> dict[str, float]:
+    def run(mpc: LinearizedMPC | RebuildMPC | OSQPMPC, steps: int) -> dict[str, float]:
         samples, solver_ms, statuses, u_err = [], [], {}, 0.0
         for i in range(steps):
             (x0, _, x_ref), lin = data[i], lins[i]
@@ -181,6 +181,7 @@ def main() -> None:
         "OSQP eps 1e-5 + polish (cvxpy default)": (LinearizedMPC, {"solver_options": {"polishing": True}}),
         "OSQP eps 1e-3, no polish": (LinearizedMPC, {"eps_abs": 1e-3, "eps_rel": 1e-3}),
         "CLARABEL (eps 1e-5)": (LinearizedMPC, {"solver": "CLARABEL"}),
+        "OSQPMPC: the same QP to OSQP directly (eps 1e-5)": (OSQPMPC, {}),
         "RebuildMPC OSQP (eps 1e-5)": (RebuildMPC, {}),
         "RebuildMPC CLARABEL": (RebuildMPC, {"solver": "CLARABEL"}),
     }

@@ -14,7 +14,7 @@ from fnnlib._validation import check_finite, check_positive
 from fnnlib.control.flatness import flat_reference
 from fnnlib.control.trajectories import lissajous
 from fnnlib.mpc.linearize import linearize
-from fnnlib.mpc.linearized import LinearizedMPC
+from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
 
@@ -46,6 +46,8 @@ class FlightResult:
     S8), ``x_tilde`` (T, 12) the layer-0 observation error (NaN where the model
     has none), ``delta`` (T, 12) the model's one-step residual
     :math:`(x_{t+1} - \\Phi(x_t, u_t)) / dt` without feedback (for Theorems 1-2).
+    ``t_linearize`` / ``t_solve`` (T,) are the seconds each step spent linearizing
+    and solving; ``elapsed_s`` the wall time of the whole :func:`fly` call.
     """
 
     name: str
@@ -60,10 +62,18 @@ class FlightResult:
     t_solve: np.ndarray
     n_fallbacks: int
     statuses: list[str] = field(default_factory=list)
+    dt: float = 0.02
+    elapsed_s: float = float("nan")
 
     @property
     def wall_time(self) -> float:
+        """Seconds spent linearizing and solving (the controller's share of :attr:`elapsed_s`)."""
         return float(self.t_linearize.sum() + self.t_solve.sum())
+
+    @property
+    def real_time_factor(self) -> float:
+        """Flown time over the wall time of the whole loop (simulation and bookkeeping included)."""
+        return float(len(self.u) * self.dt / self.elapsed_s)
 
 
 def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
@@ -74,7 +84,7 @@ def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
             "mean_axis": float(per_axis.mean()), "norm": float(np.sqrt(np.mean(np.sum(e**2, axis=1))))}
 
 
-def fly(model: PredictionModel, mpc: LinearizedMPC, truth: Quadrotor, x_r: Tensor, u_r: Tensor, *, steps: int,
+def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, x_r: Tensor, u_r: Tensor, *, steps: int,
         x0: Tensor | None = None, dt: float = 0.02, substeps: int = 4, linearize_method: str = "central",
         progress: bool = False) -> FlightResult:
     r"""Fly ``steps`` control steps of the MPC with ``model`` on the ``truth`` vehicle.
@@ -93,6 +103,7 @@ def fly(model: PredictionModel, mpc: LinearizedMPC, truth: Quadrotor, x_r: Tenso
     x0 : Tensor, shape (12,), optional
         Initial state; default ``x_r[0]``.
     """
+    t_start = time.perf_counter()
     check_positive(dt, name="dt")
     steps, N = int(steps), int(mpc.N)
     if steps < 1:
@@ -143,11 +154,15 @@ def fly(model: PredictionModel, mpc: LinearizedMPC, truth: Quadrotor, x_r: Tenso
         u = torch.minimum(torch.maximum(plan_u[0], u_lb), u_ub)  # solver tolerance
         plan_u[0] = u  # the models are told the input actually applied (commit's contract)
         with torch.no_grad():
-            xdot_true.append(truth.f(x, u).numpy())
-            xdot_pred.append(model.xdot(x, u).numpy())
-            x_next = truth.step(x, u, dt=dt, substeps=substeps)
-            delta.append(((x_next - model.phi(x, u)) / dt).numpy())
-        model.commit(plan_x, plan_u)
+            rate_true = truth.f(x, u)
+            x_next = truth.step(x, u, dt=dt, substeps=substeps, k1=rate_true)
+            # the model along the new plan, once: row 0 is (x, u), the rest feeds the cascade's commit
+            rates = model.f(plan_x[:-1], plan_u)
+            phi_plan = model.phi(plan_x[:-1], plan_u, k1=rates)
+            xdot_true.append(rate_true.numpy())
+            xdot_pred.append(model.xdot(x, u, f=rates[0]).numpy())
+            delta.append(((x_next - phi_plan[0]) / dt).numpy())
+        model.commit(plan_x, plan_u, phi_plan)
         check_finite(x_next, name=f"truth state at step {t + 1}")
         us.append(u.numpy().copy())
         x = x_next
@@ -156,4 +171,4 @@ def fly(model: PredictionModel, mpc: LinearizedMPC, truth: Quadrotor, x_r: Tenso
         name=model.name, x=torch.stack(xs).numpy(), u=np.stack(us), x_ref=x_r[:steps + 1].numpy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
         delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
-        statuses=statuses)
+        statuses=statuses, dt=float(dt), elapsed_s=time.perf_counter() - t_start)

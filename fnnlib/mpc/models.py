@@ -74,24 +74,28 @@ class PredictionModel:
         """Continuous change rate of the model, (..., 12)."""
         return self.plant.f(x, u, a_res=None if self.residual is None else self.residual(x))
 
-    def phi(self, x: Tensor, u: Tensor) -> Tensor:
-        r""":math:`\Phi(x, u)`, the RK4 step of :meth:`f` (no feedback)."""
-        return self.plant.step(x, u, dt=self.dt, substeps=self.substeps, a_res_fn=self.residual)
+    def phi(self, x: Tensor, u: Tensor, k1: Tensor | None = None) -> Tensor:
+        r""":math:`\Phi(x, u)`, the RK4 step of :meth:`f` (no feedback); ``k1 = f(x, u)`` if already computed."""
+        return self.plant.step(x, u, dt=self.dt, substeps=self.substeps, a_res_fn=self.residual, k1=k1)
 
     def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
         """The discrete model for horizon steps ``k`` (LongTensor, batch); here the same for every ``k``."""
         return self.phi(x, u)
 
-    def xdot(self, x: Tensor, u: Tensor) -> Tensor:
-        """The model's first-step change-rate prediction at the measured state (Fig. S8)."""
-        return self.f(x, u)
+    def xdot(self, x: Tensor, u: Tensor, f: Tensor | None = None) -> Tensor:
+        """The model's first-step change-rate prediction at the measured state (Fig. S8); ``f = f(x, u)`` if known."""
+        return self.f(x, u) if f is None else f
 
     # -- online hooks -----------------------------------------------------
     def observe(self, x_meas: Tensor) -> None:
         """A new measured state (12,), before the MPC solves."""
 
-    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
-        """The plan just solved: states (N+1, 12) from the measured state, inputs (N, 4); ``plan_u[0]`` is applied."""
+    def commit(self, plan_x: Tensor, plan_u: Tensor, phi_plan: Tensor | None = None) -> None:
+        """The plan just solved: states (N+1, 12) from the measured state, inputs (N, 4); ``plan_u[0]`` is applied.
+
+        ``phi_plan`` (N, 12), if given, is :meth:`phi` of ``(plan_x[:-1], plan_u)`` already computed by the
+        caller (the flight loop needs it too); models that need it compute it otherwise.
+        """
 
     def reset(self) -> None:
         """Forget everything learned online."""
@@ -126,9 +130,10 @@ class AdaptiveNNModel(PredictionModel):
             a_tilde = (x_meas[3:6] - x_pred[3:6]) / self.dt
             self.residual.adapt(x_prev, a_tilde, self.dt)  # type: ignore[union-attr]
 
-    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
+    def commit(self, plan_x: Tensor, plan_u: Tensor, phi_plan: Tensor | None = None) -> None:
         with torch.no_grad():
-            self._last = (plan_x[0].clone(), self.phi(plan_x[0], plan_u[0]))
+            x_pred = self.phi(plan_x[0], plan_u[0]) if phi_plan is None else phi_plan[0]
+            self._last = (plan_x[0].clone(), x_pred.clone())
 
     def reset(self) -> None:
         self._last = None
@@ -197,9 +202,9 @@ class FeedbackCascadeModel(PredictionModel):
     def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
         return self.phi(x, u) + self.dt * self._correction(x, k)
 
-    def xdot(self, x: Tensor, u: Tensor) -> Tensor:
+    def xdot(self, x: Tensor, u: Tensor, f: Tensor | None = None) -> Tensor:
         k = torch.zeros(x.shape[:-1], dtype=torch.long)
-        return self.f(x, u) + self._correction(x, k)
+        return (self.f(x, u) if f is None else f) + self._correction(x, k)
 
     def observe(self, x_meas: Tensor) -> None:
         check_finite(x_meas, name="x_meas")
@@ -210,7 +215,7 @@ class FeedbackCascadeModel(PredictionModel):
             # chi_hat' = Gamma Xi^T x_tilde   (Eq. 30), velocity rows
             self.residual.adapt(x_meas, self._x_tilde[3:6], self.dt)  # type: ignore[union-attr]
 
-    def commit(self, plan_x: Tensor, plan_u: Tensor) -> None:
+    def commit(self, plan_x: Tensor, plan_u: Tensor, phi_plan: Tensor | None = None) -> None:
         if plan_x.shape != (self.N + 1, 12) or plan_u.shape != (self.N, 4):
             raise ValueError(f"plan must be x (N+1, 12), u (N, 4) with N = {self.N}; got {tuple(plan_x.shape)}, "
                              f"{tuple(plan_u.shape)}")
@@ -221,7 +226,11 @@ class FeedbackCascadeModel(PredictionModel):
             Lk = self.L.to(X.dtype)
             # x_hat <- x_hat + [Phi(X, u) - X] + Ts L_k (X - x_hat)   (Eq. 8, RK4 form)
             fb = (Lk @ (X - self.x_hat).unsqueeze(-1)).squeeze(-1)
-            self.x_hat = self.x_hat + (self.phi(X, U) - X) + self.dt * fb
+            if phi_plan is None:
+                phi_plan = self.phi(X, U)
+            elif phi_plan.shape != X.shape:
+                raise ValueError(f"phi_plan must have shape {tuple(X.shape)}, got {tuple(phi_plan.shape)}")
+            self.x_hat = self.x_hat + (phi_plan - X) + self.dt * fb
             check_finite(self.x_hat, name="x_hat")
 
     def reset(self) -> None:

@@ -6,7 +6,7 @@ import control
 import numpy as np
 import pytest
 
-from fnnlib.mpc import LinearizedMPC, MPCSolution, RebuildMPC, shift_plan
+from fnnlib.mpc import LinearizedMPC, MPCSolution, OSQPMPC, RebuildMPC, shift_plan
 
 DT = 0.1
 A_DI = np.array([[1.0, DT], [0.0, 1.0]])  # discretised double integrator
@@ -110,16 +110,62 @@ def test_problem_is_dpp_and_resolves_with_fresh_parameters() -> None:
     assert mpc.n_solves == 4 and mpc.n_fallbacks == 0
 
 
+# --- the same QP handed to OSQP directly ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("N", [1, 4, 10])
+def test_direct_osqp_gives_the_lqr_input(N: int) -> None:
+    K, P, _ = control.dlqr(A_DI, B_DI, np.diag(Q_DI), np.diag(R_DI))
+    mpc = OSQPMPC(N, Q_DI, R_DI, Q_N=P, **TIGHT)
+    for x0 in ([1.0, 0.0], [-0.3, 2.0]):
+        sol = mpc.solve(np.array(x0), *lti(N), np.zeros(2), np.zeros(1))
+        assert sol.ok and not sol.fallback
+        np.testing.assert_allclose(sol.u[0], -K @ np.array(x0), rtol=1e-5)
+
+
+@pytest.mark.parametrize("full_weights", [False, True], ids=["diagonal", "full"])
+def test_direct_osqp_equals_the_cvxpy_problem_step_after_step(full_weights: bool) -> None:
+    """Random time-varying data, boxes on u and on some x, moving references: the same plans."""
+    rng = np.random.default_rng(7)
+    N, n, m = 6, 4, 2
+    if full_weights:
+        G = rng.normal(size=(n, n))
+        Q, R, Q_N = G @ G.T + np.eye(n), np.array([[2.0, 0.3], [0.3, 1.0]]), 3 * np.eye(n)
+    else:
+        Q, R, Q_N = np.array([1.0, 2.0, 0.5, 0.0]), np.array([1.0, 0.1]), None
+    kw = {"Q_N": Q_N, "u_lb": [-1.0, -2.0], "u_ub": [1.0, 0.5], "x_lb": [-np.inf, -0.3, -np.inf, -np.inf],
+          "x_ub": [np.inf, 0.3, np.inf, 2.0], "eps_abs": 1e-10, "eps_rel": 1e-10}
+    cvx, direct = LinearizedMPC(N, Q, R, **kw), OSQPMPC(N, Q, R, **kw)
+    active = 0
+    for _ in range(5):
+        A = np.eye(n) + 0.3 * rng.normal(size=(N, n, n))
+        B, c = rng.normal(size=(N, n, m)), 0.1 * rng.normal(size=(N, n))
+        x0, x_r, u_r = 0.2 * rng.normal(size=n), rng.normal(size=(N, n)), rng.normal(size=(N, m))
+        a, b = cvx.solve(x0, A, B, c, x_r, u_r), direct.solve(x0, A, B, c, x_r, u_r)
+        assert a.ok and b.ok and not b.fallback
+        np.testing.assert_allclose(b.u, a.u, atol=1e-6)
+        np.testing.assert_allclose(b.x, a.x, atol=1e-6)
+        for k in range(N):
+            np.testing.assert_allclose(b.x[k + 1], A[k] @ b.x[k] + B[k] @ b.u[k] + c[k], atol=1e-7)
+        active += int(np.isclose(np.abs(b.x[1:, 1]), 0.3, atol=1e-6).any() or np.isclose(b.u[:, 0], 1.0).any())
+    assert active > 0  # the boxes mattered somewhere
+
+
+def test_direct_osqp_refuses_another_solver() -> None:
+    with pytest.raises(ValueError, match="OSQP only"):
+        OSQPMPC(3, Q_DI, R_DI, solver="CLARABEL")
+
+
 # --- fallback ------------------------------------------------------------------------------------------------------
 
-def infeasible_mpc(N: int = 5) -> LinearizedMPC:
+def infeasible_mpc(N: int = 5, cls: type = LinearizedMPC) -> LinearizedMPC:
     """|position| <= 0.1 cannot hold at x_1 from velocity 10 with |u| <= 1."""
-    return LinearizedMPC(N, Q_DI, R_DI, u_lb=[-1.0], u_ub=[1.0], x_lb=[-0.1, -np.inf], x_ub=[0.1, np.inf])
+    return cls(N, Q_DI, R_DI, u_lb=[-1.0], u_ub=[1.0], x_lb=[-0.1, -np.inf], x_ub=[0.1, np.inf])
 
 
-def test_first_call_fallback_returns_the_clipped_reference() -> None:
+@pytest.mark.parametrize("cls", [LinearizedMPC, OSQPMPC])
+def test_first_call_fallback_returns_the_clipped_reference(cls: type) -> None:
     N = 5
-    mpc = infeasible_mpc(N)
+    mpc = infeasible_mpc(N, cls)
     u_r = np.array([[3.0], [-3.0], [0.5], [0.2], [1.5]])
     sol = mpc.solve([0.0, 10.0], *lti(N), [0.0, 0.0], u_r)
     assert sol.fallback and not sol.ok and "infeasible" in sol.status
@@ -129,9 +175,10 @@ def test_first_call_fallback_returns_the_clipped_reference() -> None:
     assert mpc.n_fallbacks == 1
 
 
-def test_infeasible_step_returns_the_shifted_previous_plan() -> None:
+@pytest.mark.parametrize("cls", [LinearizedMPC, OSQPMPC])
+def test_infeasible_step_returns_the_shifted_previous_plan(cls: type) -> None:
     N = 5
-    mpc = infeasible_mpc(N)
+    mpc = infeasible_mpc(N, cls)
     good = mpc.solve([0.05, 0.0], *lti(N), [0.0, 0.0], [0.3])
     assert good.ok and not good.fallback
     bad = mpc.solve([0.0, 10.0], *lti(N), [0.0, 0.0], [0.3])

@@ -1,0 +1,89 @@
+"""The Sec. 5.2 flight loop end to end: per-step time of each prediction model and the real-time factor.
+
+One 6 s Lissajous flight (300 steps of 0.02 s, N = 10, Q = diag(100 x3, 50 x6, 1 x3), R = I4,
+0 <= u <= 6 N, |Theta| <= pi/2) on the Sec. 5.3 test vehicle, for each of the seven prediction
+models of App. A.5.4 and each configuration (QP implementation x linearization method x truth
+sub-steps). The residual networks are the trained ones of the ``quadrotor_learning`` task when
+``--learning-dir`` holds them, else freshly initialised networks of the paper's size (2 x 36, tanh:
+the cost per step does not depend on the weights). Reported per model: median and p95 of
+linearize + solve per step, the median of each part, and the whole loop's wall time (truth
+simulation, model updates and bookkeeping included) as a multiple of real time.
+
+    .venv/bin/python benchmarks/bench_flight.py [--steps 300] [--learning-dir outputs/paper/quadrotor_learning]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import fnnlib as F
+from fnnlib.models.residual import AeroResidual
+from fnnlib.mpc import LinearizedMPC, OSQPMPC
+from fnnlib.mpc.flight import fly, lissajous_reference
+from fnnlib.mpc.models import paper_models
+from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor
+
+N, DT = 10, 0.02
+Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
+X_LB = np.r_[np.full(6, -np.inf), np.full(3, -np.pi / 2), np.full(3, -np.inf)]
+
+CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps)
+    "osqp direct, forward differences, truth 1 RK4 step (notebook default)": (OSQPMPC, "forward", 1),
+    "osqp direct, central differences, truth 1 RK4 step": (OSQPMPC, "central", 1),
+    "osqp direct, reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1),
+    "cvxpy Parameters, forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1),
+    "cvxpy Parameters, central differences, truth 4 RK4 sub-steps (session-2 setting)": (LinearizedMPC, "central", 4),
+}
+
+
+def residuals(learning_dir: Path | None) -> tuple[torch.nn.Module, torch.nn.Module, str]:
+    if learning_dir is not None and (learning_dir / "residual.pt").is_file():
+        res, _ = F.load_checkpoint(learning_dir / "residual.pt", expected_kind="AeroResidual")
+        mlp, _ = F.load_checkpoint(learning_dir / "mlp.pt", expected_kind="AeroResidual")
+        return res.double(), mlp.double(), f"trained, from {learning_dir}"
+    torch.manual_seed(0)
+    return AeroResidual().double(), AeroResidual().double(), "freshly initialised (2 x 36 tanh)"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--learning-dir", type=Path, default=Path("outputs/paper/quadrotor_learning"))
+    ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    args = ap.parse_args()
+    residual, mlp, origin = residuals(args.learning_dir)
+    truth = Quadrotor(TEST_TRUTH)
+    x_r, u_r = lissajous_reference(args.steps, N, dt=DT)
+    print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {DT} s")
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for name, (cls, method, substeps) in CONFIGS.items():
+        print(f"\n{name}")
+        print(f"  {'model':8s} {'lin+solve med':>13s} {'p95':>6s} {'lin med':>8s} {'solve med':>9s} "
+              f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
+        rows = {}
+        mpc = cls(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
+        for model in paper_models(residual, mlp, N=N, dt=DT):
+            r = fly(model, mpc, truth, x_r, u_r, steps=args.steps, dt=DT, substeps=substeps,
+                    linearize_method=method)
+            step = 1e3 * (r.t_linearize + r.t_solve)[1:]  # the first step warms caches up
+            rows[model.name] = {"step_ms_median": float(np.median(step)), "step_ms_p95": float(np.percentile(step, 95)),
+                                "linearize_ms_median": 1e3 * float(np.median(r.t_linearize[1:])),
+                                "solve_ms_median": 1e3 * float(np.median(r.t_solve[1:])),
+                                "loop_ms_per_step": 1e3 * r.elapsed_s / args.steps,
+                                "real_time_factor": r.real_time_factor, "fallbacks": r.n_fallbacks}
+            v = rows[model.name]
+            print(f"  {model.name:8s} {v['step_ms_median']:13.2f} {v['step_ms_p95']:6.2f} {v['linearize_ms_median']:8.2f} "
+                  f"{v['solve_ms_median']:9.2f} {v['loop_ms_per_step']:12.2f} {v['real_time_factor']:11.2f} "
+                  f"{v['fallbacks']:9d}")
+        out[name] = rows
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
