@@ -28,9 +28,10 @@ truth_mass = 1.33
 truth_inertia = [0.005, 0.005, 0.004]
 truth_drag = [0.6, 0.6, 0.15]
 disturbance = [0.3, 0.3, 0.3]
-truth_substeps = 4
+truth_substeps = 1
 solver = "OSQP"
-linearize_method = "central"
+qp = "osqp"
+linearize_method = "forward"
 transient_s = 1.0
 
 # %%
@@ -41,7 +42,7 @@ import torch
 
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc import LinearizedMPC
+from fnnlib.mpc import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.flight import fly, lissajous_reference, tracking_rmse
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.models import AdaptiveNNModel, paper_models
@@ -57,6 +58,17 @@ truth = Quadrotor(NOMINAL.replace(mass=truth_mass, inertia=tuple(truth_inertia),
 F.check_gain(L, 12, dt)  # refuse an unstable feedback gain before any flight
 if not u_max or min(u_max) <= 0:
     raise ValueError(f"u_max must list positive thrust bounds, got {u_max}")
+QP_CLASSES = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
+if qp not in QP_CLASSES:
+    raise ValueError(f"qp must be one of {sorted(QP_CLASSES)}, got {qp!r}")
+
+
+def make_mpc(umax):
+    """Eq. (28) with the paper's weights, thrust box [0, umax] and |Theta| <= theta_max."""
+    return QP_CLASSES[qp](N, np.asarray(Q), np.asarray(R), u_lb=np.zeros(4), u_ub=np.full(4, umax), x_lb=x_lb,
+                          x_ub=-x_lb, solver=solver)
+
+
 x_lb = np.r_[np.full(6, -np.inf), np.full(3, -theta_max), np.full(3, -np.inf)]
 x_r, u_r = lissajous_reference(steps, N, dt=dt)
 out = Path(out_dir)
@@ -69,12 +81,17 @@ print(f"residual from seed {meta_res.get('seed')}; reference thrust range {float
 # The paper bounds each thrust by 4 N, the authors' release by 6 N. With the 1.33 kg test vehicle, hovering
 # alone takes 3.26 N per motor and the Lissajous peak (13 m/s^2 sideways) about 5.5 N, so under 4 N no
 # model can follow the reference; we fly both bounds and report both.
+#
+# `qp = "osqp"` solves the QP of Eq. (28) with OSQP directly (the problem set up once, each step only new
+# numbers in a fixed sparsity pattern); `qp = "cvxpy"` solves the same QP through the cvxpy problem built once
+# with Parameters. The tests hold the two to the same inputs (1e-6); the direct form skips cvxpy's per-solve
+# work, ~3.5 of the ~4.5 ms a cvxpy solve takes. The truth is integrated with one RK4 step of 0.02 s
+# (`truth_substeps`): against 16 sub-steps that differs by 1.3e-8 per step, far below any model error here.
 
 # %%
 flights = {}
 for umax in u_max:
-    mpc = LinearizedMPC(N, np.asarray(Q), np.asarray(R), u_lb=np.zeros(4), u_ub=np.full(4, umax), x_lb=x_lb,
-                        x_ub=-x_lb, solver=solver)
+    mpc = make_mpc(umax)
     models = paper_models(residual, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt)
     flights[umax] = {m.name: fly(m, mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
                                  linearize_method=linearize_method, progress=True) for m in models}
@@ -88,8 +105,7 @@ six = names[:6]
 # %%
 adapnn_sweep = {}
 for umax in u_max:
-    mpc = LinearizedMPC(N, np.asarray(Q), np.asarray(R), u_lb=np.zeros(4), u_ub=np.full(4, umax), x_lb=x_lb,
-                        x_ub=-x_lb, solver=solver)
+    mpc = make_mpc(umax)
     runs = {g: fly(AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(residual, g), dt=dt), mpc, truth,
                    x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method)
             for g in Gamma_adapnn_grid}
@@ -105,13 +121,33 @@ def acc_rmse(r):
 
 table = {str(umax): {n: {**tracking_rmse(r.x, r.x_ref), "acc_pred_rmse": acc_rmse(r), "fallbacks": r.n_fallbacks,
                          "step_ms_median": 1e3 * float(np.median(r.t_linearize + r.t_solve)),
-                         "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95))}
+                         "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
+                         "linearize_ms_median": 1e3 * float(np.median(r.t_linearize)),
+                         "solve_ms_median": 1e3 * float(np.median(r.t_solve)),
+                         "flight_s": r.elapsed_s, "real_time_factor": r.real_time_factor}
                      for n, r in fl.items()} for umax, fl in flights.items()}
 for umax, rows in table.items():
-    print(f"thrust <= {umax} N          RMSE mean-axis   norm   acc-pred   fallbacks   ms/step (median, p95)")
+    print(f"thrust <= {umax} N   RMSE mean-axis   norm  acc-pred  fallbacks  ms/step (median, p95)  flight s  x real time")
     for n, v in rows.items():
-        print(f"  {n:8s} {v['mean_axis']:18.3f} {v['norm']:7.3f} {v['acc_pred_rmse']:9.3f} {v['fallbacks']:9d}"
-              f"   {v['step_ms_median']:6.1f} {v['step_ms_p95']:6.1f}")
+        print(f"  {n:8s} {v['mean_axis']:12.3f} {v['norm']:7.3f} {v['acc_pred_rmse']:8.3f} {v['fallbacks']:9d}"
+              f"   {v['step_ms_median']:6.1f} {v['step_ms_p95']:6.1f}   {v['flight_s']:10.2f} {v['real_time_factor']:8.1f}")
+
+# %% [markdown]
+# ## Speed
+# Targets set for this reproduction (not a paper claim): the median control step (linearize + solve) at most
+# 4 ms and the 6 s flight, simulation included, at least 5x faster than real time, on the 2-core CI machine.
+# Each flight's wall time is measured inside `fly`; `benchmarks/bench_flight.py` repeats the measurement
+# without the notebook around it.
+
+# %%
+every = [v for rows in table.values() for v in rows.values()]
+speed = {"step_ms_median_worst_model": max(v["step_ms_median"] for v in every),
+         "step_ms_median_best_model": min(v["step_ms_median"] for v in every),
+         "real_time_factor_worst_model": min(v["real_time_factor"] for v in every),
+         "real_time_factor_best_model": max(v["real_time_factor"] for v in every),
+         "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "linearize_method": linearize_method}
+speed["met"] = (speed["step_ms_median_worst_model"] <= 4.0) and (speed["real_time_factor_worst_model"] >= 5.0)
+print(speed)
 
 # %%
 t_grid = np.arange(steps + 1) * dt
@@ -206,6 +242,6 @@ claims = [
                    rule="AdapFNN within 25 % of FNN and >= FNN; Theorem 2 ball holds >= 95 % after the transient"),
 ]
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
-                metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep})
+                metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep, "speed": speed})
 for c in claims:
     print(c["id"], c["verdict"], c["checks"])
