@@ -363,11 +363,17 @@ class _MPCBase:
         return shift_plan(self._plan[0], self._plan[1], x0)
 
     def reset(self) -> None:
-        """Forget the last plan (the next fallback uses the reference) and zero the counters."""
+        """Start afresh: forget the last plan and the solver's warm start, zero the counters.
+
+        The solver state is rebuilt (:meth:`_setup`), so a flight after ``reset()`` gives the
+        same numbers whatever was solved before it (the warm start moves iterates within
+        the tolerance otherwise).
+        """
         self._plan = None
         self.n_solves = 0
         self.n_fallbacks = 0
         self.last_exception = None
+        self._setup()
 
 
 def _weighted_sq(E: Any, F: np.ndarray) -> cp.Expression:

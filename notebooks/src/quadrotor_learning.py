@@ -104,6 +104,13 @@ best = int(np.argmin(val_loss[-1]))
 residual = fit.members[best].double()
 F.save_checkpoint(out / "residual.pt", residual, {"seed": seeds[best], "epochs": epochs, "lr": lr,
                                                   "segment_length": segment_length, "val_loss": float(val_loss[-1, best])})
+# every initialisation too: the MPC task flies each of them to show the spread over seeds
+member_files = []
+for e, s in enumerate(seeds):
+    name = f"residual_seed{s}.pt"
+    F.save_checkpoint(out / name, fit.members[e].double(), {"seed": s, "epochs": epochs, "lr": lr,
+                                                            "val_loss": float(val_loss[-1, e])})
+    member_files.append(name)
 per_model_s = fit.seconds / len(seeds)
 print(f"{len(seeds)} initialisations x {epochs} epochs in {fit.seconds:.0f} s ({per_model_s:.0f} s per model, "
       f"{fit.history.n_updates} Adam updates each); kept seed {seeds[best]} (lowest validation loss)")
@@ -211,6 +218,7 @@ claims = [
                    rule="no trainable feedback parameter; 50 epochs of one model <= 30 min on this machine"),
 ]
 F.write_results(out, task="quadrotor_learning", profile=profile, claims=claims,
-                metrics={"best_seed": seeds[best], "mlp_final_mse": mlp_loss[-1], "epochs": epochs})
+                metrics={"best_seed": seeds[best], "mlp_final_mse": mlp_loss[-1], "epochs": epochs,
+                         "member_checkpoints": member_files})
 for c in claims:
     print(c["id"], c["verdict"], c["checks"])

@@ -35,6 +35,7 @@ linearize_method = "forward"
 transient_s = 1.0
 
 # %%
+import json
 from pathlib import Path
 
 import numpy as np
@@ -213,6 +214,73 @@ for umax, fl in flights.items():
 print(thm2)
 
 # %% [markdown]
+# ## Spread over the trained networks
+# The flights above use the residual network with the lowest validation loss. The four models that carry it
+# (Neural, AdapNN, FNN, AdapFNN) are flown again with every initialisation trained by `quadrotor_learning`
+# (AdapNN at the gain kept above); Nomi and FB do not use it and MLP is one network, so their flights are the
+# ones above. This is spread over training seeds only: the flight itself is deterministic (the member that
+# is also `residual.pt` reproduces the flights above exactly). The verdicts below use the flights above, as
+# the rules say; the fractions here show how often each ordering holds over seeds.
+
+# %%
+learning = json.loads((up / "results.json").read_text())
+member_files = learning.get("metrics", {}).get("member_checkpoints")
+if not member_files:
+    raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
+carrying = ("Neural", "AdapNN", "FNN", "AdapFNN")
+best_gamma = {str(umax): min(adapnn_sweep[str(umax)], key=adapnn_sweep[str(umax)].get) for umax in u_max}
+spread = {str(umax): {n: {} for n in carrying} for umax in u_max}
+for fname in member_files:
+    net, meta = F.load_checkpoint(up / fname, expected_kind="AeroResidual")
+    net = net.double()
+    for umax in u_max:
+        mpc = make_mpc(umax)
+        ms = {m.name: m for m in paper_models(net, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt)}
+        ms["AdapNN"] = AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(net, best_gamma[str(umax)]),
+                                       dt=dt)
+        for name in carrying:
+            r = fly(ms[name], mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
+                    linearize_method=linearize_method)
+            spread[str(umax)][name][str(meta["seed"])] = tracking_rmse(r.x, r.x_ref)["mean_axis"]
+            if meta["seed"] == meta_res.get("seed"):  # the network of the flights above: the same flight
+                assert abs(spread[str(umax)][name][str(meta["seed"])] - table[str(umax)][name]["mean_axis"]) < 1e-9
+
+orderings = {}
+for umax in u_max:
+    u = str(umax)
+    fixed = {n: table[u][n]["mean_axis"] for n in ("Nomi", "MLP", "FB")}
+    seeds_u = list(spread[u]["FNN"])
+    per_seed = [{**fixed, **{n: spread[u][n][sd] for n in carrying}} for sd in seeds_u]
+    orderings[u] = {
+        "FNN best of the six": float(np.mean([min(six, key=r.get) == "FNN" for r in per_seed])),
+        "FNN < Neural": float(np.mean([r["FNN"] < r["Neural"] for r in per_seed])),
+        "FNN < AdapNN": float(np.mean([r["FNN"] < r["AdapNN"] for r in per_seed])),
+        "Neural < Nomi": float(np.mean([r["Neural"] < r["Nomi"] for r in per_seed])),
+        "AdapFNN >= FNN": float(np.mean([r["AdapFNN"] >= r["FNN"] for r in per_seed])),
+        "AdapFNN within 25 % of FNN": float(np.mean([abs(r["AdapFNN"] - r["FNN"]) <= 0.25 * r["FNN"]
+                                                      for r in per_seed])),
+    }
+    print(f"thrust <= {umax} N, {len(seeds_u)} seeds:")
+    for n in carrying:
+        v = np.array(list(spread[u][n].values()))
+        print(f"  {n:8s} mean {v.mean():.3f}  std {v.std(ddof=1) if v.size > 1 else 0.0:.3f}  min {v.min():.3f}  "
+              f"max {v.max():.3f}")
+    print("  fraction of seeds where:", orderings[u])
+
+fig, axes = F.new_figure(1, len(u_max))
+for ax, umax in zip(np.ravel(axes), u_max):  # one panel per thrust bound (a lone Axes when there is one)
+    u = str(umax)
+    for i, n in enumerate(carrying):
+        v = list(spread[u][n].values())
+        ax.plot(np.full(len(v), i), v, "o", alpha=0.7)
+    for n, style in (("Nomi", ":"), ("MLP", "-."), ("FB", "--")):
+        ax.axhline(table[u][n]["mean_axis"], color="k", ls=style, lw=0.8, label=n)
+    ax.set(xticks=range(len(carrying)), xticklabels=carrying, ylabel="mean per-axis RMSE [m]",
+           title=f"thrust <= {umax} N: one dot per trained network")
+    ax.legend(fontsize=7)
+F.save_figure(fig, out, "seed_spread")
+
+# %% [markdown]
 # ## Verdicts
 
 # %%
@@ -230,7 +298,11 @@ for umax, rows in table.items():
     q5[f"{umax} N: Theorem 2 ball holds >= 95 % after the transient"] = thm2[umax]["inside_fraction"] >= 0.95
 rmse_numbers = {u: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for u, rows in table.items()}
 claims = [
-    F.claim_result("Q3", checks=q3, figure=f"figures/tracking_u{u_max[0]:g}.png", numbers={"mean_axis_rmse_m": rmse_numbers},
+    F.claim_result("Q3", checks=q3, figure=f"figures/tracking_u{u_max[0]:g}.png",
+                   numbers={"mean_axis_rmse_m": rmse_numbers,
+                            "over_seeds_fraction": {u: {k: o[k] for k in ("FNN best of the six", "FNN < Neural",
+                                                                          "Neural < Nomi")}
+                                                    for u, o in orderings.items()}},
                    rule="FNN lowest mean per-axis RMSE of the six; Neural < Nomi; MLP > Neural (every thrust bound)"),
     F.claim_result("Q4", checks=q4, figure=f"figures/acc_prediction_u{u_max[0]:g}.png",
                    numbers={"acc_pred_rmse": {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()}
@@ -238,10 +310,13 @@ claims = [
                    rule="lowest first-step acceleration RMSE of the six is FB or FNN; FNN < Neural"),
     F.claim_result("Q5", checks=q5, figure=f"figures/adapfnn_u{u_max[0]:g}.png",
                    numbers={"mean_axis_rmse_m": {u: {n: rmse_numbers[u][n] for n in ("FNN", "AdapFNN")} for u in rmse_numbers},
-                            "theorem2": thm2},
+                            "theorem2": thm2,
+                            "over_seeds_fraction": {u: {k: o[k] for k in ("AdapFNN >= FNN", "AdapFNN within 25 % of FNN")}
+                                                    for u, o in orderings.items()}},
                    rule="AdapFNN within 25 % of FNN and >= FNN; Theorem 2 ball holds >= 95 % after the transient"),
 ]
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
-                metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep, "speed": speed})
+                metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep, "speed": speed,
+                         "seed_spread": {"mean_axis_rmse_m": spread, "orderings_fraction": orderings}})
 for c in claims:
     print(c["id"], c["verdict"], c["checks"])

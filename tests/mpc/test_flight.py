@@ -265,3 +265,16 @@ def test_both_qp_implementations_fly_the_same_flight(reference):
                 _mpc(cls, **tight), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS) for cls in (LinearizedMPC, OSQPMPC)]
     np.testing.assert_allclose(runs[0].u, runs[1].u, rtol=0, atol=1e-6)
     np.testing.assert_allclose(runs[0].x, runs[1].x, rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("mpc_cls", [LinearizedMPC, OSQPMPC])
+def test_a_flight_does_not_depend_on_what_the_controller_flew_before(reference, mpc_cls):
+    """fly() resets the controller, warm start included: the same flight twice gives the same bits."""
+    x_r, u_r = reference
+    mpc = _mpc(mpc_cls)
+    model = lambda: FeedbackCascadeModel(PredictionModel("Nomi", Quadrotor(NOMINAL)), 3.0, beta=0.1, N=N)  # noqa: E731
+    first = fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
+    fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    again = fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
+    np.testing.assert_array_equal(again.x, first.x)
+    np.testing.assert_array_equal(again.u, first.u)
