@@ -24,7 +24,7 @@ import torch
 
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc import LinearizedMPC, OSQPMPC
+from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.models import AdaptiveNNModel, paper_models
@@ -40,6 +40,8 @@ CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps)
     "osqp direct, reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1),
     "cvxpy Parameters, forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1),
     "cvxpy Parameters, central differences, truth 4 RK4 sub-steps (session-2 setting)": (LinearizedMPC, "central", 4),
+    "cvxpy problem rebuilt every step, forward differences, truth 1 RK4 step (the straightforward way)":
+        (RebuildMPC, "forward", 1),
 }
 
 

@@ -148,7 +148,10 @@ speed = {"step_ms_median_worst_model": max(v["step_ms_median"] for v in every),
          "real_time_factor_best_model": max(v["real_time_factor"] for v in every),
          "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "linearize_method": linearize_method}
 speed["met"] = (speed["step_ms_median_worst_model"] <= 4.0) and (speed["real_time_factor_worst_model"] >= 5.0)
-print(speed)
+print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.1f} to "
+      f"{speed['step_ms_median_worst_model']:.1f} ms over the models (target <= 4)")
+print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['real_time_factor_best_model']:.1f}x "
+      f"faster than real time (target >= 5x); targets met: {speed['met']}")
 
 # %%
 t_grid = np.arange(steps + 1) * dt
@@ -211,7 +214,9 @@ for umax, fl in flights.items():
     ax.set(xlabel="t [s]", title=f"Observation error, thrust <= {umax} N (Fig. S14)")
     ax.legend(fontsize=7)
     F.save_figure(fig, out, f"adapfnn_u{umax:g}")
-print(thm2)
+for umax, v in thm2.items():
+    print(f"thrust <= {umax} N: gamma = {v['gamma']:.2f}, ball gamma/lambda_m(L) = {v['ball_x']:.2f}, "
+          f"max ||x_tilde|| after {transient_s} s = {v['max_error']:.2f}, inside {100 * v['inside_fraction']:.0f} %")
 
 # %% [markdown]
 # ## Spread over the trained networks
@@ -265,7 +270,7 @@ for umax in u_max:
         v = np.array(list(spread[u][n].values()))
         print(f"  {n:8s} mean {v.mean():.3f}  std {v.std(ddof=1) if v.size > 1 else 0.0:.3f}  min {v.min():.3f}  "
               f"max {v.max():.3f}")
-    print("  fraction of seeds where:", orderings[u])
+    print("  fraction of seeds where " + "; ".join(f"{k}: {v:.1f}" for k, v in orderings[u].items()))
 
 fig, axes = F.new_figure(1, len(u_max))
 for ax, umax in zip(np.ravel(axes), u_max):  # one panel per thrust bound (a lone Axes when there is one)
@@ -275,10 +280,10 @@ for ax, umax in zip(np.ravel(axes), u_max):  # one panel per thrust bound (a lon
         ax.plot(np.full(len(v), i), v, "o", alpha=0.7)
     for n, style in (("Nomi", ":"), ("MLP", "-."), ("FB", "--")):
         ax.axhline(table[u][n]["mean_axis"], color="k", ls=style, lw=0.8, label=n)
-    ax.set(xticks=range(len(carrying)), xticklabels=carrying, ylabel="mean per-axis RMSE [m]",
+    ax.set(xticks=range(len(carrying)), xticklabels=carrying, ylabel="mean per-axis RMSE [m]", yscale="log",
            title=f"thrust <= {umax} N: one dot per trained network")
     ax.legend(fontsize=7)
-F.save_figure(fig, out, "seed_spread")
+_ = F.save_figure(fig, out, "seed_spread")
 
 # %% [markdown]
 # ## Verdicts
