@@ -241,8 +241,9 @@ def _outer3(a: Tensor, b: Tensor, c: Tensor) -> Tensor:
     return ((a.unsqueeze(-1) * b.unsqueeze(-2)).unsqueeze(-1) * c.unsqueeze(-2).unsqueeze(-2)).flatten(-3)
 
 
-def _rotation_from_basis(basis: Tensor, T_R: Tensor) -> Tensor:
-    return (_outer3(basis[..., 2, :], basis[..., 1, :], basis[..., 0, :]) @ T_R).unflatten(-1, (3, 3))
+def _rotation_from_basis(b_psi: Tensor, b_theta: Tensor, b_phi: Tensor, T_R: Tensor) -> Tensor:
+    """``R`` (..., 3, 3) from the (1, cos, sin) bases of psi, theta, phi (see :func:`_trilinear_maps`)."""
+    return (_outer3(b_psi, b_theta, b_phi) @ T_R).unflatten(-1, (3, 3))
 
 
 def _rotation_matrix(Theta: Tensor) -> Tensor:
@@ -254,7 +255,9 @@ def _rotation_matrix(Theta: Tensor) -> Tensor:
 
     (``c``/``s`` cos/sin, ``f`` phi, ``t`` theta, ``p`` psi), by the trilinear map of :func:`_trilinear_maps`.
     """
-    return _rotation_from_basis(_trig_basis(Theta), _T_R.to(dtype=Theta.dtype, device=Theta.device))
+    basis = _trig_basis(Theta)
+    return _rotation_from_basis(basis[..., 2, :], basis[..., 1, :], basis[..., 0, :],
+                                _T_R.to(dtype=Theta.dtype, device=Theta.device))
 
 
 def rotation_matrix(Theta: Tensor) -> Tensor:
@@ -562,7 +565,7 @@ class Quadrotor:
         v, omega = x[..., 3:6], x[..., 9:12]
         basis = _trig_basis(x[..., 6:9])  # rows (1, cos, sin) of phi, theta, psi
         b_phi, b_theta = basis[..., 0, :], basis[..., 1, :]
-        R = (_outer3(basis[..., 2, :], b_theta, b_phi) @ k.T_R).unflatten(-1, (3, 3))
+        R = _rotation_from_basis(basis[..., 2, :], b_theta, b_phi, k.T_R)
         s = u @ k.S_T  # [T / m, tau / J]
         # v' = -(T / m) R e3 + g e3 + F / m - R D R^T v + a_res
         v_dot = k.a0 - s[..., :1] * R[..., :, 2]
