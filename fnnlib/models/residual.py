@@ -142,7 +142,7 @@ class AdaptiveResidual(nn.Module):
         with torch.no_grad():
             phi = self.features(x.to(self.chi_hat.dtype))
             # chi_hat' = Gamma Xi^T x_tilde   (Eq. 30)
-            self.chi_hat += float(dt) * self.Gamma * torch.outer(x_tilde_v.to(self.chi_hat.dtype), phi)
+            self.chi_hat.add_(torch.outer(x_tilde_v.to(self.chi_hat.dtype), phi), alpha=float(dt) * self.Gamma)
 
     def reset(self) -> None:
         """Back to the offline weights."""

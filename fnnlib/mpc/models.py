@@ -86,6 +86,14 @@ class PredictionModel:
         """The model's first-step change-rate prediction at the measured state (Fig. S8); ``f = f(x, u)`` if known."""
         return self.f(x, u) if f is None else f
 
+    def feedback_terms(self) -> tuple[Tensor, Tensor] | None:
+        r"""The affine correction inside the horizon, if any: the pair ``(dt * L_k, x_hat)``, shapes (N, 12, 12), (N, 12).
+
+        :meth:`step` at horizon step ``k`` is :meth:`phi` plus ``dt L_k (x - x_hat[k])``; the compiled
+        linearization (:mod:`fnnlib.mpc.compiled`) adds it in closed form. ``None``: no correction.
+        """
+        return None
+
     # -- online hooks -----------------------------------------------------
     def observe(self, x_meas: Tensor) -> None:
         """A new measured state (12,), before the MPC solves."""
@@ -202,9 +210,16 @@ class FeedbackCascadeModel(PredictionModel):
     def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
         return self.phi(x, u) + self.dt * self._correction(x, k)
 
+    def feedback_terms(self) -> tuple[Tensor, Tensor] | None:
+        if self.x_hat is None:
+            return None
+        return self.dt * self.L, self.x_hat
+
     def xdot(self, x: Tensor, u: Tensor, f: Tensor | None = None) -> Tensor:
-        k = torch.zeros(x.shape[:-1], dtype=torch.long)
-        return (self.f(x, u) if f is None else f) + self._correction(x, k)
+        rate = self.f(x, u) if f is None else f
+        if self.x_hat is not None and x.ndim == 1:  # the flight loop's case: layer 0 at one state
+            return rate + self.L[0].to(x.dtype) @ (x - self.x_hat[0].to(x.dtype))
+        return rate + self._correction(x, torch.zeros(x.shape[:-1], dtype=torch.long))
 
     def observe(self, x_meas: Tensor) -> None:
         check_finite(x_meas, name="x_meas")
