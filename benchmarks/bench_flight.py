@@ -2,8 +2,8 @@
 
 One 6 s Lissajous flight (300 steps of 0.02 s, N = 10, Q = diag(100 x3, 50 x6, 1 x3), R = I4,
 0 <= u <= 6 N, |Theta| <= pi/2) on the Sec. 5.3 test vehicle, for each of the seven prediction
-models of App. A.5.4 and each configuration (QP implementation x linearization method x truth
-sub-steps). The residual networks are the trained ones of the ``quadrotor_learning`` task when
+models of App. A.5.4 and each configuration (QP implementation x numerics backend and
+linearization method x truth sub-steps). The residual networks are the trained ones of the ``quadrotor_learning`` task when
 ``--learning-dir`` holds them, else freshly initialised networks of the paper's size (2 x 36, tanh:
 the cost per step does not depend on the weights); AdapNN adapts with Gamma = 4, the gain the notebook's
 sweep keeps. Reported per model: median and p95 of
@@ -25,6 +25,7 @@ import torch
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
+from fnnlib.mpc.compiled import warm_up
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.models import AdaptiveNNModel, paper_models
@@ -34,14 +35,18 @@ N, DT = 10, 0.02
 Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
 X_LB = np.r_[np.full(6, -np.inf), np.full(3, -np.pi / 2), np.full(3, -np.inf)]
 
-CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps)
-    "osqp direct, forward differences, truth 1 RK4 step (notebook default)": (OSQPMPC, "forward", 1),
-    "osqp direct, central differences, truth 1 RK4 step": (OSQPMPC, "central", 1),
-    "osqp direct, reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1),
-    "cvxpy Parameters, forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1),
-    "cvxpy Parameters, central differences, truth 4 RK4 sub-steps (session-2 setting)": (LinearizedMPC, "central", 4),
-    "cvxpy problem rebuilt every step, forward differences, truth 1 RK4 step (the straightforward way)":
-        (RebuildMPC, "forward", 1),
+CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps, backend)
+    "osqp direct, numba kernels with exact Jacobians, truth 1 RK4 step (notebook default)":
+        (OSQPMPC, "exact", 1, "numba"),
+    "osqp direct, torch forward differences, truth 1 RK4 step": (OSQPMPC, "forward", 1, "torch"),
+    "osqp direct, torch central differences, truth 1 RK4 step": (OSQPMPC, "central", 1, "torch"),
+    "osqp direct, torch reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1, "torch"),
+    "cvxpy Parameters, numba kernels, truth 1 RK4 step": (LinearizedMPC, "exact", 1, "numba"),
+    "cvxpy Parameters, torch forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1, "torch"),
+    "cvxpy Parameters, torch central differences, truth 4 RK4 sub-steps (session-2 setting)":
+        (LinearizedMPC, "central", 4, "torch"),
+    "cvxpy problem rebuilt every step, torch forward differences, truth 1 RK4 step (the straightforward way)":
+        (RebuildMPC, "forward", 1, "torch"),
 }
 
 
@@ -65,7 +70,8 @@ def main() -> None:
     x_r, u_r = lissajous_reference(args.steps, N, dt=DT)
     print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {DT} s")
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for name, (cls, method, substeps) in CONFIGS.items():
+    print(f"numba kernels compiled or loaded from the cache in {warm_up(residual, mlp):.1f} s (not timed below)")
+    for name, (cls, method, substeps, backend) in CONFIGS.items():
         print(f"\n{name}")
         print(f"  {'model':8s} {'lin+solve med':>13s} {'p95':>6s} {'lin med':>8s} {'solve med':>9s} "
               f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
@@ -76,7 +82,7 @@ def main() -> None:
         models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, 4.0), dt=DT)
         for model in models:
             r = fly(model, mpc, truth, x_r, u_r, steps=args.steps, dt=DT, substeps=substeps,
-                    linearize_method=method)
+                    linearize_method=method if backend == "torch" else "forward", backend=backend)
             step = 1e3 * (r.t_linearize + r.t_solve)[1:]  # the first step warms caches up
             rows[model.name] = {"step_ms_median": float(np.median(step)), "step_ms_p95": float(np.percentile(step, 95)),
                                 "linearize_ms_median": 1e3 * float(np.median(r.t_linearize[1:])),

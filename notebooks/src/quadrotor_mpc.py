@@ -3,8 +3,8 @@
 #
 # A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, dt = 0.02 s,
 # Q = diag(100 x3, 50 x6, 1 x3), R = I4, thrust box, |Theta| <= pi/2). At every step the prediction model is
-# linearized along the previous plan and the time-varying QP is solved with cvxpy (OSQP, warm-started, the
-# problem built once). Seven prediction models are compared on a test vehicle the models have never seen:
+# linearized along the previous plan and the time-varying QP is solved (OSQP, warm-started, the problem set up
+# once). Seven prediction models are compared on a test vehicle the models have never seen:
 # +0.5 kg mass, +2e-3 kg m^2 x/y inertia, drag diag(0.6, 0.6, 0.15) instead of the training diag(0.7, 0.7, 0.2),
 # and a 0.3 N force on every axis. Claims **Q3** (tracking), **Q4** (first-step acceleration prediction) and
 # **Q5** (AdapFNN, Eqs. (29)-(30), Theorem 2). The residual networks come from the `quadrotor_learning` task.
@@ -32,6 +32,7 @@ truth_substeps = 1
 solver = "OSQP"
 qp = "osqp"
 linearize_method = "forward"
+backend = "numba"
 transient_s = 1.0
 
 # %%
@@ -44,6 +45,7 @@ import torch
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC
+from fnnlib.mpc.compiled import warm_up
 from fnnlib.mpc.flight import fly, lissajous_reference, tracking_rmse
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.models import AdaptiveNNModel, paper_models
@@ -62,6 +64,8 @@ if not u_max or min(u_max) <= 0:
 QP_CLASSES = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
 if qp not in QP_CLASSES:
     raise ValueError(f"qp must be one of {sorted(QP_CLASSES)}, got {qp!r}")
+if backend not in ("torch", "numba"):
+    raise ValueError(f"backend must be 'torch' or 'numba', got {backend!r}")
 
 
 def make_mpc(umax):
@@ -88,14 +92,21 @@ print(f"residual from seed {meta_res.get('seed')}; reference thrust range {float
 # with Parameters. The tests hold the two to the same inputs (1e-6); the direct form skips cvxpy's per-solve
 # work, ~3.5 of the ~4.5 ms a cvxpy solve takes. The truth is integrated with one RK4 step of 0.02 s
 # (`truth_substeps`): against 16 sub-steps that differs by 1.3e-8 per step, far below any model error here.
+#
+# `backend = "numba"` evaluates the models along the plan, their exact Jacobians (forward mode through the RK4
+# stages) and the truth's step with the compiled twins in `fnnlib.mpc.compiled`; `backend = "torch"` with the
+# torch reference, linearizing by `linearize_method`. The tests hold the two to the same flight (1e-8 m). The
+# kernels are compiled, or loaded from numba's cache, before the first flight, outside the timed loops.
 
 # %%
+compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
+print(f"compiled kernels ready in {compile_s:.1f} s" if backend == "numba" else "torch backend")
 flights = {}
 for umax in u_max:
     mpc = make_mpc(umax)
     models = paper_models(residual, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt)
     flights[umax] = {m.name: fly(m, mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
-                                 linearize_method=linearize_method, progress=True) for m in models}
+                                 linearize_method=linearize_method, backend=backend, progress=True) for m in models}
 names = list(flights[u_max[0]])
 six = names[:6]
 
@@ -108,7 +119,8 @@ adapnn_sweep = {}
 for umax in u_max:
     mpc = make_mpc(umax)
     runs = {g: fly(AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(residual, g), dt=dt), mpc, truth,
-                   x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method)
+                   x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method,
+                   backend=backend)
             for g in Gamma_adapnn_grid}
     adapnn_sweep[str(umax)] = {g: tracking_rmse(r.x, r.x_ref)["mean_axis"] for g, r in runs.items()}
     best_g = min(runs, key=lambda g: adapnn_sweep[str(umax)][g])
@@ -137,8 +149,8 @@ for umax, rows in table.items():
 # ## Speed
 # Targets set for this reproduction (not a paper claim): the median control step (linearize + solve) at most
 # 4 ms and the 6 s flight, simulation included, at least 5x faster than real time, on the 2-core CI machine.
-# Each flight's wall time is measured inside `fly`; `benchmarks/bench_flight.py` repeats the measurement
-# without the notebook around it.
+# Each flight's wall time is measured inside `fly` (kernels already compiled); `benchmarks/bench_flight.py`
+# repeats the measurement without the notebook around it, for both backends.
 
 # %%
 every = [v for rows in table.values() for v in rows.values()]
@@ -146,7 +158,9 @@ speed = {"step_ms_median_worst_model": max(v["step_ms_median"] for v in every),
          "step_ms_median_best_model": min(v["step_ms_median"] for v in every),
          "real_time_factor_worst_model": min(v["real_time_factor"] for v in every),
          "real_time_factor_best_model": max(v["real_time_factor"] for v in every),
-         "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "linearize_method": linearize_method}
+         "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "backend": backend,
+         "linearize_method": linearize_method if backend == "torch" else "exact (forward mode, compiled)",
+         "compile_s": compile_s}
 speed["met"] = (speed["step_ms_median_worst_model"] <= 4.0) and (speed["real_time_factor_worst_model"] >= 5.0)
 print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.1f} to "
       f"{speed['step_ms_median_worst_model']:.1f} ms over the models (target <= 4)")
@@ -245,7 +259,7 @@ for fname in member_files:
                                        dt=dt)
         for name in carrying:
             r = fly(ms[name], mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
-                    linearize_method=linearize_method)
+                    linearize_method=linearize_method, backend=backend)
             spread[str(umax)][name][str(meta["seed"])] = tracking_rmse(r.x, r.x_ref)["mean_axis"]
             if meta["seed"] == meta_res.get("seed"):  # the network of the flights above: the same flight
                 assert abs(spread[str(umax)][name][str(meta["seed"])] - table[str(umax)][name]["mean_axis"]) < 1e-9
