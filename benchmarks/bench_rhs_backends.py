@@ -1,12 +1,14 @@
-"""What one RK4 step of the MPC's prediction model costs in eager torch, and what a numpy twin would cost.
+"""What one RK4 step of the MPC's prediction model costs in eager torch, a numpy twin and the numba kernel.
 
 The flight loop of Sec. 5.2 evaluates three RK4 steps of Eq. (27) per control step (the
 linearization batch, the truth, the model along the new plan); in eager torch each costs about a
 millisecond of per-op overhead whatever the batch size. This script measures that cost for the
 fnnlib model (nominal Eq. (27) + the 6-36-36-3 tanh residual) against a numpy transcription of the
 same right-hand side written here only to measure the option (it is not library code; it is checked
-equal to fnnlib to 1e-12 first). Batch sizes: 1 (truth), 10 (model along the plan), 170 (forward-
-difference linearization, N (n + m + 1)).
+equal to fnnlib to 1e-12 first), and against the compiled kernel the flight loop uses
+(:mod:`fnnlib.mpc.compiled`), whose exact step Jacobians for the 10 plan points are timed too (they
+replace the 170-row forward-difference batch). Batch sizes: 1 (truth), 10 (model along the plan), 170
+(forward-difference linearization, N (n + m + 1)).
 
     .venv/bin/python benchmarks/bench_rhs_backends.py [--repeats 300]
 """
@@ -20,6 +22,7 @@ import numpy as np
 import torch
 
 from fnnlib.models.residual import AeroResidual
+from fnnlib.mpc.compiled import CompiledQuadrotor, warm_up
 from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor, allocation_matrix, rotation_matrix
 
 
@@ -84,8 +87,10 @@ def main() -> None:
     for p in net.parameters():
         p.requires_grad_(False)
     twin = numpy_twin(q, net)
+    warm_up(net)
+    compiled = CompiledQuadrotor(q, net)
     rng = np.random.default_rng(0)
-    print(f"{'batch':>6s} {'torch ms':>9s} {'numpy ms':>9s} {'ratio':>6s}")
+    print(f"{'batch':>6s} {'torch ms':>9s} {'numpy ms':>9s} {'numba ms':>9s} {'torch/numba':>11s}")
     for B in (1, 10, 170):
         x = rng.normal(size=(B, 12)) * 0.3
         u = rng.uniform(1.0, 5.0, size=(B, 4))
@@ -96,7 +101,12 @@ def main() -> None:
             assert np.abs(rotation_matrix(xt[:, 6:9]).numpy()).max() <= 1.0 + 1e-12
             t_torch = per_call_ms(lambda: q.step(xt, ut, dt=0.02, a_res_fn=net), args.repeats)
         t_numpy = per_call_ms(lambda: twin(x, u), args.repeats)
-        print(f"{B:6d} {t_torch:9.3f} {t_numpy:9.3f} {t_torch / t_numpy:6.1f}")
+        assert np.abs(compiled.step(x, u) - ref).max() < 1e-12
+        t_numba = per_call_ms(lambda: compiled.step(x, u), args.repeats)
+        print(f"{B:6d} {t_torch:9.3f} {t_numpy:9.3f} {t_numba:9.3f} {t_torch / t_numba:11.1f}")
+    x, u = rng.normal(size=(10, 12)) * 0.3, rng.uniform(1.0, 5.0, size=(10, 4))
+    t_jac = per_call_ms(lambda: compiled.step_jacobian(x, u), args.repeats)
+    print(f"numba step + exact Jacobians at the 10 plan points: {t_jac:.3f} ms")
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from tqdm.auto import tqdm
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.control.flatness import flat_reference
 from fnnlib.control.trajectories import lissajous
-from fnnlib.mpc.linearize import linearize
+from fnnlib.mpc.linearize import Linearization, linearize
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
@@ -48,6 +48,10 @@ class FlightResult:
     :math:`(x_{t+1} - \\Phi(x_t, u_t)) / dt` without feedback (for Theorems 1-2).
     ``t_linearize`` / ``t_solve`` (T,) are the seconds each step spent linearizing
     and solving; ``elapsed_s`` the wall time of the whole :func:`fly` call.
+    ``n_reference_linearizations`` counts the steps after the first where the
+    previous plan had left the model's domain (its linearization was not
+    finite, as in a diverging flight) and the model was linearized along the
+    reference instead.
     """
 
     name: str
@@ -62,6 +66,7 @@ class FlightResult:
     t_solve: np.ndarray
     n_fallbacks: int
     statuses: list[str] = field(default_factory=list)
+    n_reference_linearizations: int = 0
     dt: float = 0.02
     elapsed_s: float = float("nan")
 
@@ -139,6 +144,20 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
     u_ub = torch.as_tensor(np.asarray(mpc.u_ub), dtype=torch.float64)
     k_idx = torch.arange(N)
 
+    def linearize_at(x_bar: Tensor, u_bar: Tensor) -> Linearization | None:
+        """The model's affine form along (x_bar, u_bar), or None where it is not finite there."""
+        try:
+            if backend == "numba":
+                lin = c_model.linearize(x_bar, u_bar)
+            else:
+                lin = linearize(model.step, x_bar, u_bar, k_idx, method=linearize_method)  # type: ignore[arg-type]
+        except ValueError:  # a NaN/inf point or output, refused by the linearization
+            return None
+        with np.errstate(all="ignore"):
+            finite = all(np.isfinite(a).all() for a in (lin.A, lin.B, lin.c))
+        return lin if finite else None
+
+    n_reference = 0
     xs, us = [x.clone()], []
     xdot_true, xdot_pred, x_tilde, delta = [], [], [], []
     t_lin, t_sol, statuses = np.zeros(steps), np.zeros(steps), []
@@ -150,17 +169,17 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         e = model.observer_error
         x_tilde.append(np.full(12, np.nan) if e is None else e.numpy().copy())
         # linearisation point: the previous plan shifted by one step, starting at the measured state
-        if plan_x is None:
-            x_bar = torch.cat([x[None], x_r[t + 1:t + N]])
-            u_bar = u_r[t:t + N].clone()
-        else:
-            x_bar = torch.cat([x[None], plan_x[2:N + 1]])
-            u_bar = torch.cat([plan_u[1:], plan_u[-1:]])
         tic = time.perf_counter()
-        if backend == "numba":
-            lin = c_model.linearize(x_bar, u_bar)
-        else:
-            lin = linearize(model.step, x_bar, u_bar, k_idx, method=linearize_method)  # type: ignore[arg-type]
+        lin = None
+        if plan_x is not None:
+            lin = linearize_at(torch.cat([x[None], plan_x[2:N + 1]]), torch.cat([plan_u[1:], plan_u[-1:]]))
+            n_reference += lin is None
+        if lin is None:  # the first step, or a plan outside the model's domain: along the reference
+            lin = linearize_at(torch.cat([x[None], x_r[t + 1:t + N]]), u_r[t:t + N].clone())
+            if lin is None:
+                raise ValueError(f"step {t}: the model's linearization at the measured state and the reference is "
+                                 f"not finite (state {x.numpy().round(3).tolist()}); the flight has left the model's "
+                                 "domain")
         t_lin[t] = time.perf_counter() - tic
         tic = time.perf_counter()
         sol = mpc.solve(x.numpy(), lin.A, lin.B, lin.c, x_r[t + 1:t + N + 1].numpy(), u_r[t:t + N].numpy())
@@ -193,4 +212,4 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         name=model.name, x=torch.stack(xs).numpy(), u=np.stack(us), x_ref=x_r[:steps + 1].numpy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
         delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
-        statuses=statuses, dt=float(dt), elapsed_s=time.perf_counter() - t_start)
+        statuses=statuses, dt=float(dt), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference)

@@ -133,6 +133,7 @@ def acc_rmse(r):
 
 
 table = {str(umax): {n: {**tracking_rmse(r.x, r.x_ref), "acc_pred_rmse": acc_rmse(r), "fallbacks": r.n_fallbacks,
+                         "reference_linearizations": r.n_reference_linearizations,
                          "step_ms_median": 1e3 * float(np.median(r.t_linearize + r.t_solve)),
                          "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
                          "linearize_ms_median": 1e3 * float(np.median(r.t_linearize)),

@@ -278,3 +278,39 @@ def test_a_flight_does_not_depend_on_what_the_controller_flew_before(reference, 
     again = fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
     np.testing.assert_array_equal(again.x, first.x)
     np.testing.assert_array_equal(again.u, first.u)
+
+
+class _LeavesItsDomain(PredictionModel):
+    """The nominal model, whose step is NaN on the calls listed in ``bad`` (1-based), as a model is outside the
+    domain where it is finite (a diverging flight's plan, a state at gimbal lock)."""
+
+    def __init__(self, bad: set[int] | None = None, bad_from: int | None = None) -> None:
+        super().__init__("Nomi", Quadrotor(NOMINAL))
+        self.bad, self.bad_from, self.calls = bad or set(), bad_from, 0
+
+    def step(self, x, u, k):
+        self.calls += 1
+        out = super().step(x, u, k)
+        if self.calls in self.bad or (self.bad_from is not None and self.calls >= self.bad_from):
+            out = torch.full_like(out, float("nan"))
+        return out
+
+
+def test_a_plan_outside_the_models_domain_is_replaced_by_the_reference(reference):
+    """Step 1's plan linearizes to NaN: that step is linearized along the reference instead, counted, and the
+    flight goes on; where even the reference gives NaN, fly stops with a clear error."""
+    x_r, u_r = reference
+    # "forward" linearizes with one call of step: call 1 is step 0 (reference), call 2 step 1's plan (NaN),
+    # call 3 step 1 again along the reference
+    run = fly(_LeavesItsDomain(bad={2}), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+              linearize_method="forward")
+    assert run.n_reference_linearizations == 1 and run.n_fallbacks == 0
+    assert np.isfinite(run.x).all() and np.isfinite(run.u).all()
+    clean = fly(_LeavesItsDomain(), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+                linearize_method="forward")
+    assert clean.n_reference_linearizations == 0
+    assert 0 < np.abs(run.u[1] - clean.u[1]).max()  # step 1 did use another linearization point
+    # nowhere to linearize: a clear error, not NaN in the QP
+    with pytest.raises(ValueError, match="left the model's domain"):
+        fly(_LeavesItsDomain(bad_from=2), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+            linearize_method="forward")
