@@ -140,76 +140,83 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
     model.reset()
     mpc.reset()
     fallbacks_before = int(mpc.n_fallbacks)
-    u_lb = torch.as_tensor(np.asarray(mpc.u_lb), dtype=torch.float64)
-    u_ub = torch.as_tensor(np.asarray(mpc.u_ub), dtype=torch.float64)
+    u_lb, u_ub = np.asarray(mpc.u_lb, dtype=np.float64), np.asarray(mpc.u_ub, dtype=np.float64)
     k_idx = torch.arange(N)
+    X_r, U_r = x_r.numpy(), u_r.numpy()
+    as_t = torch.from_numpy  # the loop works in numpy; the models' hooks see torch views
 
-    def linearize_at(x_bar: Tensor, u_bar: Tensor) -> Linearization | None:
+    def linearize_at(x_bar: np.ndarray, u_bar: np.ndarray) -> Linearization | None:
         """The model's affine form along (x_bar, u_bar), or None where it is not finite there."""
         try:
             if backend == "numba":
                 lin = c_model.linearize(x_bar, u_bar)
             else:
-                lin = linearize(model.step, x_bar, u_bar, k_idx, method=linearize_method)  # type: ignore[arg-type]
+                lin = linearize(model.step, as_t(x_bar), as_t(u_bar), k_idx,  # type: ignore[arg-type]
+                                method=linearize_method)
         except ValueError:  # a NaN/inf point or output, refused by the linearization
             return None
         with np.errstate(all="ignore"):
             finite = all(np.isfinite(a).all() for a in (lin.A, lin.B, lin.c))
         return lin if finite else None
 
+    x = x.numpy().copy()
     n_reference = 0
-    xs, us = [x.clone()], []
+    xs, us = [x], []
     xdot_true, xdot_pred, x_tilde, delta = [], [], [], []
     t_lin, t_sol, statuses = np.zeros(steps), np.zeros(steps), []
-    plan_x: Tensor | None = None
-    plan_u: Tensor | None = None
+    plan_x: np.ndarray | None = None
+    plan_u: np.ndarray | None = None
     bar = tqdm(range(steps), desc=model.name, disable=not progress, leave=False)
     for t in bar:
-        model.observe(x)
+        x_t = as_t(x)
+        model.observe(x_t)
         e = model.observer_error
         x_tilde.append(np.full(12, np.nan) if e is None else e.numpy().copy())
         # linearisation point: the previous plan shifted by one step, starting at the measured state
         tic = time.perf_counter()
         lin = None
-        if plan_x is not None:
-            lin = linearize_at(torch.cat([x[None], plan_x[2:N + 1]]), torch.cat([plan_u[1:], plan_u[-1:]]))
+        if plan_x is not None and plan_u is not None:
+            lin = linearize_at(np.vstack([x, plan_x[2:N + 1]]), np.vstack([plan_u[1:], plan_u[-1:]]))
             n_reference += lin is None
         if lin is None:  # the first step, or a plan outside the model's domain: along the reference
-            lin = linearize_at(torch.cat([x[None], x_r[t + 1:t + N]]), u_r[t:t + N].clone())
+            lin = linearize_at(np.vstack([x, X_r[t + 1:t + N]]), U_r[t:t + N].copy())
             if lin is None:
                 raise ValueError(f"step {t}: the model's linearization at the measured state and the reference is "
-                                 f"not finite (state {x.numpy().round(3).tolist()}); the flight has left the model's "
-                                 "domain")
+                                 f"not finite (state {x.round(3).tolist()}); the flight has left the model's domain")
         t_lin[t] = time.perf_counter() - tic
         tic = time.perf_counter()
-        sol = mpc.solve(x.numpy(), lin.A, lin.B, lin.c, x_r[t + 1:t + N + 1].numpy(), u_r[t:t + N].numpy())
+        sol = mpc.solve(x, lin.A, lin.B, lin.c, X_r[t + 1:t + N + 1], U_r[t:t + N])
         t_sol[t] = time.perf_counter() - tic
         statuses.append(str(sol.status))
-        plan_u = torch.as_tensor(sol.u, dtype=torch.float64)
-        plan_x = torch.as_tensor(sol.x, dtype=torch.float64)
+        plan_u = np.array(sol.u, dtype=np.float64)
+        plan_x = np.array(sol.x, dtype=np.float64)
         plan_x[0] = x
-        u = torch.minimum(torch.maximum(plan_u[0], u_lb), u_ub)  # solver tolerance
+        u = np.minimum(np.maximum(plan_u[0], u_lb), u_ub)  # solver tolerance
         plan_u[0] = u  # the models are told the input actually applied (commit's contract)
         with torch.no_grad():
             # the model along the new plan, once: row 0 is (x, u), the rest feeds the cascade's commit
             if backend == "numba":
-                rate_true, x_next = map(torch.from_numpy, c_truth.rate_and_step(x, u, dt, substeps))
-                rates, phi_plan = map(torch.from_numpy, c_model.f_and_phi(plan_x[:-1], plan_u))
+                rate_true, x_next = c_truth.rate_and_step(x, u, dt, substeps)
+                rates, phi_plan = c_model.f_and_phi(plan_x[:-1], plan_u)
             else:
-                rate_true = truth.f(x, u)
-                x_next = truth.step(x, u, dt=dt, substeps=substeps, k1=rate_true)
-                rates = model.f(plan_x[:-1], plan_u)
-                phi_plan = model.phi(plan_x[:-1], plan_u, k1=rates)
-            xdot_true.append(rate_true.numpy())
-            xdot_pred.append(model.xdot(x, u, f=rates[0]).numpy())
-            delta.append(((x_next - phi_plan[0]) / dt).numpy())
-        model.commit(plan_x, plan_u, phi_plan)
-        check_finite(x_next, name=f"truth state at step {t + 1}")
-        us.append(u.numpy().copy())
+                u_t = as_t(u)
+                rate_true_t = truth.f(x_t, u_t)
+                rate_true = rate_true_t.numpy()
+                x_next = truth.step(x_t, u_t, dt=dt, substeps=substeps, k1=rate_true_t).numpy()
+                rates_t = model.f(as_t(plan_x[:-1]), as_t(plan_u))
+                rates = rates_t.numpy()
+                phi_plan = model.phi(as_t(plan_x[:-1]), as_t(plan_u), k1=rates_t).numpy()
+            xdot_true.append(rate_true)
+            xdot_pred.append(model.xdot(x_t, as_t(u), f=as_t(rates[0])).numpy())
+            delta.append((x_next - phi_plan[0]) / dt)
+        model.commit(as_t(plan_x), as_t(plan_u), as_t(phi_plan))
+        if not np.isfinite(x_next).all():
+            check_finite(as_t(x_next), name=f"truth state at step {t + 1}")
+        us.append(u)
         x = x_next
-        xs.append(x.clone())
+        xs.append(x)
     return FlightResult(
-        name=model.name, x=torch.stack(xs).numpy(), u=np.stack(us), x_ref=x_r[:steps + 1].numpy(),
+        name=model.name, x=np.stack(xs), u=np.stack(us), x_ref=X_r[:steps + 1].copy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
         delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
         statuses=statuses, dt=float(dt), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference)

@@ -33,6 +33,7 @@ solver = "OSQP"
 qp = "osqp"
 linearize_method = "forward"
 backend = "numba"
+speed_repeats = 5
 transient_s = 1.0
 
 # %%
@@ -126,6 +127,7 @@ for umax in u_max:
     best_g = min(runs, key=lambda g: adapnn_sweep[str(umax)][g])
     flights[umax]["AdapNN"] = runs[best_g]
     print(f"thrust <= {umax} N: AdapNN RMSE by Gamma {adapnn_sweep[str(umax)]}; keeping Gamma = {best_g}")
+best_gamma = {str(umax): min(adapnn_sweep[str(umax)], key=adapnn_sweep[str(umax)].get) for umax in u_max}
 
 # %%
 def acc_rmse(r):
@@ -150,21 +152,42 @@ for umax, rows in table.items():
 # ## Speed
 # Targets set for this reproduction (not a paper claim): the median control step (linearize + solve) at most
 # 4 ms and the 6 s flight, simulation included, at least 5x faster than real time, on the 2-core CI machine.
-# Each flight's wall time is measured inside `fly` (kernels already compiled); `benchmarks/bench_flight.py`
+# Wall time on this machine varies from run to run (a pure-Python loop timed six times in a row spread over
+# 0.60-1.06 s), so one flight per model is a noisy sample. The rule: every model is flown `speed_repeats` times
+# at the largest thrust bound, kernels already compiled; per model, the step time is the median over all steps
+# of all its repeats and the real-time factor the median over its repeats; the targets are met when the worst
+# model meets both. The single flights above are in the table as they came. `benchmarks/bench_flight.py`
 # repeats the measurement without the notebook around it, for both backends.
 
 # %%
-every = [v for rows in table.values() for v in rows.values()]
-speed = {"step_ms_median_worst_model": max(v["step_ms_median"] for v in every),
-         "step_ms_median_best_model": min(v["step_ms_median"] for v in every),
-         "real_time_factor_worst_model": min(v["real_time_factor"] for v in every),
-         "real_time_factor_best_model": max(v["real_time_factor"] for v in every),
+if int(speed_repeats) < 1:
+    raise ValueError(f"speed_repeats must be >= 1, got {speed_repeats}")
+timing = {}
+mpc = make_mpc(max(u_max))
+for m in paper_models(residual, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt):
+    if m.name == "AdapNN":  # the gain the sweep keeps at this bound
+        m = AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(residual, best_gamma[str(max(u_max))]), dt=dt)
+    runs = [fly(m, mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method,
+                backend=backend) for _ in range(int(speed_repeats))]
+    steps_ms = 1e3 * np.concatenate([r.t_linearize + r.t_solve for r in runs])
+    timing[m.name] = {"step_ms_median": float(np.median(steps_ms)), "step_ms_p95": float(np.percentile(steps_ms, 95)),
+                      "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
+                      "real_time_factor_each": [r.real_time_factor for r in runs]}
+speed = {"per_model": timing, "repeats": int(speed_repeats), "thrust_bound": max(u_max),
+         "step_ms_median_worst_model": max(v["step_ms_median"] for v in timing.values()),
+         "step_ms_median_best_model": min(v["step_ms_median"] for v in timing.values()),
+         "real_time_factor_worst_model": min(v["real_time_factor_median"] for v in timing.values()),
+         "real_time_factor_best_model": max(v["real_time_factor_median"] for v in timing.values()),
          "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "backend": backend,
          "linearize_method": linearize_method if backend == "torch" else "exact (forward mode, compiled)",
          "compile_s": compile_s}
 speed["met"] = (speed["step_ms_median_worst_model"] <= 4.0) and (speed["real_time_factor_worst_model"] >= 5.0)
-print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.1f} to "
-      f"{speed['step_ms_median_worst_model']:.1f} ms over the models (target <= 4)")
+for n, v in timing.items():
+    print(f"  {n:8s} linearize + solve {v['step_ms_median']:.2f} ms (p95 {v['step_ms_p95']:.2f}); "
+          f"x real time, median of {int(speed_repeats)}: {v['real_time_factor_median']:.1f} "
+          f"(each {', '.join(f'{f:.1f}' for f in v['real_time_factor_each'])})")
+print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.2f} to "
+      f"{speed['step_ms_median_worst_model']:.2f} ms over the models (target <= 4)")
 print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['real_time_factor_best_model']:.1f}x "
       f"faster than real time (target >= 5x); targets met: {speed['met']}")
 
@@ -248,7 +271,6 @@ member_files = learning.get("metrics", {}).get("member_checkpoints")
 if not member_files:
     raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
 carrying = ("Neural", "AdapNN", "FNN", "AdapFNN")
-best_gamma = {str(umax): min(adapnn_sweep[str(umax)], key=adapnn_sweep[str(umax)].get) for umax in u_max}
 spread = {str(umax): {n: {} for n in carrying} for umax in u_max}
 for fname in member_files:
     net, meta = F.load_checkpoint(up / fname, expected_kind="AeroResidual")
