@@ -8,9 +8,11 @@ linearization method x truth sub-steps). The residual networks are the trained o
 the cost per step does not depend on the weights); AdapNN adapts with Gamma = 4, the gain the notebook's
 sweep keeps. Reported per model: median and p95 of
 linearize + solve per step, the median of each part, and the whole loop's wall time (truth
-simulation, model updates and bookkeeping included) as a multiple of real time.
+simulation, model updates and bookkeeping included) as a multiple of real time (with --repeats R, the
+step statistics pool all R flights and the loop time is their median).
 
-    .venv/bin/python benchmarks/bench_flight.py [--steps 300] [--learning-dir outputs/paper/quadrotor_learning]
+    .venv/bin/python benchmarks/bench_flight.py [--steps 300] [--repeats 1] [--only numba]
+        [--learning-dir outputs/paper/quadrotor_learning]
 """
 
 from __future__ import annotations
@@ -64,6 +66,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--learning-dir", type=Path, default=Path("outputs/paper/quadrotor_learning"))
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    ap.add_argument("--repeats", type=int, default=1, help="flights per model and configuration; medians reported")
+    ap.add_argument("--only", default=None, help="run only the configurations whose name contains this text")
     args = ap.parse_args()
     residual, mlp, origin = residuals(args.learning_dir)
     truth = Quadrotor(TEST_TRUTH)
@@ -71,7 +75,11 @@ def main() -> None:
     print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {DT} s")
     out: dict[str, dict[str, dict[str, float]]] = {}
     print(f"numba kernels compiled or loaded from the cache in {warm_up(residual, mlp):.1f} s (not timed below)")
+    if args.repeats < 1:
+        raise SystemExit("--repeats must be >= 1")
     for name, (cls, method, substeps, backend) in CONFIGS.items():
+        if args.only is not None and args.only not in name:
+            continue
         print(f"\n{name}")
         print(f"  {'model':8s} {'lin+solve med':>13s} {'p95':>6s} {'lin med':>8s} {'solve med':>9s} "
               f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
@@ -81,14 +89,19 @@ def main() -> None:
         # AdapNN with the gain the notebook's sweep keeps (4.0): at the release's 8.0 it diverges at 6 N
         models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, 4.0), dt=DT)
         for model in models:
-            r = fly(model, mpc, truth, x_r, u_r, steps=args.steps, dt=DT, substeps=substeps,
-                    linearize_method=method if backend == "torch" else "forward", backend=backend)
-            step = 1e3 * (r.t_linearize + r.t_solve)[1:]  # the first step warms caches up
-            rows[model.name] = {"step_ms_median": float(np.median(step)), "step_ms_p95": float(np.percentile(step, 95)),
-                                "linearize_ms_median": 1e3 * float(np.median(r.t_linearize[1:])),
-                                "solve_ms_median": 1e3 * float(np.median(r.t_solve[1:])),
-                                "loop_ms_per_step": 1e3 * r.elapsed_s / args.steps,
-                                "real_time_factor": r.real_time_factor, "fallbacks": r.n_fallbacks}
+            runs = [fly(model, mpc, truth, x_r, u_r, steps=args.steps, dt=DT, substeps=substeps,
+                        linearize_method=method if backend == "torch" else "forward", backend=backend)
+                    for _ in range(args.repeats)]
+            # the first step of each flight warms caches up
+            lin = 1e3 * np.concatenate([r.t_linearize[1:] for r in runs])
+            sol = 1e3 * np.concatenate([r.t_solve[1:] for r in runs])
+            elapsed = float(np.median([r.elapsed_s for r in runs]))
+            rows[model.name] = {"step_ms_median": float(np.median(lin + sol)),
+                                "step_ms_p95": float(np.percentile(lin + sol, 95)),
+                                "linearize_ms_median": float(np.median(lin)), "solve_ms_median": float(np.median(sol)),
+                                "loop_ms_per_step": 1e3 * elapsed / args.steps,
+                                "real_time_factor": args.steps * DT / elapsed,
+                                "fallbacks": max(r.n_fallbacks for r in runs)}
             v = rows[model.name]
             print(f"  {model.name:8s} {v['step_ms_median']:13.2f} {v['step_ms_p95']:6.2f} {v['linearize_ms_median']:8.2f} "
                   f"{v['solve_ms_median']:9.2f} {v['loop_ms_per_step']:12.2f} {v['real_time_factor']:11.2f} "
