@@ -26,6 +26,7 @@ Every kernel is checked against the torch reference in ``tests/mpc/test_compiled
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numba as nb
@@ -36,7 +37,7 @@ from torch import Tensor, nn
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
 from fnnlib.mpc.linearize import Linearization
 from fnnlib.mpc.models import PredictionModel
-from fnnlib.systems.quadrotor import Quadrotor, constants
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, check_step, constants
 
 __all__ = ["CompiledModel", "CompiledQuadrotor", "residual_layers", "warm_up"]
 
@@ -486,10 +487,6 @@ def warm_up(*residuals: nn.Module | None) -> float:
     float
         Seconds it took.
     """
-    import time
-
-    from fnnlib.systems.quadrotor import NOMINAL
-
     tic = time.perf_counter()
     plant = Quadrotor(NOMINAL)
     x, u = np.zeros((1, 12)), plant.hover_input().numpy()[None]
@@ -502,6 +499,5 @@ def warm_up(*residuals: nn.Module | None) -> float:
 
 
 def _check_step(dt: float, substeps: int) -> tuple[float, int]:
-    from fnnlib.systems.quadrotor import check_step
-
-    return check_step(float(dt) if isinstance(dt, (np.floating, int)) and not isinstance(dt, bool) else dt, substeps)
+    """:func:`~fnnlib.systems.quadrotor.check_step`, taking numpy scalars too."""
+    return check_step(float(dt) if isinstance(dt, np.floating) else dt, substeps)

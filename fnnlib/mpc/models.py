@@ -192,6 +192,7 @@ class FeedbackCascadeModel(PredictionModel):
         # positive definite and stable at Ts = dt, as Theorem 1 needs
         L_mat = check_gain(L, 12, self.dt)
         self.L = torch.stack(decayed_gains(L_mat, int(N), beta))  # (N, 12, 12)
+        self._dt_L = self.dt * self.L
         self.N = int(N)
         self.beta = float(beta)
         if adaptive and not isinstance(base.residual, AdaptiveResidual):
@@ -213,13 +214,14 @@ class FeedbackCascadeModel(PredictionModel):
     def feedback_terms(self) -> tuple[Tensor, Tensor] | None:
         if self.x_hat is None:
             return None
-        return self.dt * self.L, self.x_hat
+        return self._dt_L, self.x_hat
 
     def xdot(self, x: Tensor, u: Tensor, f: Tensor | None = None) -> Tensor:
         rate = self.f(x, u) if f is None else f
-        if self.x_hat is not None and x.ndim == 1:  # the flight loop's case: layer 0 at one state
-            return rate + self.L[0].to(x.dtype) @ (x - self.x_hat[0].to(x.dtype))
-        return rate + self._correction(x, torch.zeros(x.shape[:-1], dtype=torch.long))
+        if self.x_hat is None:
+            return rate
+        # layer 0's correction L_0 (x - x_hat^(0))   (Eq. 7)
+        return rate + (x - self.x_hat[0].to(x.dtype)) @ self.L[0].to(x.dtype).T
 
     def observe(self, x_meas: Tensor) -> None:
         check_finite(x_meas, name="x_meas")
