@@ -35,7 +35,7 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
-from fnnlib.mpc.linearize import Linearization
+from fnnlib.mpc.linearize import Linearization, affine_model
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, check_step, constants
 
@@ -362,11 +362,9 @@ class CompiledQuadrotor:
         self.residual = residual
         self.P = pack_params(plant)
         Ws, bs = residual_layers(residual)  # fails early on an unsupported network
-        self._layers_now = (Ws, bs, True) if Ws else (_DUMMY[0], _DUMMY[1], False)
-        self._H, self._G = _buffers(self._layers_now[0])
-
-    def _layers(self) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], bool]:
-        return self._layers_now
+        # (weights, biases, has_res): views of the network's tensors, so in-place updates are seen
+        self._net = (Ws, bs, True) if Ws else (_DUMMY[0], _DUMMY[1], False)
+        self._H, self._G = _buffers(self._net[0])
 
     @staticmethod
     def _inputs(x: np.ndarray | Tensor, u: np.ndarray | Tensor) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -389,7 +387,7 @@ class CompiledQuadrotor:
     def f(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor) -> np.ndarray:
         """Change rate ``f(x, u) + [0, f_neural, 0, 0]``: (B, 12) or (12,), like ``x``."""
         X, U, single = self._inputs(x, u)
-        Ws, bs, has_res = self._layers()
+        Ws, bs, has_res = self._net
         out = np.empty_like(X)
         _f_batch(X, U, self.P, Ws, bs, has_res, self._H, self._G, out)
         return out[0] if single else out
@@ -403,7 +401,7 @@ class CompiledQuadrotor:
         r"""``(f(x, u), Phi(x, u))`` in one pass: the change rate is the RK4 step's first stage."""
         X, U, single = self._inputs(x, u)
         dt, substeps = _check_step(dt, substeps)
-        Ws, bs, has_res = self._layers()
+        Ws, bs, has_res = self._net
         out, rate = np.empty_like(X), np.empty_like(X)
         _rk4_batch(X, U, dt, substeps, self.P, Ws, bs, has_res, self._H, self._G, out, rate)
         return (rate[0], out[0]) if single else (rate, out)
@@ -417,7 +415,7 @@ class CompiledQuadrotor:
 
     def _step_jacobian(self, X: np.ndarray, U: np.ndarray, dt: float,
                        substeps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        Ws, bs, has_res = self._layers()
+        Ws, bs, has_res = self._net
         out = np.empty_like(X)
         A = np.empty((X.shape[0], 12, 12))
         B = np.empty((X.shape[0], 12, 4))
@@ -461,7 +459,10 @@ class CompiledModel:
         return self.dynamics.rate_and_step(x, u, self.dt, self.substeps)
 
     def linearize(self, x_bar: np.ndarray | Tensor, u_bar: np.ndarray | Tensor) -> Linearization:
-        """Affine model of ``model.step`` along the plan, horizon steps ``k = 0 .. N-1`` (see the class docstring)."""
+        """Affine model of ``model.step`` along the plan, horizon steps ``k = 0 .. N-1`` (see the class docstring).
+
+        Raises ``ValueError`` where it is not finite, as :func:`~fnnlib.mpc.linearize.linearize` does.
+        """
         X, U, _ = CompiledQuadrotor._inputs(x_bar, u_bar)
         x_next, A, B = self.dynamics._step_jacobian(X, U, self.dt, self.substeps)
         terms = self.model.feedback_terms()
@@ -472,8 +473,7 @@ class CompiledModel:
             G, e = G[:X.shape[0]], X - terms[1].numpy()[:X.shape[0]]
             A += G
             x_next += np.einsum("kij,kj->ki", G, e)
-        c = x_next - np.einsum("kij,kj->ki", A, X) - np.einsum("kij,kj->ki", B, U)
-        return Linearization(A=A, B=B, c=c, x_next=x_next)
+        return affine_model(A, B, x_next, X, U)
 
 
 def warm_up(*residuals: nn.Module | None) -> float:

@@ -149,15 +149,11 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         """The model's affine form along (x_bar, u_bar), or None where it is not finite there."""
         try:
             if backend == "numba":
-                lin = c_model.linearize(x_bar, u_bar)
-            else:
-                lin = linearize(model.step, as_t(x_bar), as_t(u_bar), k_idx,  # type: ignore[arg-type]
-                                method=linearize_method)
-        except ValueError:  # a NaN/inf point or output, refused by the linearization
+                return c_model.linearize(x_bar, u_bar)
+            return linearize(model.step, as_t(x_bar), as_t(u_bar), k_idx,  # type: ignore[arg-type]
+                             method=linearize_method)
+        except ValueError:  # a NaN/inf point or output, refused by either linearization
             return None
-        with np.errstate(all="ignore"):
-            finite = all(np.isfinite(a).all() for a in (lin.A, lin.B, lin.c))
-        return lin if finite else None
 
     x = x.numpy().copy()
     n_reference = 0

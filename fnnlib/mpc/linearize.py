@@ -163,15 +163,26 @@ def linearize(
     else:
         A, B, x_next = _jacobians_vmap(step, x, u, kk)
 
-    A_np = A.double().cpu().numpy()
-    B_np = B.double().cpu().numpy()
-    xn = x_next.double().cpu().numpy()
-    if not (np.isfinite(A_np).all() and np.isfinite(B_np).all() and np.isfinite(xn).all()):
+    as_np = lambda t: t.double().cpu().numpy()  # noqa: E731
+    return affine_model(as_np(A), as_np(B), as_np(x_next), as_np(x), as_np(u))
+
+
+def affine_model(A: np.ndarray, B: np.ndarray, x_next: np.ndarray, x_bar: np.ndarray,
+                 u_bar: np.ndarray) -> Linearization:
+    r"""The :class:`Linearization` from Jacobians and the model's value at the plan:
+    :math:`c_k = f_d(\bar x_k, \bar u_k) - A_k \bar x_k - B_k \bar u_k`.
+
+    Raises
+    ------
+    ValueError
+        If any of ``A``, ``B``, ``x_next`` or the resulting ``c`` holds NaN or inf.
+    """
+    with np.errstate(all="ignore"):
+        finite = np.isfinite(A).all() and np.isfinite(B).all() and np.isfinite(x_next).all()
+        c = x_next - np.einsum("kij,kj->ki", A, x_bar) - np.einsum("kij,kj->ki", B, u_bar)
+    if not (finite and np.isfinite(c).all()):
         raise ValueError("the model returned a NaN or infinite value (or derivative) at the nominal plan")
-    x_np, u_np = x.double().cpu().numpy(), u.double().cpu().numpy()
-    # c_k = f_d(x_bar_k, u_bar_k) - A_k x_bar_k - B_k u_bar_k
-    c = xn - np.einsum("kij,kj->ki", A_np, x_np) - np.einsum("kij,kj->ki", B_np, u_np)
-    return Linearization(A_np, B_np, c, xn)
+    return Linearization(A, B, c, x_next)
 
 
 def _check_output(out: Tensor, rows: int, n: int) -> None:
