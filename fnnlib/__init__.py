@@ -28,7 +28,7 @@ from fnnlib.observers import (
 )
 from fnnlib.plotting import new_figure, save_figure
 from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
-from fnnlib.report import claim_result, read_results, verdict_from_checks, write_results
+from fnnlib.results import claim_result, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.stability import (
     discrete_residual,

@@ -8,8 +8,8 @@ import nbformat
 import pytest
 from .nbfactory import MakePipeline, child_task, leaf_task, write_notebook
 
-from fnnlib.pipeline import PipelineError, PipelineSpec, check, load_spec, read_parameters
-from fnnlib.pipeline.params import _type_ok
+from fnnbook import PipelineError, PipelineSpec, check, load_spec, read_parameters
+from fnnbook.params import _type_ok
 
 PARAMS = (
     'profile = "smoke"\n'

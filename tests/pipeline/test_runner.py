@@ -10,8 +10,8 @@ import papermill
 import pytest
 import yaml
 
-from fnnlib.pipeline import PipelineError, PipelineSpec, RunReport, load_spec, run
-from fnnlib.pipeline.runner import FINGERPRINT_FILE
+from fnnbook import PipelineError, PipelineSpec, RunReport, load_spec, run
+from fnnbook.runner import FINGERPRINT_FILE
 
 from .nbfactory import MakePipeline, child_task, leaf_task
 

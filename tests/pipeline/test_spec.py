@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fnnlib.pipeline import PipelineError, load_spec
+from fnnbook import PipelineError, load_spec
 
 from .nbfactory import MakePipeline, child_task, leaf_task
 

@@ -19,8 +19,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from fnnlib.pipeline.runner import check, is_up_to_date, run
-from fnnlib.pipeline.spec import PipelineError, PipelineSpec, load_spec
+from fnnbook.book import assemble_book, build_book
+from fnnbook.runner import check, is_up_to_date, run
+from fnnbook.spec import PipelineError, PipelineSpec, load_spec
 
 __all__ = ["main"]
 
@@ -114,8 +115,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                          echo=lambda line: print(line, flush=True))
             return 0 if report.ok else 1
         if args.command == "book":
-            from fnnlib.report.book import assemble_book, build_book  # noqa: PLC0415
-
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
             assemble_book(spec, args.profile, book_dir)
             start = time.perf_counter()

@@ -2,7 +2,7 @@
 
 ``CLAIMS.md`` lists claims in markdown tables, one ``## section`` per group,
 rows like ``| S1 | claim text | Fig. 4c |``.  Each task's ``results.json``
-(:mod:`fnnlib.report.claims`) reports verdicts for some IDs; the rest are
+(:mod:`fnnlib.results`) reports verdicts for some IDs; the rest are
 shown as "not run".
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.report.claims import VERDICTS, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
 
 __all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "read_claims", "render_scoreboard", "score_rows",
            "self_check"]

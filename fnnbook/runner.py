@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any
 
 import fnnlib
-from fnnlib.pipeline.params import check_task_parameters, read_parameters, resolve_parameters
-from fnnlib.pipeline.spec import PipelineError, PipelineSpec, Task
+from fnnbook.scoreboard import read_claims
+from fnnbook.params import check_task_parameters, read_parameters, resolve_parameters
+from fnnbook.spec import PipelineError, PipelineSpec, Task
 
 __all__ = ["Plan", "RunReport", "TaskOutcome", "check", "is_up_to_date", "run"]
 
@@ -124,8 +125,6 @@ def _fingerprint(task: Task, params: Mapping[str, Any], upstream: Mapping[str, s
 def _known_claims(claims_file: Path) -> set[str] | None:
     if not claims_file.is_file():
         return None
-    from fnnlib.report.scoreboard import read_claims  # noqa: PLC0415 (report imports pipeline)
-
     return {c.id for c in read_claims(claims_file)}
 
 

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from fnnlib.pipeline.spec import PipelineError, PipelineSpec, Task
+from fnnbook.spec import PipelineError, PipelineSpec, Task
 
 __all__ = ["INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters"]
 
