@@ -31,6 +31,13 @@ __all__ = ["Plan", "RunReport", "TaskOutcome", "check", "is_up_to_date", "run"]
 
 FINGERPRINT_FILE = ".fingerprint.json"
 KERNEL = "python3"
+#: torch intra-op threads in each notebook's kernel (importing fnnlib no longer sets them)
+TASK_THREADS = 1
+
+
+def _kernel_arguments(threads: int) -> list[str]:
+    """ipykernel options that set torch's threads before the notebook's first cell."""
+    return [f"--IPKernelApp.exec_lines=['import torch', 'torch.set_num_threads({int(threads)})']"]
 
 
 @dataclass(frozen=True)
@@ -279,6 +286,7 @@ def _execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool) -> t
             papermill.execute_notebook(
                 str(task.notebook), str(executed), parameters=params, kernel_name=KERNEL,
                 cwd=str(spec.root), progress_bar=progress_bar, stdout_file=fh, stderr_file=fh,
+                extra_arguments=_kernel_arguments(TASK_THREADS),
             )
             missing = [p for p in task.products if not (staging / p).exists()]
             if missing:

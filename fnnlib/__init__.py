@@ -1,8 +1,8 @@
 """fnnlib: feedback neural ODEs (Jia et al., "Feedback Favors the Generalization of Neural ODEs", ICLR 2025).
 
 The public face is flat: everything a notebook needs is importable from here.
-Importing fnnlib sets torch to one intra-op thread (faster for these tiny
-networks); call :func:`set_num_threads` to change it.
+Importing fnnlib changes no global state; :func:`set_num_threads` sets torch's
+intra-op threads (the pipeline runner calls it in each notebook's kernel).
 """
 
 from fnnlib._threads import set_num_threads
@@ -60,8 +60,6 @@ from fnnlib.training import (
 )
 
 __version__ = "0.1.0"
-
-set_num_threads()
 
 __all__ = [
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
