@@ -24,7 +24,7 @@ __all__ = ["Part", "PipelineError", "PipelineSpec", "Task", "load_spec"]
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 
 _TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
-_TOP_OPTIONAL = ("data_dir",)
+_TOP_OPTIONAL = ("data_dir", "shared")
 _TASK_REQUIRED = ("title", "notebook", "products", "parameters")
 _TASK_OPTIONAL = ("claims", "upstream")
 _PART_KEYS = ("title", "tasks")
@@ -282,6 +282,8 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
     where = str(file.name)
     data = _mapping(where, data)
     _check_keys(where, data, _TOP_REQUIRED, _TOP_OPTIONAL)
+    # `shared` only holds blocks that tasks merge with YAML anchors (`<<: *name`); yaml has merged them already
+    _mapping(f"{where}: shared", data.get("shared") or {})
     root = file.parent
 
     raw_tasks = _mapping(f"{where}: tasks", data["tasks"])
