@@ -17,6 +17,7 @@ from typing import Any
 
 import yaml
 
+from fnnbook.runner import read_status
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.results import RESULTS_FILENAME, read_results
 from fnnbook.scoreboard import SELF_CHECK_ID, read_claims, render_scoreboard, score_rows, self_check
@@ -41,6 +42,12 @@ def _copy_for_book(src: Path, dst: Path) -> None:
         if "parameters" in tags and "remove-cell" not in tags:
             cell.metadata["tags"] = [*tags, "remove-cell"]
     nbformat.write(nb, dst)
+
+
+def _not_run_page(title: str, why: str) -> str:
+    return (f"# {title}\n\n:::{{warning}}\nNot run: {why}\n:::\n\n"
+            "Its claims are listed as *not run* on the scoreboard. Once the cause is fixed, "
+            "`fnn-pipeline run` runs this task and `fnn-pipeline book` shows its results here.\n")
 
 
 def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[str]) -> Path:
@@ -83,12 +90,24 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     pages: dict[str, str] = {}
     figures: dict[str, str] = {}
     parts: list[dict[str, Any]] = []
+    notes: dict[str, str] = {}
+    status = read_status(spec, profile)
     for part in spec.parts:
         chapters = []
         for name in part.tasks:
+            if name in spec.grids:  # grid points are read by their aggregate step, not shown one by one
+                continue
             out = spec.output_dir(profile, name)
             executed = out / f"{name}.ipynb"
             if not out.is_dir():
+                why = status.get(name, {}).get("message")
+                if why and status[name].get("status") == "not run":  # e.g. its data are missing: say so
+                    (generated / name).mkdir()
+                    (generated / name / f"{name}.md").write_text(_not_run_page(spec.tasks[name].title, why),
+                                                                 encoding="utf-8")
+                    pages[name] = f"{name}/{name}.md"
+                    notes[name] = f"not run: {why}"
+                    chapters.append({"file": f"{GENERATED}/{name}/{name}"})
                 continue
             if not executed.is_file():
                 raise PipelineError(f"task {name!r}: {out} has no executed notebook {executed.name}")
@@ -110,7 +129,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         results = {**results, "scoreboard": {"claims": [self_check(claims, results)]}}
     rows = score_rows(claims, results, {n: t.claims for n, t in spec.tasks.items()})
     (generated / "scoreboard.md").write_text(
-        render_scoreboard(rows, profile=profile, pages=pages, figures=figures), encoding="utf-8")
+        render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes), encoding="utf-8")
     parts.append({"caption": "Results", "chapters": [{"file": f"{GENERATED}/scoreboard"},
                                                      {"file": "paper_vs_release"}]})
     toc = {"format": "jb-book", "root": "intro", "parts": parts}

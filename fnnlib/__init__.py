@@ -30,6 +30,7 @@ from fnnlib.plotting import new_figure, save_figure
 from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
 from fnnlib.results import claim_result, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.settings import check_notebook_settings
 from fnnlib.stability import (
     discrete_residual,
     gain_eigen_bounds,
@@ -70,7 +71,7 @@ __all__ = [
     "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",
+    "check_gain", "check_notebook_settings", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

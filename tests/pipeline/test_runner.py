@@ -88,7 +88,7 @@ def test_failure_keeps_last_good_output(make_pipeline: MakePipeline) -> None:
     assert (log.parent / "leaf.ipynb").is_file()  # the failed executed notebook beside the log
     assert not (spec.output_root / "smoke" / ".staging" / "leaf").exists()
 
-    spec = _set_leaf(pipeline, fail=False)  # fixed: runs, and the stale failure notebook goes
+    spec = _set_leaf(pipeline, fail=False, value=4)  # fixed (and changed): runs, and the stale failure notebook goes
     assert _run(spec, ["leaf"])[0].ok
     assert not (log.parent / "leaf.ipynb").exists()
 
