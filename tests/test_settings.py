@@ -1,0 +1,53 @@
+"""fnnlib.check_notebook_settings: every notebook's value checks, run before any work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import fnnlib as F
+from fnnbook import read_parameters
+from fnnlib.settings import MissingDataError
+
+NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
+
+
+def _defaults(name: str) -> dict:
+    params = read_parameters(next(p for p in NOTEBOOKS if p.stem == name))
+    return {**params, "data": "synthetic"} if name == "bottle" else params
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_the_paper_values_pass(notebook: Path) -> None:
+    F.check_notebook_settings(notebook.stem, _defaults(notebook.stem))
+
+
+@pytest.mark.parametrize(("notebook", "change", "message"), [
+    ("spiral", {"L": -1.0}, "not positive definite"),
+    ("spiral", {"L": 250.0}, "unstable"),
+    ("spiral", {"N": 0}, "N"),
+    ("spiral", {"iterations": 0}, "iterations must be an integer >= 1"),
+    ("spiral", {"hidden": [50, 0]}, "layer widths"),
+    ("theory", {"L_sweep": [5.0, -1.0]}, "not positive definite"),
+    ("ablations", {"omega_range": [0.8, -0.4, 4.4]}, "empty"),
+    ("observers", {"N": 1000}, "need 1 <= N < n_samples"),
+    ("neural_feedback", {"fb_iterations": 0}, "fb_iterations"),
+    ("neural_feedback", {"beta": -0.1}, "beta"),
+    ("bottle", {"data": "fake"}, "data must be 'real' or 'synthetic'"),
+    ("quadrotor_learning", {"seeds": [0, 0]}, "distinct"),
+    ("quadrotor_learning", {"segment_length": 0}, "segment_length"),
+    ("quadrotor_mpc", {"u_max": [0.0]}, "positive thrust"),
+])
+def test_bad_values_are_refused(notebook: str, change: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        F.check_notebook_settings(notebook, {**_defaults(notebook), **change})
+
+
+def test_missing_data_and_unknown_notebooks(tmp_path: Path) -> None:
+    with pytest.raises(MissingDataError, match="data missing: Training_dataset.mat, Testing_dataset.mat"):
+        F.check_notebook_settings("05_bottle.ipynb", {**_defaults("bottle"), "data": "real",
+                                                      "data_dir": str(tmp_path)})
+    with pytest.raises(ValueError, match="setting 'Ts' is missing"):
+        F.check_notebook_settings("spiral", {"L": 20.0})
+    F.check_notebook_settings("my_own_notebook", {"L": -1.0})  # no checks declared: passes
