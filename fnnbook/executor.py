@@ -20,7 +20,6 @@ import importlib.util
 import logging
 import os
 import shutil
-import signal
 import time
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
@@ -30,7 +29,8 @@ import psutil
 from distributed import Client, Future, LocalCluster, wait
 from tqdm.auto import tqdm
 
-from fnnbook.runner import Plan, TaskOutcome, _logs_dir, _staging_dir, cpu_count, execute_task, mark_killed
+from fnnbook.runner import (Plan, TaskOutcome, _logs_dir, _staging_dir, cpu_count, execute_task, kill_kernels,
+                            mark_killed)
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["TASK_MEMORY", "default_workers", "local_cluster", "run_on_dask"]
@@ -53,7 +53,7 @@ def local_cluster(workers: int) -> Iterator[Client]:
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0" if _HAS_BOKEH else None,
+                               dashboard_address="127.0.0.1:0",  # any free port
                                worker_dashboard_address=None, memory_limit=0)
         client = Client(cluster)
         try:
@@ -61,16 +61,6 @@ def local_cluster(workers: int) -> Iterator[Client]:
         finally:
             client.close()
             cluster.close()
-
-
-def _kill_kernels() -> int:
-    """Runs on a worker: end its child processes (the notebooks' kernels)."""
-    children = psutil.Process().children(recursive=True)
-    for child in children:
-        with contextlib.suppress(psutil.Error):
-            child.send_signal(signal.SIGKILL)
-    psutil.wait_procs(children, timeout=5)
-    return len(children)
 
 
 def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, workers: int,
@@ -176,7 +166,7 @@ def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, p
     with contextlib.suppress(Exception):
         client.cancel(list(futures.values()), force=True)
     with contextlib.suppress(Exception):
-        client.run(_kill_kernels)
+        client.run(kill_kernels)
     for name in pending.values():
         mark_killed(_logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")
         shutil.rmtree(_staging_dir(spec, plan.profile, name), ignore_errors=True)

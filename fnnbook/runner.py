@@ -15,6 +15,7 @@ and the atomic swap of outputs are the same either way.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import papermill
+import psutil
 
 import fnnlib
 from fnnbook.params import INJECTED, check_task_parameters, read_parameters, resolve_parameters
@@ -50,8 +52,13 @@ _END_MARKERS = ("\n--- ok after ", "\n--- FAILED")
 
 
 def _kernel_arguments(threads: int) -> list[str]:
-    """ipykernel options that set torch's threads before the notebook's first cell."""
-    return [f"--IPKernelApp.exec_lines=['import torch', 'torch.set_num_threads({int(threads)})']"]
+    """ipykernel options: set torch's threads before the notebook's first cell; keep the kernel's own log quiet.
+
+    (The kernel's log goes to the terminal, not to the task's log: messages such as a reply that cannot be
+    sent while Ctrl-C shuts it down. The notebook's output and errors still reach the task's log.)
+    """
+    return [f"--IPKernelApp.exec_lines=['import torch', 'torch.set_num_threads({int(threads)})']",
+            "--IPKernelApp.log_level=CRITICAL"]
 
 
 @dataclass(frozen=True)
@@ -329,6 +336,23 @@ def mark_killed(log: Path, why: str) -> None:
             fh.write(f"\n--- FAILED: {why} ---\n")
 
 
+def kill_kernels() -> int:
+    """End this process's notebook kernels (its ipykernel child processes); return how many."""
+    kernels = [p for p in psutil.Process().children(recursive=True) if _is_kernel(p)]
+    for proc in kernels:
+        with contextlib.suppress(psutil.Error):
+            proc.kill()
+    psutil.wait_procs(kernels, timeout=5)
+    return len(kernels)
+
+
+def _is_kernel(proc: psutil.Process) -> bool:
+    try:
+        return "ipykernel" in " ".join(proc.cmdline())
+    except psutil.Error:
+        return False
+
+
 def _kernel_config(folder: str) -> Any:
     """Kernels talk over IPC sockets in ``folder`` (no TCP port opened, no 'without encryption' warning)."""
     from traitlets.config import Config
@@ -388,6 +412,8 @@ def _execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
                                                     encoding="utf-8")
             _swap(staging, final)
         except BaseException as exc:
+            if not isinstance(exc, Exception):  # Ctrl-C: the kernel (in its own session) would outlive us
+                kill_kernels()
             elapsed = time.perf_counter() - start
             cell_error = hasattr(exc, "ename") and hasattr(exc, "evalue")  # papermill's cell error
             detail = str(exc) if cell_error else traceback.format_exc()

@@ -121,3 +121,14 @@ def test_log_of_a_killed_attempt_gets_a_failed_marker(tmp_path: Path) -> None:
     assert log.read_text().endswith("half\n--- FAILED: killed ---\n")
     mark_killed(log, "again")  # an ended log is left alone
     assert log.read_text().count("FAILED") == 1
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_kernel_gets_the_torch_threads_asked_for(make_pipeline: MakePipeline, tmp_path: Path, threads: int) -> None:
+    write_notebook(tmp_path / "notebooks" / "leaf.ipynb", 'profile = ""\nout_dir = ""\n',
+                   "import pathlib, torch\n(pathlib.Path(out_dir) / 'threads.txt').write_text(str(torch.get_num_threads()))")
+    spec = load_spec(make_pipeline({"leaf": {**leaf_task(), "products": ["threads.txt"],
+                                             "parameters": {"smoke": {}}}}))
+    assert _quiet(spec, threads=threads).ok
+    assert (spec.output_dir("smoke", "leaf") / "threads.txt").read_text() == str(threads)
+    assert f"torch threads: {threads}" in (spec.output_root / "smoke" / "_logs" / "leaf.log").read_text()
