@@ -523,8 +523,8 @@ def run(
         Address of a running Dask scheduler (``tcp://host:port``); overrides
         ``workers``.
     threads : int, optional
-        torch threads per task. Default: cores // workers (at least 1), and
-        :data:`TASK_THREADS` in-process on one core.
+        torch threads per task. Default: cores // workers (at least 1); 1 on
+        a cluster given by ``scheduler``.
 
     Returns
     -------
@@ -542,9 +542,9 @@ def run(
         raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
     plan = check(spec, profile, tasks, sources=sources)
     verdict = decide(spec, plan, force=force)
-    if threads is None:
-        threads = task_threads(workers)
-    if scheduler is not None or workers > 1:
+    if threads is None:  # on a cluster given by address, the local core count says nothing: 1
+        threads = 1 if scheduler is not None else task_threads(workers)
+    if (scheduler is not None or workers > 1) and any(v == "run" for v in verdict.values()):
         from fnnbook.executor import run_on_dask
 
         outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,

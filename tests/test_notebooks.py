@@ -28,7 +28,7 @@ def smoke_spec(tmp_path_factory: pytest.TempPathFactory) -> PipelineSpec:
 @pytest.mark.notebook
 @pytest.mark.parametrize("task", TASKS)
 def test_task_runs_in_smoke_profile(smoke_spec: PipelineSpec, task: str) -> None:
-    report = run(smoke_spec, PROFILE, [task], progress_bar=False)
+    report = run(smoke_spec, PROFILE, [task], progress_bar=False, threads=1)  # one torch thread, as before
     outcome = report.outcome(task)
     assert outcome.status in ("ok", "skipped"), (
         f"{task}: {outcome.status} ({outcome.message}); log: {outcome.log}")
