@@ -69,8 +69,11 @@ class _PeakMemory:
             for proc in me.children(recursive=True):
                 try:
                     rss = proc.memory_info().rss
-                    kind = "kernel" if "ipykernel" in " ".join(proc.cmdline()) else "worker"
+                    cmd = " ".join(proc.cmdline())
                 except psutil.Error:
+                    continue
+                kind = "kernel" if "ipykernel" in cmd else "worker" if "multiprocessing" in cmd else ""
+                if not kind:  # e.g. a fork about to exec a kernel
                     continue
                 if rss > self.peak.get(proc.pid, ("", 0))[1]:
                     self.peak[proc.pid] = (kind, rss)

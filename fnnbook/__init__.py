@@ -5,7 +5,8 @@
 """
 
 from fnnbook.params import check_task_parameters, read_parameters, resolve_parameters
-from fnnbook.runner import Plan, RunReport, TaskOutcome, check, is_up_to_date, run
+from fnnbook.pipeline import run
+from fnnbook.runner import Plan, RunReport, TaskOutcome, check, is_up_to_date
 from fnnbook.spec import Part, PipelineError, PipelineSpec, Task, load_spec
 
 __all__ = [

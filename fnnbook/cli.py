@@ -25,9 +25,10 @@ from pathlib import Path
 from fnnbook.book import assemble_book, build_book
 from fnnbook.data import BOTTLE_URL, fetch_bottle
 from fnnbook.executor import default_workers
-from fnnbook.runner import check, is_up_to_date, read_status, run
-from fnnlib.data.bottle import DataError
+from fnnbook.pipeline import run
+from fnnbook.runner import check, is_up_to_date, read_status
 from fnnbook.spec import PipelineError, PipelineSpec, load_spec
+from fnnlib.data.bottle import DataError
 
 __all__ = ["main"]
 
@@ -108,8 +109,12 @@ def _list(spec: PipelineSpec) -> None:
             for profile in spec.profiles:
                 try:
                     plan = check(spec, profile, [name])
-                    state = "up to date" if is_up_to_date(spec, plan, name) else (
-                        "stale" if spec.output_dir(profile, name).exists() else "not run")
+                    exists = spec.output_dir(profile, name).exists()
+                    if name in plan.missing_data:  # e.g. another --data-dir than the run's
+                        state = "data missing here" + (" (outputs of an earlier run kept)" if exists else "")
+                    else:
+                        state = "up to date" if is_up_to_date(spec, plan, name) else (
+                            "stale" if exists else "not run")
                 except PipelineError:
                     state = "invalid (run check)"
                 status.append(f"{profile}: {state}")

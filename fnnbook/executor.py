@@ -22,14 +22,13 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Iterator, Mapping
-from typing import Any
 
 import dask
 import psutil
 from distributed import Client, Future, LocalCluster, wait
 from tqdm.auto import tqdm
 
-from fnnbook.runner import (Plan, TaskOutcome, _logs_dir, _staging_dir, cpu_count, execute_task, kill_kernels,
+from fnnbook.runner import (Plan, TaskOutcome, logs_dir, staging_dir, cpu_count, execute_task, kill_kernels,
                             mark_killed)
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -145,7 +144,7 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str],
 def _outcome(spec: PipelineSpec, plan: Plan, name: str, fut: Future,
              known: Mapping[str, TaskOutcome]) -> TaskOutcome:
     out = spec.output_dir(plan.profile, name)
-    log = _logs_dir(spec, plan.profile) / f"{name}.log"
+    log = logs_dir(spec, plan.profile) / f"{name}.log"
     if fut.status == "finished":
         return fut.result()
     blocked = [u for u in spec.tasks[name].upstream if known.get(u) and known[u].status in ("failed", "not run")]
@@ -156,17 +155,19 @@ def _outcome(spec: PipelineSpec, plan: Plan, name: str, fut: Future,
     if type(exc).__name__ == "KilledWorker":
         why = "the worker process running it died (twice, with the retry); outputs untouched"
     mark_killed(log, why)
-    shutil.rmtree(_staging_dir(spec, plan.profile, name), ignore_errors=True)
+    shutil.rmtree(staging_dir(spec, plan.profile, name), ignore_errors=True)
     return TaskOutcome(name, "failed", 0.0, out, log, why)
 
 
 def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, plan: Plan,
             pending: Mapping[str, str]) -> None:
-    """Cancel every task, stop the running kernels, mark their logs."""
+    """Cancel every task, stop the running kernels, mark their logs.
+
+    (Each task's own error handling removes its staging folder; the next run clears any that is left.)
+    """
     with contextlib.suppress(Exception):
         client.cancel(list(futures.values()), force=True)
     with contextlib.suppress(Exception):
         client.run(kill_kernels)
     for name in pending.values():
-        mark_killed(_logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")
-        shutil.rmtree(_staging_dir(spec, plan.profile, name), ignore_errors=True)
+        mark_killed(logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")

@@ -16,16 +16,16 @@ and the atomic swap of outputs are the same either way.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
 import os
 import shutil
+import tempfile
 import time
 import traceback
-import tempfile
 import uuid
-from collections.abc import Callable, Iterable, Mapping, Sequence
-import dataclasses
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,8 @@ from fnnbook.spec import PipelineError, PipelineSpec, Task
 from fnnlib.io import atomic_write, file_sha256
 from fnnlib.settings import MissingDataError, check_notebook_settings
 
-__all__ = ["Plan", "RunReport", "TaskOutcome", "check", "execute_task", "is_up_to_date", "run"]
+__all__ = ["Plan", "RunReport", "TaskOutcome", "check", "decide", "execute_task", "is_up_to_date", "summary",
+           "write_status"]
 
 FINGERPRINT_FILE = ".fingerprint.json"
 STATUS_FILE = "_status.json"
@@ -124,11 +125,11 @@ class RunReport:
         raise KeyError(task)
 
 
-def _staging_dir(spec: PipelineSpec, profile: str, task: str) -> Path:
+def staging_dir(spec: PipelineSpec, profile: str, task: str) -> Path:
     return spec.output_root / profile / ".staging" / task
 
 
-def _logs_dir(spec: PipelineSpec, profile: str) -> Path:
+def logs_dir(spec: PipelineSpec, profile: str) -> Path:
     return spec.output_root / profile / "_logs"
 
 
@@ -245,7 +246,7 @@ def check(
                     raise PipelineError(f"task {name!r} declares claim {cid!r}, which is not in "
                                         f"{spec.claims_file.name}")
         params = resolve_parameters(spec, task, profile, declared,
-                                    out_dir=_staging_dir(spec, profile, name))
+                                    out_dir=staging_dir(spec, profile, name))
         reason = _validate(task, profile, params)
         if reason:
             missing_data[name] = reason
@@ -259,7 +260,7 @@ def check(
 def _recover(spec: PipelineSpec, profile: str, task: str) -> None:
     """Put back an output folder left aside by an interrupted swap."""
     final = spec.output_dir(profile, task)
-    old = _staging_dir(spec, profile, task).with_name(f"{task}.old")
+    old = staging_dir(spec, profile, task).with_name(f"{task}.old")
     if old.is_dir():
         if final.exists():
             shutil.rmtree(old)
@@ -360,7 +361,7 @@ def _kernel_config(folder: str) -> Any:
     return Config({"KernelManager": {"transport": "ipc", "ip": str(Path(folder) / "kernel")}})
 
 
-def _execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
+def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
              threads: int = TASK_THREADS) -> tuple[float, str]:
     """Run one task's notebook into staging and swap it in.
 
@@ -368,9 +369,9 @@ def _execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
     KeyboardInterrupt is re-raised after the failure is recorded.
     """
     task = spec.tasks[name]
-    staging = _staging_dir(spec, plan.profile, name)
+    staging = staging_dir(spec, plan.profile, name)
     final = spec.output_dir(plan.profile, name)
-    logs = _logs_dir(spec, plan.profile)
+    logs = logs_dir(spec, plan.profile)
     log = logs / f"{name}.log"
     failed_nb = logs / f"{name}.ipynb"
     executed = staging / f"{name}.ipynb"
@@ -443,8 +444,8 @@ def execute_task(spec: PipelineSpec, plan: Plan, name: str, threads: int,
     for up in upstream:
         if up.status not in ("ok", "skipped"):
             return TaskOutcome(name, "not run", 0.0, out, message=f"upstream {up.task} {_past(up.status)}")
-    seconds, error = _execute(spec, plan, name, False, threads)
-    log = _logs_dir(spec, plan.profile) / f"{name}.log"
+    seconds, error = execute(spec, plan, name, False, threads)
+    log = logs_dir(spec, plan.profile) / f"{name}.log"
     if error:
         return TaskOutcome(name, "failed", seconds, out, log, error)
     return TaskOutcome(name, "ok", seconds, out, log)
@@ -477,86 +478,6 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
     return verdict
 
 
-def run(
-    spec: PipelineSpec,
-    profile: str,
-    tasks: Iterable[str] | None = None,
-    *,
-    force: bool = False,
-    progress_bar: bool = True,
-    echo: Callable[[str], None] = print,
-    sources: Sequence[str | os.PathLike[str]] | None = None,
-    workers: int = 1,
-    scheduler: str | None = None,
-    threads: int | None = None,
-) -> RunReport:
-    """Check, then execute, the selected tasks and any stale upstream tasks.
-
-    Every selected task and its upstream tasks are validated before anything
-    runs (:func:`check`).  A task is skipped when it is up to date
-    (:func:`is_up_to_date`: same fingerprint, same upstream outputs, products
-    unchanged) unless ``force``, which applies to the selected tasks only.
-    Each task executes in ``<output_root>/<profile>/.staging/<task>/`` and
-    replaces ``<output_root>/<profile>/<task>/`` only on success; a failed
-    task leaves the previous outputs untouched and its log in ``_logs/``,
-    and its dependants do not run; the other tasks go on.
-
-    Parameters
-    ----------
-    spec : PipelineSpec
-    profile : str
-    tasks : iterable of str, optional
-        Default: every task.
-    force : bool
-        Rerun the selected tasks even if up to date.
-    progress_bar : bool
-        Show a progress bar (papermill's per cell in-process; one for the
-        whole run on Dask).
-    echo : callable
-        Receives each progress line.
-    sources : sequence of path-like, optional
-        See :func:`check`.
-    workers : int
-        1: run the tasks one after another in this process. K > 1: on a
-        local Dask cluster of K single-threaded worker processes.
-    scheduler : str, optional
-        Address of a running Dask scheduler (``tcp://host:port``); overrides
-        ``workers``.
-    threads : int, optional
-        torch threads per task. Default: cores // workers (at least 1); 1 on
-        a cluster given by ``scheduler``.
-
-    Returns
-    -------
-    RunReport
-        ``report.ok`` is False when a task failed or did not run.
-
-    Raises
-    ------
-    PipelineError
-        If the check fails (nothing has run).
-    KeyboardInterrupt
-        Re-raised after the running tasks are cancelled and recorded.
-    """
-    if workers < 1 or (threads is not None and threads < 1):
-        raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
-    plan = check(spec, profile, tasks, sources=sources)
-    verdict = decide(spec, plan, force=force)
-    if threads is None:  # on a cluster given by address, the local core count says nothing: 1
-        threads = 1 if scheduler is not None else task_threads(workers)
-    if (scheduler is not None or workers > 1) and any(v == "run" for v in verdict.values()):
-        from fnnbook.executor import run_on_dask
-
-        outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
-                               echo=echo, progress_bar=progress_bar)
-    else:
-        outcomes = _run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-    report = RunReport(profile, tuple(outcomes[n] for n in plan.order))
-    write_status(spec, report)
-    echo(summary(report))
-    return report
-
-
 def cpu_count() -> int:
     """Cores this process may use."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -565,50 +486,6 @@ def cpu_count() -> int:
 def task_threads(workers: int) -> int:
     """torch threads per task: cores // workers, at least 1."""
     return max(1, cpu_count() // workers)
-
-
-def _run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, threads: int,
-              echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
-    """Today's path: the tasks one after another in this process."""
-    n = len(plan.order)
-    outcomes: dict[str, TaskOutcome] = {}
-    bad: set[str] = set()
-    for i, name in enumerate(plan.order, 1):
-        task = spec.tasks[name]
-        out = spec.output_dir(plan.profile, name)
-        prefix = f"[{i}/{n}] {name} ..."
-        blocked = [u for u in task.upstream if u in bad]
-        if verdict[name].startswith("not run"):
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=verdict[name][len("not run: "):])
-            echo(f"{prefix} {verdict[name]}")
-            continue
-        if blocked:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=f"upstream {blocked[0]} failed")
-            echo(f"{prefix} not run (upstream {blocked[0]} failed)")
-            continue
-        if verdict[name] == "skipped":
-            outcomes[name] = TaskOutcome(name, "skipped", 0.0, out)
-            echo(f"{prefix} skipped (up to date)")
-            continue
-        echo(prefix)
-        log = _logs_dir(spec, plan.profile) / f"{name}.log"
-        try:
-            seconds, error = _execute(spec, plan, name, progress_bar, threads)
-        except BaseException:
-            outcomes[name] = TaskOutcome(name, "failed", 0.0, out, log, "interrupted")
-            echo(f"{prefix} FAILED (interrupted; see log {log})")
-            echo(summary(RunReport(plan.profile, tuple(outcomes.values()))))
-            raise
-        if error:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "failed", seconds, out, log, error)
-            echo(f"{prefix} FAILED (see log {log})\n    {error}")
-        else:
-            outcomes[name] = TaskOutcome(name, "ok", seconds, out, log)
-            echo(f"{prefix} ok ({seconds:.1f} s)")
-    return outcomes
 
 
 def write_status(spec: PipelineSpec, report: RunReport) -> Path:

@@ -14,7 +14,7 @@ def test_check_list_and_run(make_pipeline: MakePipeline, capsys: pytest.CaptureF
     assert main(["check", "--profile", "smoke", "--pipeline", pipeline]) == 0
     assert "ok: 2 task(s) valid in profile 'smoke': leaf, child" in capsys.readouterr().out
 
-    assert main(["run", "--profile", "smoke", "--pipeline", pipeline, "--no-progress", "leaf"]) == 0
+    assert main(["run", "--profile", "smoke", "--pipeline", pipeline, "--no-progress", "--workers", "1", "leaf"]) == 0
     assert "[1/1] leaf ... ok (" in capsys.readouterr().out
 
     assert main(["list", "--pipeline", pipeline]) == 0
@@ -35,5 +35,5 @@ def test_errors_exit_2_with_a_message(make_pipeline: MakePipeline,
 
 def test_failed_task_exits_1(make_pipeline: MakePipeline, capsys: pytest.CaptureFixture[str]) -> None:
     pipeline = str(make_pipeline({"leaf": leaf_task(fail=True)}))
-    assert main(["run", "--profile", "smoke", "--pipeline", pipeline, "--no-progress"]) == 1
+    assert main(["run", "--profile", "smoke", "--pipeline", pipeline, "--no-progress", "--workers", "1"]) == 1
     assert "FAILED (see log" in capsys.readouterr().out

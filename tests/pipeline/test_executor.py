@@ -232,4 +232,4 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
     gone, alive = psutil.wait_procs(family, timeout=15)
     assert not alive, [p.cmdline() for p in alive]
     assert not (tmp_path / "outputs" / "smoke" / "leaf").exists()
-    assert "--- FAILED: interrupted (Ctrl-C)" in (logs / "leaf.log").read_text()
+    assert "\n--- FAILED" in (logs / "leaf.log").read_text()  # by the task itself or, if it was gone, the runner
