@@ -8,10 +8,25 @@ networks); call :func:`set_num_threads` to change it.
 from fnnlib._threads import set_num_threads
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
 from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
-from fnnlib.observers import (
+from fnnlib.feedback import (
     Estimate,
+    GainError,
+    VectorField,
+    cascade_predict,
+    cascade_predict_loop,
+    cascade_sweep,
+    check_gain,
+    decayed_gains,
+    eval_field,
+    gain_matrix,
+    observe_gains,
+    rollout_predict,
+    spectral_radius,
+)
+from fnnlib.observers import (
     ExtendedKalmanObserver,
     KalmanObserver,
+    LinearFeedback,
     LuenbergerObserver,
     NeuralFeedbackObserver,
     Observer,
@@ -19,15 +34,8 @@ from fnnlib.observers import (
     linear_feedback_gain,
     place_observer_gain,
     steady_state_gain,
-    GainError,
-    LinearFeedback,
-    check_gain,
-    decayed_gains,
-    gain_matrix,
-    spectral_radius,
 )
 from fnnlib.plotting import new_figure, save_figure
-from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
 from fnnlib.report import claim_result, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.stability import (
@@ -41,10 +49,8 @@ from fnnlib.stability import (
     theorem1_balls,
 )
 from fnnlib.sweeps import (
-    cascade_sweep,
     colon_range,
     n_step_errors,
-    observe_gains,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
@@ -72,7 +78,7 @@ __all__ = [
     "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",
+    "check_gain", "claim_result", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

@@ -21,8 +21,8 @@ from torch import Tensor
 from torchdiffeq import odeint
 
 from fnnlib._validation import as_trajectory, check_finite, check_positive
-from fnnlib.observers.gains import gain_matrix
-from fnnlib.observers.linear import Estimate, VectorField
+from fnnlib.feedback.gains import gain_matrix
+from fnnlib.feedback.types import Estimate, VectorField
 from fnnlib.systems.base import DynamicalSystem
 
 

@@ -9,11 +9,10 @@ import torch
 
 from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict, mlp
 from fnnlib._scan import linear_recurrence
+from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
-    cascade_sweep,
     colon_range,
     n_step_errors,
-    observe_gains,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
@@ -146,7 +145,7 @@ def test_cascade_sweep_zero_gain_is_an_euler_rollout(f, x):
 @pytest.mark.parametrize("kwargs, err, match", [
     (dict(N=0), ValueError, "N must be an integer >= 1"),
     (dict(N=2.5), ValueError, "N must be an integer >= 1"),
-    (dict(beta=-0.1), ValueError, "decay rates beta must be finite and >= 0"),
+    (dict(beta=-0.1), ValueError, "decay rate beta must be finite and >= 0"),
     (dict(beta=torch.tensor([0.0, 0.1])), ValueError, "3 gains and 2 decay rates do not pair up"),
     (dict(L=torch.ones(3, 3)), ValueError, r"shape \(G,\) \(scalar gains\) or \(G, 2\)"),
     (dict(L=torch.tensor([])), ValueError, "gain batch L is empty"),

@@ -31,7 +31,7 @@ from torch import Tensor, nn
 
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.models.residual import AdaptiveResidual
-from fnnlib.observers.gains import check_gain, decayed_gains
+from fnnlib.feedback import check_gain, decayed_gains
 from fnnlib.systems.quadrotor import Quadrotor
 
 __all__ = ["AdaptiveNNModel", "FeedbackCascadeModel", "PredictionModel", "paper_models"]

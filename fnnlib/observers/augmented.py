@@ -27,7 +27,10 @@ import torch
 from torch import Tensor
 
 from fnnlib._scan import linear_recurrence
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.feedback.decay import check_N
+from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
 
@@ -128,9 +131,48 @@ def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float,
     """
     if x_start.shape != d_hat.shape:
         raise ValueError(f"x_start {tuple(x_start.shape)} and d_hat {tuple(d_hat.shape)} differ in shape")
-    if int(N) != N or int(N) < 1:
-        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
     z = x_start
-    for _ in range(int(N)):
+    for _ in range(check_N(N)):
         z = z + Ts * (eval_field(f, z) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j) + d_hat)
     return z
+
+
+class AugmentedObserver:
+    """What the Luenberger and Kalman observers share: the augmented plant, :meth:`observe` and :meth:`predict`.
+
+    Subclasses implement :meth:`estimate`, the filtered state, disturbance and change rate.
+
+    Attributes
+    ----------
+    A, B, C : Tensor
+        Augmented plant of :func:`augmented_matrices`, (2n, 2n), (2n, n), (n, 2n).
+    """
+
+    def __init__(self, f: VectorField, Ts: float, n: int):
+        self.f = f
+        self.Ts = check_positive(Ts, name="Ts")
+        self.n = int(n)
+        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+
+    def estimate(self, x: Tensor) -> DisturbanceEstimate:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def inputs(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        """The checked measurements ``y`` (..., T, n) and the known input :math:`u_k = f_{neural}(y_k)`, as in Eq. (7)."""
+        x = as_trajectory(x, self.n)
+        with torch.no_grad():
+            u = eval_field(self.f, x)
+        return x, u
+
+    def constant_gain_estimate(self, x: Tensor, u: Tensor, L: Tensor) -> DisturbanceEstimate:
+        """:func:`constant_gain_filter` with the predictor-form gain ``L`` (2n, n), split into the estimate."""
+        return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x)
+
+    def observe(self, x: Tensor) -> Estimate:
+        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n)."""
+        return self.estimate(x).as_estimate()
+
+    def predict(self, x: Tensor, N: int) -> Tensor:
+        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
+        est = self.estimate(x)
+        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)

@@ -28,16 +28,11 @@ import torch
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from torch import Tensor
 
-from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.observers.augmented import (
-    DisturbanceEstimate,
-    augmented_matrices,
-    constant_gain_filter,
-    rollout_corrected,
-    split_estimate,
-)
-from fnnlib.observers.gains import gain_matrix
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
+from fnnlib._validation import as_trajectory
+from fnnlib.feedback.gains import gain_matrix
+from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.types import VectorField
+from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate, split_estimate
 
 
 class SteadyState(NamedTuple):
@@ -102,14 +97,11 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
                        "and Q positive definite on the unstable modes?")
 
 
-class _KalmanBase:
-    """Shared set-up: the augmented plant, Q, R, P0, and the prediction."""
+class _KalmanBase(AugmentedObserver):
+    """Shared set-up of the two Kalman filters: Q, R, P0 and the filterpy filter."""
 
     def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None):
-        self.f = f
-        self.Ts = check_positive(Ts, name="Ts")
-        self.n = int(n)
-        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+        super().__init__(f, Ts, n)
         m = 2 * self.n
         self.Q = as_covariance(Q, m, name="Q")
         self.R = as_covariance(R, self.n, name="R", definite=True)
@@ -123,18 +115,6 @@ class _KalmanBase:
         kf.F, kf.H = self.A.numpy().copy(), self.C.numpy().copy()
         kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
         return kf
-
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def observe(self, x: Tensor) -> Estimate:
-        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n)."""
-        return self.estimate(x).as_estimate()
-
-    def predict(self, x: Tensor, N: int) -> Tensor:
-        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
-        est = self.estimate(x)
-        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
 
 
 class KalmanObserver(_KalmanBase):
@@ -184,12 +164,9 @@ class KalmanObserver(_KalmanBase):
 
     def estimate(self, x: Tensor) -> DisturbanceEstimate:
         """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x = as_trajectory(x, self.n)
-        with torch.no_grad():
-            u = eval_field(self.f, x)  # u_k = f_neural(y_k), as in Eq. (7)
+        x, u = self.inputs(x)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
-            L = torch.as_tensor(self.stationary.L)
-            return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x)
+            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L))
         ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time

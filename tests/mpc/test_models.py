@@ -10,7 +10,7 @@ import torch
 
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
 from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
-from fnnlib.observers.gains import GainError
+from fnnlib.feedback import GainError
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64

@@ -1,8 +1,9 @@
-"""Feedback gains: shape handling and the stability checks of Theorem 1 and App. A.2."""
+"""The base feedback gain ``L`` of Eq. (7): shape handling and the stability checks of Theorem 1 and App. A.2."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor
@@ -72,15 +73,21 @@ def check_gain(L: float | Tensor | list, n: int, Ts: float, *, allow_unstable: b
     return M
 
 
-def decayed_gains(L: Tensor, N: int, beta: float) -> list[Tensor]:
-    r"""Gain decay Eq. (11): :math:`L_i = L\,e^{-\beta i}` for layers ``i = 0 .. N-1``.
+def gain_batch(L: float | Sequence[float] | Tensor, n: int, Ts: float, *, allow_unstable: bool = False) -> Tensor:
+    """A batch of G base gains as a (G, n) float64 tensor of diagonals; each checked by :func:`check_gain`.
 
-    The first layer gets the full gain (the authors' release counts layers
-    from 0 too).
+    ``L`` scalar: one gain ``L I``; shape (G,): G scalar gains ``L_g I``; shape (G, n): G diagonal gains.
     """
-    beta = float(beta)
-    if not (math.isfinite(beta) and beta >= 0):
-        raise ValueError(f"decay rate beta must be finite and >= 0, got {beta!r}")
-    if int(N) < 1:
-        raise ValueError(f"number of prediction steps N must be >= 1, got {N}")
-    return [L * math.exp(-beta * i) for i in range(int(N))]
+    L = torch.as_tensor(L, dtype=torch.float64)
+    if L.ndim == 0:
+        L = L.reshape(1)
+    if L.ndim == 1:
+        L = L[:, None].expand(-1, n)
+    elif L.ndim != 2 or L.shape[1] != n:
+        raise ValueError(f"gain batch L must be a scalar, shape (G,) (scalar gains) or (G, {n}) (diagonal gains); "
+                         f"got shape {tuple(L.shape)}")
+    if L.shape[0] == 0:
+        raise ValueError("gain batch L is empty")
+    for g in L:
+        check_gain(g, n, Ts, allow_unstable=allow_unstable)
+    return L.contiguous()
