@@ -6,7 +6,8 @@ networks); call :func:`set_num_threads` to change it.
 """
 
 from fnnlib._threads import set_num_threads
-from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
+from fnnlib.data import load_bottle, synthetic_throws
+from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
 from fnnlib.feedback import (
     Estimate,
@@ -40,24 +41,33 @@ from fnnlib.report import claim_result, read_results, verdict_from_checks, write
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.stability import (
     discrete_residual,
+    divergence_transition,
     gain_eigen_bounds,
     growth_factor,
     iss_bound,
     observe_continuous,
     reconvergence,
+    scaled_error_norm,
     settling_time,
     theorem1_balls,
 )
 from fnnlib.sweeps import (
     colon_range,
     n_step_errors,
+    offset_spirals,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
 )
 from fnnlib.systems import DynamicalSystem, Spiral, SwitchedSystem, add_measurement_noise
+from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
+    PAPER_BOTTLE_RECIPE,
+    PAPER_FEEDBACK_RECIPE,
+    PAPER_SPIRAL_RECIPE,
     CheckpointError,
+    FeedbackRecipe,
+    ODERecipe,
     TrainHistory,
     load_checkpoint,
     save_checkpoint,
@@ -73,13 +83,15 @@ __all__ = [
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
     "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
-    "settling_time", "theorem1_balls", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
+    "settling_time", "theorem1_balls", "divergence_transition", "scaled_error_norm", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
-    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback",
+    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
+    "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
+    "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
     "check_gain", "claim_result", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
-    "rollout_predict", "rmse", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
 ]

@@ -172,6 +172,31 @@ def growth_factor(err: Tensor, *, early: tuple[float, float] = (0.4, 0.5),
     return window(*late) / window(*early).clamp_min(torch.finfo(err.dtype).tiny)
 
 
+def scaled_error_norm(x: Tensor, x_hat: Tensor) -> Tensor:
+    """The 2-norm of ``x - x_hat`` over the last axis without overflow: each row is scaled by its largest entry first.
+
+    A diverging observer (App. A.2) reaches errors of 1e176, whose squares are inf in float64.
+    """
+    diff = x - x_hat
+    scale = diff.abs().amax(-1, keepdim=True).clamp_min(1e-300)
+    return (diff / scale).norm(dim=-1) * scale[..., 0]
+
+
+def divergence_transition(rho: Tensor, diverges: Tensor) -> tuple[int, float, float]:
+    """Where runs sorted by spectral radius ``rho`` switch from bounded to diverging (App. A.2).
+
+    Returns the number of class switches along the sorted ``rho``, the largest
+    bounded ``rho`` and the smallest diverging one (NaN where there is none).
+    """
+    if rho.shape != diverges.shape or rho.ndim != 1:
+        raise ValueError(f"rho and diverges must be 1-D of one length, got {tuple(rho.shape)}, {tuple(diverges.shape)}")
+    cls = diverges[torch.argsort(rho)]
+    switches = int((cls[1:] != cls[:-1]).sum())
+    rho_lo = float(rho[~diverges].max()) if bool((~diverges).any()) else float("nan")
+    rho_hi = float(rho[diverges].min()) if bool(diverges.any()) else float("nan")
+    return switches, rho_lo, rho_hi
+
+
 def reconvergence(t: Tensor, err: Tensor, t_switch: float, *, window: float,
                   band_factor: float = 2.0) -> dict[str, float]:
     """How fast an error returns to its steady level after a step change at ``t_switch``.

@@ -15,6 +15,7 @@ import torch
 from torch import Tensor
 
 from fnnlib.systems.base import DynamicalSystem
+from fnnlib.systems.spiral import Spiral
 
 
 def colon_range(start: float, step: float, stop: float) -> Tensor:
@@ -64,6 +65,19 @@ def simulate_levels(systems: Sequence[DynamicalSystem], x0: Tensor, t: Tensor, *
     if exact and not all(hasattr(s, "exact_solution") for s in systems):
         raise ValueError("exact=True needs systems with a closed form (an exact_solution method)")
     return torch.stack([s.exact_solution(x0, t) if exact else s.simulate(x0, t) for s in systems])
+
+
+def offset_spirals(base: Sequence[float], offsets: Tensor) -> list[Spiral]:
+    """The spirals ``base + offsets[j]`` in (omega, eta, eps), one per row of ``offsets`` (levels, 3).
+
+    The 12 learning-residual levels of App. A.7.1 (S8, Fig. S9 and S10) are the
+    nominal spiral plus the paired offsets of :func:`paired_levels`.
+    """
+    offsets = torch.as_tensor(offsets, dtype=torch.float64)
+    if offsets.ndim != 2 or offsets.shape[1] != 3 or len(base) != 3:
+        raise ValueError(f"need a base (omega, eta, eps) and offsets of shape (levels, 3); got base {list(base)}, "
+                         f"offsets {tuple(offsets.shape)}")
+    return [Spiral(*(torch.tensor(base, dtype=torch.float64) + d).tolist()) for d in offsets]
 
 
 def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
@@ -11,6 +13,38 @@ from tqdm import tqdm
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
 from fnnlib.observers.neural import feedback_rollout
 from fnnlib.training.neural_ode import OPTIMIZERS, TrainHistory
+
+
+@dataclass(frozen=True)
+class FeedbackRecipe:
+    """How the neural feedback is trained by Alg. 1 (App. A.3.3); no defaults.
+
+    Attributes
+    ----------
+    iterations, batch_size : int
+        Descent steps; samples per mini-batch, drawn from all cases.
+    lr : float
+        Learning rate.
+    optimizer : str
+        A key of :data:`~fnnlib.training.neural_ode.OPTIMIZERS`.
+    refresh_every : int
+        Iterations between two rollouts of the current ``h`` (1: Alg. 1 literally).
+    """
+
+    iterations: int
+    batch_size: int
+    lr: float
+    optimizer: str
+    refresh_every: int
+
+    def replace(self, **changes) -> "FeedbackRecipe":
+        """A copy with some settings changed (e.g. a notebook's parameters over a preset)."""
+        return dataclasses.replace(self, **changes)
+
+
+#: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,
+#: the rollout refreshed every iteration as Alg. 1 writes it.
+PAPER_FEEDBACK_RECIPE = FeedbackRecipe(iterations=2000, batch_size=100, lr=0.01, optimizer="rmsprop", refresh_every=1)
 
 
 def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float) -> Tensor:
@@ -29,13 +63,9 @@ def train_neural_feedback(
     h: nn.Module,
     t: Tensor,
     X: Tensor,
+    recipe: FeedbackRecipe,
     *,
-    iterations: int = 2000,
-    batch_size: int = 100,
-    lr: float = 0.01,
-    optimizer: str = "rmsprop",
-    refresh_every: int = 1,
-    seed: int = 0,
+    seed: int,
     progress: bool = True,
 ) -> TrainHistory:
     r"""Train the feedback ``h`` on randomized cases with the neural ODE ``f`` frozen (Alg. 1).
@@ -58,14 +88,22 @@ def train_neural_feedback(
         Uniform sample times (step ``Ts``).
     X : Tensor, shape (n_case, T, n)
         One trajectory per randomized case.
-    refresh_every : int
-        Iterations between two rollouts of the current ``h`` (1: Alg. 1 literally).
+    recipe : FeedbackRecipe
+        Every training setting, e.g. ``PAPER_FEEDBACK_RECIPE.replace(refresh_every=10)``.
+    seed : int
+        Seed of the mini-batch draws.
+    progress : bool
+        Show a progress bar.
 
     Returns
     -------
     TrainHistory
         The Eq. (12) loss per iteration and the wall time.
     """
+    if not isinstance(recipe, FeedbackRecipe):
+        raise TypeError(f"recipe must be a FeedbackRecipe (e.g. PAPER_FEEDBACK_RECIPE), got {type(recipe).__name__}")
+    iterations, batch_size, lr, optimizer = recipe.iterations, recipe.batch_size, recipe.lr, recipe.optimizer
+    refresh_every = recipe.refresh_every
     if not isinstance(X, Tensor) or X.ndim != 3:
         raise ValueError(f"X must have shape (n_case, T, n), got {tuple(getattr(X, 'shape', ()))}")
     X = as_trajectory(X, name="X")

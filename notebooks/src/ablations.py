@@ -50,35 +50,27 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnlib.observers import eval_field
-from fnnlib.stability import reconvergence
-from fnnlib.sweeps import (cascade_sweep, colon_range, n_step_errors, outward_increase_fraction, paired_levels,
-                           simulate_levels)
-from fnnlib.systems import SwitchedSystem
 
 # refuse bad settings before any work: gains (Theorem 1, Eq. (25)), decay rates, horizon, switch time
-gains = colon_range(*gain_range)
-levels = paired_levels(colon_range(*omega_range), colon_range(*eta_range), colon_range(*eps_range))
-res_levels = paired_levels(colon_range(*domega_range), colon_range(*deta_range), colon_range(*deps_range))
-betas, betas_ext = colon_range(*beta_range), colon_range(*beta_extended)
+gains = F.colon_range(*gain_range)
+levels = F.paired_levels(F.colon_range(*omega_range), F.colon_range(*eta_range), F.colon_range(*eps_range))
+res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
+betas, betas_ext = F.colon_range(*beta_range), F.colon_range(*beta_extended)
 for g in [*gains.tolist(), L]:
     F.check_gain(g, 2, Ts)
 F.decayed_gains(F.check_gain(L, 2, Ts), N, float(betas_ext.max()))
 if not (1 <= N < n_samples and steady_window < t_switch < (n_samples - 1) * Ts - steady_window):
     raise ValueError(f"need 1 <= N < n_samples and a switch time with a steady window on both sides; got N={N}, "
                      f"t_switch={t_switch}, horizon {(n_samples - 1) * Ts} s")
+
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
 model, meta = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt", expected_kind="NeuralODE")
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
-gen = F.make_generator(seed + 1)
-
-
-def noisy(x, draws):
-    """``draws`` noisy copies of measurements ``x`` (..., T, n), stacked on a new leading axis."""
-    return x + noise_std * torch.randn((draws, *x.shape), generator=gen, dtype=x.dtype)
+gen = F.make_generator(seed + 1)  # the noise of S7 and S9, drawn in that order
 
 
 # %% [markdown]
@@ -102,14 +94,15 @@ def noisy(x, draws):
 # %%
 centre = int((levels - torch.tensor(nominal, dtype=torch.float64)).abs().sum(-1).argmin())
 nominal_is_a_level = bool(torch.allclose(levels[centre], torch.tensor(nominal, dtype=torch.float64), atol=1e-9))
-x_lv = simulate_levels([F.Spiral(*row) for row in levels.tolist()], torch.tensor(x0), t).float()  # (U, T, 2)
-err_clean = n_step_errors(cascade_sweep(model, x_lv, Ts, N, gains, beta), x_lv, N).mean(-1)  # (G, U)
-err_noisy = n_step_errors(cascade_sweep(model, noisy(x_lv, noise_draws), Ts, N, gains, beta), x_lv, N)
+x_lv = F.simulate_levels([F.Spiral(*row) for row in levels.tolist()], torch.tensor(x0), t).float()  # (U, T, 2)
+err_clean = F.n_step_errors(F.cascade_sweep(model, x_lv, Ts, N, gains, beta), x_lv, N).mean(-1)  # (G, U)
+x_lv_noisy = F.add_measurement_noise(x_lv, noise_std, gen, draws=noise_draws)  # (draws, U, T, 2)
+err_noisy = F.n_step_errors(F.cascade_sweep(model, x_lv_noisy, Ts, N, gains, beta), x_lv, N)
 err_noisy = err_noisy.mean(-1).mean(1)  # (G, draws, U) -> (G, U)
 
 # %%
-frac_clean = outward_increase_fraction(err_clean, centre)  # per gain
-frac_noisy = outward_increase_fraction(err_noisy, centre)
+frac_clean = F.outward_increase_fraction(err_clean, centre)  # per gain
+frac_noisy = F.outward_increase_fraction(err_noisy, centre)
 best_gain = gains[err_noisy.argmin(0)]  # per level
 interior = (err_noisy.argmin(0) > 0) & (err_noisy.argmin(0) < len(gains) - 1)
 interior_clean = (err_clean.argmin(0) > 0) & (err_clean.argmin(0) < len(gains) - 1)
@@ -120,6 +113,8 @@ s7 = {"levels": levels.tolist(), "nominal_level": centre, "nominal_is_a_level": 
       "best_gain_noise_free_per_level": gains[err_clean.argmin(0)].tolist(),
       "levels_with_interior_minimum": int(interior.sum()),
       "levels_with_interior_minimum_noise_free": int(interior_clean.sum())}
+
+# %%
 print(f"error smallest at an interior gain: {int(interior.sum())} of {len(levels)} levels with noise, "
       f"{int(interior_clean.sum())} of {len(levels)} without")
 {k: v for k, v in s7.items() if k != "levels"}
@@ -134,6 +129,8 @@ for ax, err, name in [(axes[0, 0], err_noisy, f"(a) noise std {noise_std}"), (ax
     ax.set_yticks(range(len(gains)), [f"{g:g}" for g in gains.tolist()], fontsize=7)
     ax.set(xlabel=r"level $\omega/\eta/\varepsilon$", ylabel="gain L", title=name)
     fig.colorbar(im, ax=ax, label="log10 error")
+
+# %%
 ax = axes[0, 2]
 for i in range(len(levels)):
     ax.semilogy(gains, err_noisy[:, i], "o-", ms=3, lw=1, color=plt.cm.viridis(i / max(1, len(levels) - 1)))
@@ -155,16 +152,17 @@ fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
 # metric when that happens at all 12 levels.
 
 # %%
-systems8 = [F.Spiral(*(torch.tensor(residual_base, dtype=torch.float64) + d).tolist()) for d in res_levels]
-x8 = simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
+systems8 = F.offset_spirals(residual_base, res_levels)
+x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
-    f8_nn = eval_field(model, x8)
+    f8_nn = F.eval_field(model, x8)
 f8_fb = F.LinearFeedback(model, L, Ts, 2).observe(x8).f_hat
-rate_nn = F.error_norm(f8_nn, f8).pow(2).mean(-1).sqrt()
-rate_fb = F.error_norm(f8_fb, f8).pow(2).mean(-1).sqrt()
-ms_nn = n_step_errors(F.rollout_predict(model, x8, Ts, N, method="euler"), x8, N).mean(-1)
-ms_fb = n_step_errors(F.cascade_predict(model, x8, Ts, N, L, beta), x8, N).mean(-1)
+rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8), F.rmse_over_time(f8_fb, f8)
+ms_nn = F.n_step_errors(F.rollout_predict(model, x8, Ts, N, method="euler"), x8, N).mean(-1)
+ms_fb = F.n_step_errors(F.cascade_predict(model, x8, Ts, N, L, beta), x8, N).mean(-1)
+
+# %%
 s8 = {"offsets": res_levels.tolist(), "rate_rmse_neural_ode": rate_nn.tolist(), "rate_rmse_feedback": rate_fb.tolist(),
       f"mean_err_N{N}_neural_ode": ms_nn.tolist(), f"mean_err_N{N}_feedback": ms_fb.tolist(),
       "levels_rate_better": int((rate_fb < rate_nn).sum()), "levels_multistep_better": int((ms_fb < ms_nn).sum()),
@@ -194,10 +192,10 @@ fig_s8 = F.save_figure(fig, out, "figS9_residual_levels")
 
 # %%
 x9 = F.Spiral(*test).simulate(torch.tensor(x0), t).float()
-x9n = noisy(x9, noise_draws)  # (draws, T, 2)
-rmse9 = n_step_errors(cascade_sweep(model, x9n, Ts, N, L, betas), x9, N).pow(2).mean((1, 2)).sqrt()
-rmse9_ext = n_step_errors(cascade_sweep(model, x9n, Ts, N, L, betas_ext), x9, N).pow(2).mean((1, 2)).sqrt()
-rmse9_clean = n_step_errors(cascade_sweep(model, x9, Ts, N, L, betas), x9, N).pow(2).mean(-1).sqrt()
+x9n = F.add_measurement_noise(x9, noise_std, gen, draws=noise_draws)  # (draws, T, 2)
+rmse9 = F.n_step_errors(F.cascade_sweep(model, x9n, Ts, N, L, betas), x9, N).pow(2).mean((1, 2)).sqrt()
+rmse9_ext = F.n_step_errors(F.cascade_sweep(model, x9n, Ts, N, L, betas_ext), x9, N).pow(2).mean((1, 2)).sqrt()
+rmse9_clean = F.n_step_errors(F.cascade_sweep(model, x9, Ts, N, L, betas), x9, N).pow(2).mean(-1).sqrt()
 s9 = {"beta": betas.tolist(), "rmse_noisy": rmse9.tolist(), "rmse_noise_free": rmse9_clean.tolist(),
       "beta_extended": betas_ext.tolist(), "rmse_noisy_extended": rmse9_ext.tolist(),
       "best_beta": float(betas[rmse9.argmin()]), "best_beta_extended": float(betas_ext[rmse9_ext.argmin()])}
@@ -232,20 +230,22 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # after that the feedback change-rate error is on average below the neural ODE's.
 
 # %%
-sw = SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
+sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
 x10 = sw.simulate(torch.tensor(x0), t)
 f10 = sw.rate(x10, t).float()
 x10 = x10.float()
 est10 = F.LinearFeedback(model, L, Ts, 2).observe(x10)
 with torch.no_grad():
-    e_nn = F.error_norm(eval_field(model, x10), f10)  # the neural ODE's change-rate error, |Delta f|
+    e_nn = F.error_norm(F.eval_field(model, x10), f10)  # the neural ODE's change-rate error, |Delta f|
 e_x, e_f = F.error_norm(est10.x_hat, x10), F.error_norm(est10.f_hat, f10)
-r_x, r_f = (reconvergence(t, e, t_switch, window=steady_window, band_factor=band_factor) for e in (e_x, e_f))
+r_x, r_f = (F.reconvergence(t, e, t_switch, window=steady_window, band_factor=band_factor) for e in (e_x, e_f))
 s10 = {f"{k}_{name}": v for name, r in [("x", r_x), ("f", r_f)] for k, v in r.items()}
+
+# %%
 z_fb10 = F.cascade_predict(model, x10, Ts, N, L, beta)
 z_nn10 = F.rollout_predict(model, x10, Ts, N, method="euler")
-e_ms = n_step_errors(z_fb10, x10, N)  # indexed by the predicted time t_{k+N}; same rule, reported only
-s10["time_multistep_predicted_time"] = reconvergence(t[N:], e_ms, t_switch, window=steady_window,
+e_ms = F.n_step_errors(z_fb10, x10, N)  # indexed by the predicted time t_{k+N}; same rule, reported only
+s10["time_multistep_predicted_time"] = F.reconvergence(t[N:], e_ms, t_switch, window=steady_window,
                                                      band_factor=band_factor)["time"]
 late = t >= t_switch + settle_threshold
 s10 |= {"rate_err_after_feedback": float(e_f[late].mean()), "rate_err_after_neural_ode": float(e_nn[late].mean()),
@@ -265,8 +265,10 @@ ax.semilogy(tn, e_f, color=F.plotting.COLORS["feedback"], label=r"feedback $\|\t
 ax.semilogy(tn, e_x, color=F.plotting.COLORS["feedback"], ls=":", label=r"feedback $\|\tilde x\|$")
 ax.set(xlabel="t [s]", ylabel="error", title="(b) change-rate and observer errors")
 ax.legend(fontsize=7)
+
+# %%
 ax = axes[0, 2]
-ax.semilogy(tn[N:], n_step_errors(z_nn10, x10, N), color=F.plotting.COLORS["neural_ode"], label="neural ODE")
+ax.semilogy(tn[N:], F.n_step_errors(z_nn10, x10, N), color=F.plotting.COLORS["neural_ode"], label="neural ODE")
 ax.semilogy(tn[N:], e_ms, color=F.plotting.COLORS["feedback"], label="feedback")
 ax.set(xlabel="t [s] (predicted time)", ylabel=f"{N}-step error", title=f"(c) {N}-step prediction")
 ax.legend(fontsize=8)
@@ -279,8 +281,7 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # The rules are the ones stated in each section; each check is computed from the numbers above.
 
 # %%
-n_lv = len(res_levels)
-trend, within = f"(frac>={trend_fraction:g})", f"within_{settle_threshold:g}s"
+trend = f"(frac>={trend_fraction:g})"
 claims = [
     F.claim_result("S7", checks={
         f"error_grows_with_uncertainty_noisy{trend}": s7["outward_increase_noisy"] >= trend_fraction,
@@ -288,7 +289,11 @@ claims = [
         "noisy_error_falls_then_rises_with_gain(most_levels)": s7["levels_with_interior_minimum"] > len(levels) / 2},
         numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()},
         rule=f"fraction of outward steps from the nominal level with growing error >= {trend_fraction:g} (noisy and "
-             "noise-free maps); noisy error minimal at an interior gain for more than half the levels", figure=fig_s7),
+             "noise-free maps); noisy error minimal at an interior gain for more than half the levels", figure=fig_s7)]
+
+# %%
+n_lv = len(res_levels)
+claims += [
     F.claim_result("S8", checks={f"rate_better_at_all_{n_lv}_levels": s8["levels_rate_better"] == n_lv,
                                  f"multistep_better_at_all_{n_lv}_levels": s8["levels_multistep_better"] == n_lv},
                    numbers=s8, rule="feedback error below the neural ODE's at every residual level (change-rate RMSE; "
@@ -296,7 +301,11 @@ claims = [
     F.claim_result("S9", checks={"falls_at_first": s9["rmse_noisy"][1] < s9["rmse_noisy"][0],
                                  "interior_minimum": 0 < int(rmse9.argmin()) < len(betas) - 1},
                    numbers=s9, rule="noisy N-step RMSE lower at the second beta than at beta = 0; smallest at an "
-                                    "interior beta of the paper's grid", figure=fig_s9),
+                                    "interior beta of the paper's grid", figure=fig_s9)]
+
+# %%
+within = f"within_{settle_threshold:g}s"
+claims += [
     F.claim_result("S10", checks={
         f"observer_error_reconverges_{within}": s10["time_x"] <= settle_threshold,
         f"rate_error_reconverges_{within}": s10["time_f"] <= settle_threshold,
@@ -304,6 +313,8 @@ claims = [
         numbers=s10, rule=f"errors back within {band_factor:g}x their steady level within {settle_threshold:g} s of "
                           "the switch; feedback rate error then below the neural ODE's", figure=fig_s10),
 ]
+
+# %%
 F.write_results(out, task="ablations", profile=profile, claims=claims,
                 metrics={"nominal_level": centre, "best_beta": s9["best_beta"],
                          "reconverge_s_x": s10["time_x"], "reconverge_s_f": s10["time_f"]})

@@ -35,21 +35,20 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnlib.data import load_bottle, synthetic_throws
-from fnnlib.observers import eval_field
-from fnnlib.systems.projectile import fit_drag
 
 if data not in ("real", "synthetic"):
     raise ValueError(f"data must be 'real' or 'synthetic', got {data!r}")
 if data == "real":
-    train, test = load_bottle(data_dir)  # checks SHA-256 and shapes before any work
+    train, test = F.load_bottle(data_dir)  # checks SHA-256 and shapes before any work
 else:
     n_tr, n_te, n_s = synthetic_sizes
-    train, test = synthetic_throws(n_tr, n_s, seed=seed), synthetic_throws(n_te, n_s, seed=seed + 1)
+    train, test = F.synthetic_throws(n_tr, n_s, seed=seed), F.synthetic_throws(n_te, n_s, seed=seed + 1)
 Ts = train.Ts
 F.decayed_gains(F.check_gain(L, 6, Ts), N, beta)  # refuse an unstable gain or bad decay up front
 if not 1 <= N < test.data.shape[1]:
     raise ValueError(f"need 1 <= N < {test.data.shape[1]} samples, got N={N}")
+
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 x_train, x_test = train.state.float(), test.state.float()  # (throws, T, 6)
@@ -64,12 +63,12 @@ print(f"{data} throws: train {tuple(train.data.shape)}, test {tuple(test.data.sh
 # authors' release: the paper gives no solver).
 
 # %%
-drag = fit_drag(train.data[..., 6:9], train.acc)
+drag = F.fit_drag(train.data[..., 6:9], train.acc)
+recipe = F.PAPER_BOTTLE_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
+                                       method=method, adjoint=adjoint)
 F.seed_everything(seed)
 model = F.NeuralODE(6, hidden, activation)
-history = F.train_neural_ode(model, train.t.float(), x_train, iterations=iterations, batch_size=batch_size,
-                             batch_time=batch_time, lr=lr, optimizer="adam", method=method, adjoint=adjoint,
-                             seed=seed)
+history = F.train_neural_ode(model, train.t.float(), x_train, recipe, seed=seed)
 F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seed, "data": data, "final_loss": history.loss[-1]})
 print(f"drag k = {drag.k.numpy().round(4)}; neural ODE trained in {history.seconds:.1f} s, "
       f"final loss {history.loss[-1]:.4f}")
@@ -111,9 +110,11 @@ fig_6 = F.save_figure(fig, out, "fig6_bottle_errors")
 # %%
 est = F.LinearFeedback(model, L, Ts, 6).observe(x_test)
 with torch.no_grad():
-    acc_nn = eval_field(model, x_test)[..., 3:]
+    acc_nn = F.eval_field(model, x_test)[..., 3:]
 acc_fb, acc_meas = est.f_hat[..., 3:], test.acc.float()
 acc_rmse = {"neural ODE": F.rmse(acc_nn, acc_meas), "feedback": F.rmse(acc_fb, acc_meas)}
+
+# %%
 n_throws = x_test.shape[0]
 fig, axes = F.plotting.trajectory_grid(n_throws)
 for i, ax in enumerate(axes):
@@ -145,16 +146,19 @@ acc_rmse
 # %%
 travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
+per_throw = {f"per_throw_{k}": summary[name]["per_throw"] for k, name in
+             [("feedback", "feedback"), ("neural_ode", "neural ODE"), ("drag", "drag model")]}
 claims = [
     F.claim_result("O1", checks={"feedback<neural_ode": m["feedback"] < m["neural ODE"],
                                  "neural_ode<drag": m["neural ODE"] < m["drag model"]},
                    numbers={"mean_error_m": m, "std_over_throws_m": {k: v["std_over_throws"] for k, v in
                                                                      summary.items()},
-                            "per_throw_feedback": summary["feedback"]["per_throw"],
-                            "per_throw_neural_ode": summary["neural ODE"]["per_throw"],
-                            "per_throw_drag": summary["drag model"]["per_throw"], "data": data},
+                            **per_throw, "data": data},
                    rule="mean 0.5 s position error over the test throws: feedback < neural ODE < drag model",
-                   figure=fig_6),
+                   figure=fig_6)]
+
+# %%
+claims += [
     F.claim_result("O2", checks={"feedback_acc_closer": acc_rmse["feedback"] < acc_rmse["neural ODE"],
                                  "positions_overlap": m["feedback"] < 0.1 * travel},
                    numbers={"acc_rmse": acc_rmse, "mean_travel_0.5s_m": travel,
@@ -162,6 +166,8 @@ claims = [
                    rule="feedback acceleration RMSE < neural ODE's; mean feedback error < 10 % of the distance "
                         "flown in 0.5 s", figure=fig_s2),
 ]
+
+# %%
 F.write_results(out, task="bottle", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "predict_seconds": predict_s, "drag_k": drag.k})
 for c in claims:

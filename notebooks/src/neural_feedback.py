@@ -61,18 +61,16 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnlib.models import NeuralFeedback
-from fnnlib.observers import NeuralFeedbackObserver, eval_field
-from fnnlib.sweeps import colon_range, n_step_errors, paired_levels
-from fnnlib.training import train_neural_feedback
 
 task_start = time.perf_counter()
 # refuse bad settings before any work
-cases = paired_levels(colon_range(*dr_omega_range), colon_range(*dr_eta_range), colon_range(*dr_eps_range))
-res_levels = paired_levels(colon_range(*domega_range), colon_range(*deta_range), colon_range(*deps_range))
+cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
+res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
 F.decayed_gains(F.check_gain(L, 2, Ts), N, beta)
 if not 1 <= N < n_samples:
     raise ValueError(f"need 1 <= N < n_samples, got N={N}, n_samples={n_samples}")
+
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
@@ -80,17 +78,17 @@ model, meta = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt",
 if model.config["hidden"] != list(hidden) or model.config["activation"] != activation:
     raise ValueError(f"the domain-randomized neural ODE must mirror the nominal one ({model.config}); "
                      f"got hidden={hidden}, activation={activation!r}")
+if "recipe" not in meta:
+    raise ValueError("the spiral checkpoint carries no training recipe; rerun the spiral task")
+recipe = F.ODERecipe(**meta["recipe"])  # the nominal model's recipe, read from its checkpoint
+fb_recipe = F.FeedbackRecipe(iterations=fb_iterations, batch_size=fb_batch_size, lr=fb_lr, optimizer=fb_optimizer,
+                             refresh_every=refresh_every)
+
+# %%
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
 x0_t = torch.tensor(x0, dtype=torch.float64)
-
-
-def spiral_set(params, tt):
-    """Trajectories of the spirals ``params`` (rows of omega, eta, eps) from x0, by the closed form: (len, T, 2)."""
-    return torch.stack([F.Spiral(*row).exact_solution(x0_t, tt) for row in params.tolist()])
-
-
-X_dr = spiral_set(cases, t_dr).float()  # (20, 1000, 2)
+X_dr = F.simulate_levels([F.Spiral(*row) for row in cases.tolist()], x0_t, t_dr, exact=True).float()  # (20, 1000, 2)
 sys_nom = F.Spiral(*nominal)
 x_nom = sys_nom.exact_solution(x0_t, t).float()
 f_nom = sys_nom.rate(x_nom)
@@ -116,19 +114,19 @@ print(f"{len(cases)} randomized cases, {dr_n_samples} samples each over {float(t
 # %%
 f_before = {k: v.clone() for k, v in model.state_dict().items()}
 F.seed_everything(seed)
-h = NeuralFeedback(2, fb_hidden, fb_activation)
-hist_fb = train_neural_feedback(model, h, t_dr, X_dr, iterations=fb_iterations, batch_size=fb_batch_size, lr=fb_lr,
-                                optimizer=fb_optimizer, refresh_every=refresh_every, seed=seed)
+h = F.NeuralFeedback(2, fb_hidden, fb_activation)
+hist_fb = F.train_neural_feedback(model, h, t_dr, X_dr, fb_recipe, seed=seed)
 frozen_unchanged = all(torch.equal(f_before[k], v) for k, v in model.state_dict().items())
 F.save_checkpoint(out / "neural_feedback.pt", h, {"seed": seed, "iterations": fb_iterations,
                                                  "refresh_every": refresh_every, "final_loss": hist_fb.loss[-1]})
+
+# %%
 F.seed_everything(seed)
-model_dr = F.NeuralODE(2, hidden, activation)
-hist_dr = F.train_neural_ode(model_dr, t_dr, X_dr, iterations=iterations, batch_size=batch_size,
-                             batch_time=batch_time, lr=lr, method=method, adjoint=adjoint, rtol=rtol, atol=atol,
-                             seed=seed)
-F.save_checkpoint(out / "neural_ode_dr.pt", model_dr, {"seed": seed, "iterations": iterations, "method": method,
-                                                       "adjoint": adjoint, "final_loss": hist_dr.loss[-1]})
+model_dr = F.NeuralODE(**model.config)  # the nominal model's architecture
+hist_dr = F.train_neural_ode(model_dr, t_dr, X_dr, recipe, seed=seed)
+F.save_checkpoint(out / "neural_ode_dr.pt", model_dr, {"seed": seed, "iterations": recipe.iterations,
+                                                       "method": recipe.method, "adjoint": recipe.adjoint,
+                                                       "final_loss": hist_dr.loss[-1]})
 print(f"feedback: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/iteration), frozen neural ODE "
       f"unchanged: {frozen_unchanged}; domain-randomized neural ODE: {hist_dr.seconds:.1f} s")
 
@@ -143,9 +141,9 @@ print(f"feedback: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/ite
 # `d2_factor` = 1.5 $\times$ the nominal model's, and the frozen model is bitwise unchanged by training.
 
 # %%
-nf = NeuralFeedbackObserver(model, h, Ts, 2)
+nf = F.NeuralFeedbackObserver(model, h, Ts, 2)
 with torch.no_grad():
-    f_nn_nom, f_dr_nom = eval_field(model, x_nom), eval_field(model_dr, x_nom)
+    f_nn_nom, f_dr_nom = F.eval_field(model, x_nom), F.eval_field(model_dr, x_nom)
 f_fb_nom = nf.observe(x_nom).f_hat
 d12 = {"rel_rmse_nominal_neural_ode": F.relative_rmse(f_nn_nom, f_nom),
        "rel_rmse_dr_neural_ode": F.relative_rmse(f_dr_nom, f_nom),
@@ -175,11 +173,13 @@ first, last = float(loss[:m].mean()), float(loss[-m:].mean())
 slope = float(np.polyfit(np.arange(m), loss[-m:], 1)[0])
 d3 = {"loss_first_10pct": first, "loss_last_10pct": last, "ratio": last / first,
       "last_window_trend_relative": slope * m / last, "seconds": hist_fb.seconds}
+d3
+
+# %%
 fig, ax = F.new_figure()
 ax.semilogy(loss, lw=0.8, color=F.plotting.COLORS["feedback"])
 ax.set(xlabel="iteration", ylabel="Eq. (12) loss", title="(c) training loss of the feedback part")
 fig_c = F.save_figure(fig, out, "fig5c_feedback_loss")
-d3
 
 # %% [markdown]
 # ## Neural feedback at the 12 residual levels (Fig. S10, claim D4)
@@ -195,26 +195,25 @@ d3
 # change-rate RMSE and its mean $N$-step error are lower. Reproduced if at all levels, partly if at some.
 
 # %%
-systems = [F.Spiral(*(torch.tensor(residual_base, dtype=torch.float64) + d).tolist()) for d in res_levels]
-x8 = spiral_set(torch.tensor([[s.omega, s.eta, s.eps] for s in systems]), t).float()  # (12, T, 2)
+systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
+# the trajectories use the levels' parameters rounded to float32 (as every run so far has; the rates do not)
+params32 = torch.tensor([[s.omega, s.eta, s.eps] for s in systems]).tolist()
+x8 = F.simulate_levels([F.Spiral(*p) for p in params32], x0_t, t, exact=True).float()  # (12, T, 2)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems, x8)])
 with torch.no_grad():
-    f8_nn = eval_field(model, x8)
+    f8_nn = F.eval_field(model, x8)
 f8_nf = nf.observe(x8).f_hat
 f8_lf = F.LinearFeedback(model, L, Ts, 2).observe(x8).f_hat
-
-
-def rate_rmse(f_est):
-    return F.error_norm(f_est, f8).pow(2).mean(-1).sqrt()
-
-
 t0 = time.perf_counter()
 z8_nf = nf.predict(x8, N)
 cascade_s = time.perf_counter() - t0
-ms = {"neural_ode": n_step_errors(F.rollout_predict(model, x8, Ts, N, method="euler"), x8, N).mean(-1),
-      "neural_feedback": n_step_errors(z8_nf, x8, N).mean(-1),
-      "linear_feedback": n_step_errors(F.cascade_predict(model, x8, Ts, N, L, beta), x8, N).mean(-1)}
-rate = {"neural_ode": rate_rmse(f8_nn), "neural_feedback": rate_rmse(f8_nf), "linear_feedback": rate_rmse(f8_lf)}
+
+# %%
+ms = {"neural_ode": F.n_step_errors(F.rollout_predict(model, x8, Ts, N, method="euler"), x8, N).mean(-1),
+      "neural_feedback": F.n_step_errors(z8_nf, x8, N).mean(-1),
+      "linear_feedback": F.n_step_errors(F.cascade_predict(model, x8, Ts, N, L, beta), x8, N).mean(-1)}
+rate = {k: F.rmse_over_time(v, f8) for k, v in [("neural_ode", f8_nn), ("neural_feedback", f8_nf),
+                                                ("linear_feedback", f8_lf)]}
 better = (rate["neural_feedback"] < rate["neural_ode"]) & (ms["neural_feedback"] < ms["neural_ode"])
 d4 = {"offsets": res_levels.tolist(), **{f"rate_rmse_{k}": v.tolist() for k, v in rate.items()},
       **{f"mean_err_N{N}_{k}": v.tolist() for k, v in ms.items()},
@@ -243,7 +242,6 @@ fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
 # ## Verdicts
 
 # %%
-task_seconds = time.perf_counter() - task_start
 claims = [
     F.claim_result("D1", checks={"dr_worse_than_nominal_by_factor": d12["rel_rmse_dr_neural_ode"]
                                  > d1_factor * d12["rel_rmse_nominal_neural_ode"]},
@@ -253,7 +251,10 @@ claims = [
                                  <= d2_factor * d12["rel_rmse_nominal_neural_ode"],
                                  "frozen_neural_ode_unchanged": frozen_unchanged},
                    numbers=d12, rule=f"frozen neural ODE + neural feedback relative RMSE <= {d2_factor:g}x the nominal "
-                                     "model's; frozen parameters bitwise unchanged", figure=fig_ab),
+                                     "model's; frozen parameters bitwise unchanged", figure=fig_ab)]
+
+# %%
+claims += [
     F.claim_result("D3", checks={"last_below_ratio_of_first": d3["ratio"] < d3_ratio,
                                  "last_window_flat": abs(d3["last_window_trend_relative"]) < d3_flat},
                    numbers=d3, rule=f"mean loss of the last 10 % < {d3_ratio:g}x that of the first 10 %, and the last "
@@ -262,6 +263,9 @@ claims = [
                    numbers=d4, rule=f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error, "
                                     "per level; reproduced at all levels", figure=fig_d4),
 ]
+
+# %%
+task_seconds = time.perf_counter() - task_start
 F.write_results(out, task="neural_feedback", profile=profile, claims=claims,
                 metrics={"task_seconds": task_seconds, "feedback_train_seconds": hist_fb.seconds,
                          "feedback_ms_per_iteration": hist_fb.ms_per_iteration, "dr_train_seconds": hist_dr.seconds,

@@ -38,9 +38,8 @@ import torch
 from IPython.display import Markdown, display
 
 import fnnlib as F
-from fnnlib.observers import (ExtendedKalmanObserver, KalmanObserver, LuenbergerObserver, eval_field,
-                              evaluate_observer, linear_feedback_gain, metrics_table, rollout_corrected)
 
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 model, meta = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt")  # trained by the spiral task
@@ -50,7 +49,7 @@ x = system.simulate(torch.tensor(x0), t).float()  # (T, 2) clean test states
 f_true = system.rate(x)  # true change rates
 y = F.add_measurement_noise(x, noise_std, F.make_generator(seed + 1))  # what every observer sees
 with torch.no_grad():
-    d_true = f_true - eval_field(model, x)  # the residual Delta f the feedback has to supply
+    d_true = f_true - F.eval_field(model, x)  # the residual Delta f the feedback has to supply
 print(f"loaded the neural ODE (seed {meta.get('seed')}, final loss {meta.get('final_loss', float('nan')):.4g}); "
       f"|Delta f| up to {float(d_true.norm(dim=-1).max()):.3g}, "
       f"drifting {float(d_true.diff(dim=0).std()):.3g} per step")
@@ -85,11 +84,11 @@ Q, R, P0 = [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [
 observers = {
     "neural ODE": F.LinearFeedback(model, 0.0, Ts, 2),
     "linear feedback": F.LinearFeedback(model, L, Ts, 2, beta=beta),
-    "Luenberger (as LF)": LuenbergerObserver(model, Ts, 2, L=linear_feedback_gain(L, Ts, 2)),
-    "Luenberger": LuenbergerObserver(model, Ts, 2, luenberger_poles),
-    "Kalman": KalmanObserver(model, Ts, 2, Q, R, P0=P0),
-    "Kalman, steady state": KalmanObserver(model, Ts, 2, Q, R, P0=P0, steady_state=True),
-    "EKF": ExtendedKalmanObserver(model, Ts, 2, Q, R, P0=P0),
+    "Luenberger (as LF)": F.LuenbergerObserver(model, Ts, 2, L=F.linear_feedback_gain(L, Ts, 2)),
+    "Luenberger": F.LuenbergerObserver(model, Ts, 2, luenberger_poles),
+    "Kalman": F.KalmanObserver(model, Ts, 2, Q, R, P0=P0),
+    "Kalman, steady state": F.KalmanObserver(model, Ts, 2, Q, R, P0=P0, steady_state=True),
+    "EKF": F.ExtendedKalmanObserver(model, Ts, 2, Q, R, P0=P0),
 }
 observers
 
@@ -103,13 +102,13 @@ observers
 # (`*_settled`). The `*_clean` columns repeat the loop on noise-free states.
 
 # %%
-reports = {name: evaluate_observer(obs, y, x, f_true, N, settle=settle, repeats=repeats)
+reports = {name: F.evaluate_observer(obs, y, x, f_true, N, settle=settle, repeats=repeats)
            for name, obs in observers.items()}
 table = {name: r.metrics for name, r in reports.items()}
-clean = {name: evaluate_observer(obs, x, x, f_true, N, repeats=1).metrics for name, obs in observers.items()}
+clean = {name: F.evaluate_observer(obs, x, x, f_true, N, repeats=1).metrics for name, obs in observers.items()}
 for name in table:
     table[name] |= {"rate_rmse_clean": clean[name]["rate_rmse"], "err_N_mean_clean": clean[name]["err_N_mean"]}
-display(Markdown(metrics_table(table)))
+display(Markdown(F.observers.metrics_table(table)))
 
 # %% [markdown]
 # ## The linear feedback in observer terms
@@ -129,8 +128,8 @@ display(Markdown(metrics_table(table)))
 # %%
 lf, lu_lf = reports["linear feedback"].estimate, reports["Luenberger (as LF)"].estimate
 with torch.no_grad():
-    r_k = (y[1:] - y[:-1]) / Ts - eval_field(model, y[:-1])  # measured model residual
-    d_lf = lf.f_hat - eval_field(model, y)  # = L (y - x_hat), Eq. (7)
+    r_k = (y[1:] - y[:-1]) / Ts - F.eval_field(model, y[:-1])  # measured model residual
+    d_lf = lf.f_hat - F.eval_field(model, y)  # = L (y - x_hat), Eq. (7)
 d_rec = [torch.zeros(2)]
 for k in range(n_samples - 1):
     d_rec.append((1 - Ts * L) * d_rec[-1] + Ts * L * r_k[k])  # d_{k+1} = (1 - Ts L) d_k + Ts L r_k
@@ -154,6 +153,8 @@ pole_err = float(np.abs(np.sort_complex(lu.error_poles()) - np.sort_complex(np.a
 L_dlqe, P_dlqe, _ = control.dlqe(kf.A.numpy(), np.eye(4), kf.C.numpy(), kf.Q.numpy(), kf.R.numpy())
 ss = kf.stationary
 K_filterpy = kf.gain_history(n_samples)[-1]
+
+# %%
 design = {"luenberger_pole_err": pole_err,
           "kf_L_rel_err_vs_dlqe": float(np.abs(ss.L - L_dlqe).max() / np.abs(L_dlqe).max()),
           "kf_P_rel_err_vs_dlqe": float(np.abs(ss.P - P_dlqe).max() / np.abs(P_dlqe).max()),
@@ -180,6 +181,8 @@ for name in names:
     axes[0, 0].semilogy(tn, (rep.estimate.f_hat - f_true).norm(dim=-1), color=colors[name], lw=0.8, label=name)
     axes[0, 1].semilogy(tn[N:], (rep.z_N[:-N] - x[N:]).norm(dim=-1), color=colors[name], lw=0.8, label=name)
     axes[0, 2].loglog(table[name]["us_per_step"], table[name]["rate_rmse_settled"], "o", color=colors[name], label=name)
+
+# %%
 axes[0, 0].set(xlabel="t [s]", ylabel=r"$\|\hat f - f\|$", title="change-rate error")
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"{N}-step prediction error")
 axes[0, 2].set(xlabel="µs per sample (observing)", ylabel="change-rate RMSE (settled)", title="cost vs accuracy")
@@ -221,7 +224,9 @@ best = {m: min(rivals, key=lambda o: table[o][m]) for m in metric_names}
 for m in metric_names:
     print(f"{m:18s} linear feedback {table['linear feedback'][m]:9.4g}  rank {ranks[m]}/{len(rivals)}  "
           f"best: {best[m]} ({table[best[m]][m]:.4g})")
-lf_frozen = rollout_corrected(model, y, d_lf, Ts, N)  # the feedback's own d_hat, held frozen from y_k
+
+# %%
+lf_frozen = F.observers.rollout_corrected(model, y, d_lf, Ts, N)  # the feedback's own d_hat, held frozen from y_k
 lf_frozen_err = float((lf_frozen[:-N] - x[N:]).norm(dim=-1).mean())
 print(f"linear feedback's d_hat rolled out frozen instead of the cascade: mean {N}-step error {lf_frozen_err:.4g}")
 print(f"stationary Kalman error poles {np.round(design['kf_stationary_poles'], 4).tolist()} "

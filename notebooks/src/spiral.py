@@ -44,12 +44,15 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnlib.observers import eval_field
 
 # refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
 F.decayed_gains(F.check_gain(L, 2, Ts), N_max, beta)
 if not 1 <= N <= N_max < n_samples:
     raise ValueError(f"need 1 <= N <= N_max < n_samples, got N={N}, N_max={N_max}, n_samples={n_samples}")
+recipe = F.PAPER_SPIRAL_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
+                                       method=method, adjoint=adjoint, rtol=rtol, atol=atol)
+
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
@@ -82,13 +85,12 @@ fig_ab = F.save_figure(fig, out, "fig4ab_spirals")
 # %%
 F.seed_everything(seed)
 model = F.NeuralODE(2, hidden, activation)
-history = F.train_neural_ode(model, t.float(), x_nom, iterations=iterations, batch_size=batch_size,
-                             batch_time=batch_time, lr=lr, method=method, adjoint=adjoint,
-                             rtol=rtol, atol=atol, seed=seed)
+history = F.train_neural_ode(model, t.float(), x_nom, recipe, seed=seed)
 F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seed, "iterations": iterations, "method": method,
-                                                "adjoint": adjoint, "final_loss": history.loss[-1]})
+                                                "adjoint": adjoint, "final_loss": history.loss[-1],
+                                                "recipe": recipe.as_dict()})
 with torch.no_grad():
-    f_nn_nom, f_nn_test = eval_field(model, x_nom), eval_field(model, x_test)
+    f_nn_nom, f_nn_test = F.eval_field(model, x_nom), F.eval_field(model, x_test)
 s1_rel = F.relative_rmse(f_nn_nom, f_nom)
 print(f"trained in {history.seconds:.1f} s ({history.ms_per_iteration:.0f} ms/iteration); "
       f"final loss {history.loss[-1]:.4f}; nominal change-rate relative RMSE {s1_rel:.3%}")
@@ -116,14 +118,9 @@ z_fb = F.cascade_predict(model, x_test, Ts, N_max, L, beta, return_all=True)  # 
 cascade_s = time.perf_counter() - t0
 z_nn = F.rollout_predict(model, x_test, Ts, N_max, method="euler", return_all=True)
 z_nn_dp = F.rollout_predict(model, x_test, Ts, N, method="dopri5", rtol=rtol, atol=atol)
+e_nn, e_fb, e_dp = (F.n_step_errors(z, x_test, N) for z in (z_nn[N], z_fb[N], z_nn_dp))
 
-
-def step_errors(z, n, truth=x_test):
-    """2-norm error of the n-step predictions from every start with a truth sample n steps later."""
-    return F.error_norm(z[: len(truth) - n], truth[n:])
-
-
-e_nn, e_fb, e_dp = step_errors(z_nn[N], N), step_errors(z_fb[N], N), step_errors(z_nn_dp, N)
+# %%
 s2 = {"rate_rmse_neural_ode": rate_err["neural_ode"], "rate_rmse_feedback": rate_err["feedback"],
       "nominal_rate_rel_rmse": s1_rel, "test_rate_rel_rmse_neural_ode": F.relative_rmse(f_nn_test, f_test),
       f"mean_err_N{N}_neural_ode_euler": float(e_nn.mean()), f"mean_err_N{N}_feedback": float(e_fb.mean()),
@@ -154,17 +151,17 @@ fig_def = F.save_figure(fig, out, "fig4def_test")
 # %%
 gen = F.make_generator(seed + 1)
 noise = torch.randn(x_test.shape, generator=gen, dtype=x_test.dtype)  # one draw, scaled per level
-sweep = {"noise_std": [], "neural_ode": [], "feedback_decay": [], "feedback_no_decay": []}
+sweep = {"noise_std": [], "neural_ode": [], "feedback_decay": [], "feedback_no_decay": []}  # mean N-step errors
 for std in noise_sweep:
     xm = x_test + std * noise
     sweep["noise_std"].append(std)
-    sweep["neural_ode"].append(float(step_errors(F.rollout_predict(model, xm, Ts, N), N).mean()))
-    sweep["feedback_decay"].append(float(step_errors(F.cascade_predict(model, xm, Ts, N, L, beta), N).mean()))
-    sweep["feedback_no_decay"].append(float(step_errors(F.cascade_predict(model, xm, Ts, N, L, 0.0), N).mean()))
+    sweep["neural_ode"].append(float(F.n_step_errors(F.rollout_predict(model, xm, Ts, N), x_test, N).mean()))
+    for key, b in [("feedback_decay", beta), ("feedback_no_decay", 0.0)]:
+        sweep[key].append(float(F.n_step_errors(F.cascade_predict(model, xm, Ts, N, L, b), x_test, N).mean()))
 sweep
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = F.new_figure(1, 3)  # (g): two prediction panels, then the sweep
 lim = float(x_test[:, 0].abs().max()) * 1.5
 for ax, std in zip(axes[0, :2], [0.0, noise_std]):
     xm = x_test + std * noise
@@ -174,6 +171,8 @@ for ax, std in zip(axes[0, :2], [0.0, noise_std]):
     ax.plot(tn[N:], z_dec[:-N, 0], "--", color=F.plotting.COLORS["feedback"], label="with decay")
     ax.set(xlabel="t [s]", ylabel="x", ylim=(-lim, lim), title=f"(g) {N}-step prediction, noise std {std}")
     ax.legend(fontsize=8)
+
+# %%
 ax = axes[0, 2]
 for key, color in [("neural_ode", "neural_ode"), ("feedback_decay", "feedback"),
                    ("feedback_no_decay", "feedback_nodecay")]:
@@ -193,8 +192,8 @@ print(f"The decayed cascade beats the open-loop neural ODE at noise std {beats} 
 
 # %%
 Ns = np.arange(1, N_max + 1)
-err_N_nn = np.array([float(step_errors(z_nn[n], n).mean()) for n in Ns])
-err_N_fb = np.array([float(step_errors(z_fb[n], n).mean()) for n in Ns])
+err_N_nn = np.array([float(F.n_step_errors(z_nn[n], x_test, n).mean()) for n in Ns])
+err_N_fb = np.array([float(F.n_step_errors(z_fb[n], x_test, n).mean()) for n in Ns])
 fig, ax = F.new_figure()
 ax.plot(Ns, err_N_nn, color=F.plotting.COLORS["neural_ode"], label="neural ODE")
 ax.plot(Ns, err_N_fb, color=F.plotting.COLORS["feedback"], label="feedback")
@@ -216,7 +215,6 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 #   $N \le$ `N_max`.
 
 # %%
-noisy = [i for i, s in enumerate(sweep["noise_std"]) if s > 0]
 claims = [
     F.claim_result("S1", checks={"nominal_rate_rel_rmse<=0.05": s1_rel <= 0.05},
                    numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},
@@ -226,19 +224,25 @@ claims = [
         "feedback_rate_better": rate_err["feedback"] < rate_err["neural_ode"],
         f"feedback_N{N}_better": float(e_fb.mean()) < float(e_nn.mean())},
         numbers=s2, rule="test rate error > 2x nominal; feedback rate RMSE and mean N-step error below the "
-                         "neural ODE's", figure=fig_def),
+                         "neural ODE's", figure=fig_def)]
+
+# %%
+noisy = [i for i, s in enumerate(sweep["noise_std"]) if s > 0]
+every = max(1, N_max // 10)
+first_not_better = int(Ns[err_N_fb >= err_N_nn][0]) if (err_N_fb >= err_N_nn).any() else None
+claims += [
     F.claim_result("S3", checks={f"decay_better_at_std_{sweep['noise_std'][i]}":
                                  sweep["feedback_decay"][i] < sweep["feedback_no_decay"][i] for i in noisy},
                    numbers=sweep, rule="mean N-step error with decay < without, at every noise level > 0",
                    figure=fig_g),
     F.claim_result("S4", checks={f"feedback_better_all_N<={N}": bool((err_N_fb[:N] < err_N_nn[:N]).all()),
                                  f"feedback_better_all_N<={N_max}": bool((err_N_fb < err_N_nn).all())},
-                   numbers={"N": Ns[:: max(1, N_max // 10)], "neural_ode": err_N_nn[:: max(1, N_max // 10)],
-                            "feedback": err_N_fb[:: max(1, N_max // 10)],
-                            "first_N_feedback_not_better": int(Ns[err_N_fb >= err_N_nn][0]) if
-                            (err_N_fb >= err_N_nn).any() else None},
+                   numbers={"N": Ns[::every], "neural_ode": err_N_nn[::every], "feedback": err_N_fb[::every],
+                            "first_N_feedback_not_better": first_not_better},
                    rule="feedback mean error below the neural ODE's at every N", figure=fig_h),
 ]
+
+# %%
 F.write_results(out, task="spiral", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "ms_per_iteration": history.ms_per_iteration,
                          "cascade_seconds_N_max": cascade_s})

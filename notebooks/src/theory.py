@@ -37,14 +37,12 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnlib.observers import eval_field
-from fnnlib.stability import (discrete_residual, gain_eigen_bounds, growth_factor, iss_bound, observe_continuous,
-                              theorem1_balls)
-from fnnlib.sweeps import observe_gains
 
 F.check_gain(L, 2, Ts)  # Theorem 1 needs a positive-definite L; refuse a bad one before any work
 for g in L_sweep:
     F.check_gain(g, 2, Ts)
+
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
@@ -85,13 +83,15 @@ x = sys_test.simulate(torch.tensor(x0), t)  # (T, 2), the measured test trajecto
 
 # %%
 with torch.no_grad():
-    f_true, f_nn = sys_test.rate(x), eval_field(model64, x)
+    f_true, f_nn = sys_test.rate(x), F.eval_field(model64, x)
 gamma = float((f_true - f_nn).norm(dim=-1).max())  # Assumption 1, measured
-lam_m, lam_M = gain_eigen_bounds(L, 2)
-ball1, ball2 = theorem1_balls(L, gamma, 2)
+lam_m, lam_M = F.gain_eigen_bounds(L, 2)
+ball1, ball2 = F.theorem1_balls(L, gamma, 2)
 t_tr = transient_time_constants / lam_m
 runs = {"feedback network": F.LinearFeedback(model64, L, Ts, 2).observe(x),
-        "continuous observer": observe_continuous(sys_test, model64, L, torch.tensor(x0), t)[1]}
+        "continuous observer": F.observe_continuous(sys_test, model64, L, torch.tensor(x0), t)[1]}
+
+# %%
 errs = {k: ((x - e.x_hat).norm(dim=-1), (f_true - e.f_hat).norm(dim=-1)) for k, e in runs.items()}
 after, last_half = t >= t_tr, t >= t[-1] / 2
 s5 = {"gamma": gamma, "lambda_min": lam_m, "lambda_max": lam_M, "ball_x": ball1, "ball_f": ball2, "t_transient": t_tr}
@@ -105,7 +105,7 @@ s5["ratio_f"] = ball2 / s5["feedback_limit_f"]
 s5
 
 # %%
-ests = observe_gains(model64, x, Ts, torch.tensor(L_sweep))  # the feedback network at every gain, one pass
+ests = F.observe_gains(model64, x, Ts, torch.tensor(L_sweep))  # the feedback network at every gain, one pass
 limits = (x - ests.x_hat).norm(dim=-1)[:, last_half].amax(dim=-1)
 sweep_L = {"L": L_sweep, "ball_x": [gamma / g for g in L_sweep], "limit_x": limits.tolist(),
            "ratio": [gamma / g / float(m) for g, m in zip(L_sweep, limits)]}
@@ -124,6 +124,8 @@ for j, (ylab, ball, name) in enumerate([(r"$\|\tilde x\|$", ball1, r"$\gamma/\la
     ax.axvline(t_tr, color="0.7", lw=0.8)
     ax.set(xlabel="t [s]", ylabel=ylab, title=f"({'ab'[j]}) L = {L:g}, gamma = {gamma:.3g}")
     ax.legend(fontsize=7, loc="lower right")
+
+# %%
 ax = axes[0, 2]
 ax.loglog(L_sweep, sweep_L["ball_x"], "o:", color="0.3", label=r"ball $\gamma/L$")
 ax.loglog(L_sweep, sweep_L["limit_x"], "o-", color=F.plotting.COLORS["feedback"], label="measured limit")
@@ -141,17 +143,17 @@ fig_s1 = F.save_figure(fig, out, "figS1_bounds")
 # %%
 gains = torch.tensor(discrete_gains, dtype=torch.float64)
 rho = (1 - Ts * gains).abs()  # scalar gains: rho(I - Ts L) = |1 - Ts L|
-est_d = observe_gains(model64, x, Ts, gains, allow_unstable=True)
-diff = x - est_d.x_hat
-scale = diff.abs().amax(-1, keepdim=True).clamp_min(1e-300)
-err_d = (diff / scale).norm(dim=-1) * scale[..., 0]  # (G, T); scaled so that a 1e176 error does not square to inf
+est_d = F.observe_gains(model64, x, Ts, gains, allow_unstable=True)
+err_d = F.scaled_error_norm(x, est_d.x_hat)  # (G, T); scaled so that a 1e176 error does not square to inf
 with torch.no_grad():
-    gamma_d = float(discrete_residual(x, f_nn, Ts).norm(dim=-1).max())
-growth = growth_factor(err_d)
+    gamma_d = float(F.discrete_residual(x, f_nn, Ts).norm(dim=-1).max())
+growth = F.growth_factor(err_d)
 diverges = growth > growth_threshold
 steps_between = n_samples - round(0.5 * n_samples)
 rate = growth ** (1 / steps_between)
-iss_max = torch.stack([iss_bound(g, Ts, gamma_d, n_samples).max() for g in discrete_gains])
+iss_max = torch.stack([F.iss_bound(g, Ts, gamma_d, n_samples).max() for g in discrete_gains])
+
+# %%
 s6 = {"L": discrete_gains, "rho": rho.tolist(), "growth_factor": growth.tolist(), "diverges": diverges.tolist(),
       "max_err": err_d.amax(-1).tolist(), "iss_bound_max": iss_max.tolist(), "gamma_d": gamma_d,
       "measured_rate": rate.tolist()}
@@ -159,11 +161,7 @@ s6 = {"L": discrete_gains, "rho": rho.tolist(), "growth_factor": growth.tolist()
 
 # %%
 stable, unstable = rho < 1, rho > 1
-order = torch.argsort(rho)
-cls = diverges[order]
-switches = int((cls[1:] != cls[:-1]).sum())
-rho_lo = float(rho[~diverges].max()) if bool((~diverges).any()) else float("nan")
-rho_hi = float(rho[diverges].min()) if bool(diverges.any()) else float("nan")
+switches, rho_lo, rho_hi = F.divergence_transition(rho, diverges)
 print(f"bounded up to rho = {rho_lo:.4g}, diverging from rho = {rho_hi:.4g}; class switches along rho: {switches}")
 
 # %%
@@ -175,6 +173,8 @@ for g in [100.0, 199.0, 200.0, 201.0, 210.0, 0.0]:
         ax.semilogy(tn, err_d[i].clamp_min(1e-8), lw=1, label=f"L = {g:g} (rho = {float(rho[i]):.3g})")
 ax.set(xlabel="t [s]", ylabel=r"$\|\tilde x_k\|$", title="(a) observer error, Eq. (25)")
 ax.legend(fontsize=7)
+
+# %%
 ax = axes[0, 1]
 ax.semilogy(rho[~diverges], growth[~diverges], "o", color=F.plotting.COLORS["luenberger"], label="bounded")
 ax.semilogy(rho[diverges], growth[diverges], "s", color=F.plotting.COLORS["feedback"], label="diverges")
@@ -205,6 +205,8 @@ s5_checks = {
     "regulated_by_L": all(m <= b for m, b in zip(sweep_L["limit_x"], sweep_L["ball_x"]))
     and bool((limits[1:] < limits[:-1]).all()),
 }
+
+# %%
 s6_checks = {
     "bounded_below_rho_1": bool((~diverges[stable]).all())
     and bool((err_d.amax(-1) <= iss_max * (1 + 1e-9))[stable].all()),
@@ -212,6 +214,8 @@ s6_checks = {
     "transition_at_rho_1": switches == 1 and rho_lo <= 1.0 <= rho_hi,  # one switch: adjacent grid values; NaN -> False
     "growth_rate_is_rho": bool(((rate - rho).abs() <= rate_tolerance)[diverges].all()) and bool(diverges.any()),
 }
+
+# %%
 claims = [
     F.claim_result("S5", checks=s5_checks, numbers=s5 | {"L_sweep": sweep_L},
                    rule="after t = 5/lambda_min both errors inside Theorem 1's balls (feedback network and continuous "
@@ -223,6 +227,8 @@ claims = [
                         "grow at rate rho (+-0.005)",
                    figure=fig_s6),
 ]
+
+# %%
 F.write_results(out, task="theory", profile=profile, claims=claims,
                 metrics={"gamma": gamma, "gamma_d": gamma_d, "ratio_x": s5["ratio_x"], "ratio_f": s5["ratio_f"]})
 for c in claims:
