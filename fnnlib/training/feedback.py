@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -12,11 +11,11 @@ from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
 from fnnlib.observers.neural import feedback_rollout
-from fnnlib.training.neural_ode import OPTIMIZERS, TrainHistory
+from fnnlib.training.neural_ode import OPTIMIZERS, Recipe, TrainHistory
 
 
 @dataclass(frozen=True)
-class FeedbackRecipe:
+class FeedbackRecipe(Recipe):
     """How the neural feedback is trained by Alg. 1 (App. A.3.3); no defaults.
 
     Attributes
@@ -36,10 +35,6 @@ class FeedbackRecipe:
     lr: float
     optimizer: str
     refresh_every: int
-
-    def replace(self, **changes) -> "FeedbackRecipe":
-        """A copy with some settings changed (e.g. a notebook's parameters over a preset)."""
-        return dataclasses.replace(self, **changes)
 
 
 #: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,

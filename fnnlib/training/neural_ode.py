@@ -26,8 +26,20 @@ FIXED_STEP_METHODS = {"euler", "midpoint", "rk4", "explicit_adams", "implicit_ad
 ADAPTIVE_METHODS = {"dopri5", "dopri8", "bosh3", "fehlberg2", "adaptive_heun", "tsit5"}
 
 
+class Recipe:
+    """What every training recipe (a frozen dataclass of settings) can do."""
+
+    def replace(self, **changes):
+        """A copy with some settings changed (e.g. a notebook's parameters over a preset)."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict:
+        """The settings as plain values (for checkpoint metadata); ``type(self)(**d)`` rebuilds it."""
+        return dataclasses.asdict(self)
+
+
 @dataclass(frozen=True)
-class ODERecipe:
+class ODERecipe(Recipe):
     """How a neural ODE is trained on random segments (the torchdiffeq recipe, App. A.3.2); no defaults.
 
     Attributes
@@ -65,14 +77,6 @@ class ODERecipe:
     rtol: float
     atol: float
     adjoint_seminorm: bool
-
-    def replace(self, **changes) -> "ODERecipe":
-        """A copy with some settings changed (e.g. a notebook's parameters over a preset)."""
-        return dataclasses.replace(self, **changes)
-
-    def as_dict(self) -> dict:
-        """The settings as plain values (for checkpoint metadata); ``ODERecipe(**d)`` rebuilds it."""
-        return dataclasses.asdict(self)
 
 
 #: The spiral's recipe (App. A.3.2 and the authors' release): RMSprop at 1e-3 on the L1 loss, 400 iterations of
