@@ -142,6 +142,15 @@ class AugmentedObserver:
 
     Subclasses implement :meth:`estimate`, the filtered state, disturbance and change rate.
 
+    Parameters
+    ----------
+    f : callable
+        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
+    Ts : float
+        Sampling step.
+    n : int
+        State dimension.
+
     Attributes
     ----------
     A, B, C : Tensor

@@ -122,12 +122,8 @@ class KalmanObserver(_KalmanBase):
 
     Parameters
     ----------
-    f : callable
-        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
-    Ts : float
-        Sampling step.
-    n : int
-        State dimension.
+    f, Ts, n
+        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
     Q : float, Tensor (2n,) or (2n, 2n)
         Process noise covariance of :math:`z = [x; d]`.
     R : float, Tensor (n,) or (n, n)

@@ -101,12 +101,8 @@ class LuenbergerObserver(AugmentedObserver):
 
     Parameters
     ----------
-    f : callable
-        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
-    Ts : float
-        Sampling step.
-    n : int
-        State dimension.
+    f, Ts, n
+        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
     poles : sequence of 2n complex, optional
         Discrete poles of :math:`A - LC`, placed by :func:`place_observer_gain`.
     L : Tensor, shape (2n, n), optional

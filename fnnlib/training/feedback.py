@@ -85,10 +85,8 @@ def train_neural_feedback(
         One trajectory per randomized case.
     recipe : FeedbackRecipe
         Every training setting, e.g. ``PAPER_FEEDBACK_RECIPE.replace(refresh_every=10)``.
-    seed : int
-        Seed of the mini-batch draws.
-    progress : bool
-        Show a progress bar.
+    seed, progress
+        As :func:`~fnnlib.training.neural_ode.train_neural_ode`.
 
     Returns
     -------
