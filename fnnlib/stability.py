@@ -198,7 +198,7 @@ def divergence_transition(rho: Tensor, diverges: Tensor) -> tuple[int, float, fl
 
 
 def reconvergence(t: Tensor, err: Tensor, t_switch: float, *, window: float,
-                  band_factor: float = 2.0) -> dict[str, float]:
+                  band_factor: float) -> dict[str, float]:
     """How fast an error returns to its steady level after a step change at ``t_switch``.
 
     Steady levels: the largest ``err`` over the ``window`` seconds before the

@@ -109,7 +109,7 @@ def test_discrete_observer_converges_to_the_continuous_one_at_first_order():
 def test_continuous_observer_accepts_a_float64_model_copy():
     torch.manual_seed(1)
     net = mlp(2, 2, (4,), "relu")
-    x, est = observe_continuous(Spiral(), lambda t, z: copy.deepcopy(net).double()(z), 3.0,
+    x, est = observe_continuous(Spiral(2.0, 0.1, 0.0), lambda t, z: copy.deepcopy(net).double()(z), 3.0,
                                 torch.tensor([[1.0, 0.0], [0.0, 1.0]]), torch.linspace(0, 0.5, 6))
     assert x.shape == est.x_hat.shape == est.f_hat.shape == (2, 6, 2)
 
@@ -145,7 +145,7 @@ def test_reconvergence_after_a_step():
     assert r["time"] == pytest.approx(0.11, abs=1e-9)
     assert r["time"] == r["time_pre_band"]
     with pytest.raises(ValueError, match="need a 4 s window"):
-        reconvergence(t, err, 7.0, window=4.0)
+        reconvergence(t, err, 7.0, window=4.0, band_factor=2.0)
 
 
 def test_scaled_error_norm_survives_huge_errors():

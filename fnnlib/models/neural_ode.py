@@ -17,7 +17,7 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
 }
 
 
-def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str = "relu") -> nn.Sequential:
+def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str) -> nn.Sequential:
     """A multilayer perceptron ``n_in -> hidden... -> n_out`` with the named activation.
 
     ``hidden=(50, 50)`` gives three linear layers 2-50-50-2 for the spiral.
@@ -55,8 +55,7 @@ class NeuralODE(nn.Module):
         External input dimension m (0 for autonomous systems).
     """
 
-    def __init__(self, n_state: int, hidden: Sequence[int] = (50, 50), activation: str = "relu",
-                 n_input: int = 0) -> None:
+    def __init__(self, n_state: int, hidden: Sequence[int], activation: str, n_input: int = 0) -> None:
         super().__init__()
         self.n_state = int(n_state)
         self.n_input = int(n_input)

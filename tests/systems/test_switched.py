@@ -112,7 +112,7 @@ def test_systems_of_different_dimension():
         n = 3
 
     with pytest.raises(ValueError, match="share the state dimension"):
-        SwitchedSystem([A, ThreeD()], [1.0])
+        SwitchedSystem([A, ThreeD(2.0, 0.1, 0.0)], [1.0])
 
 
 def test_bad_simulate_and_rate_inputs():

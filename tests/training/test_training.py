@@ -14,7 +14,7 @@ F64 = torch.float64
 @pytest.fixture(scope="module")
 def data():
     t = torch.arange(41, dtype=F64) * 0.05
-    x = Spiral().exact_solution(torch.tensor([[2.0, 0.0], [0.0, -1.5]]), t)  # (2, 41, 2)
+    x = Spiral(2.0, 0.1, 0.0).exact_solution(torch.tensor([[2.0, 0.0], [0.0, -1.5]]), t)  # (2, 41, 2)
     return t, x
 
 
