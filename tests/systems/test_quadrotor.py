@@ -7,19 +7,9 @@ import math
 import pytest
 import torch
 
-from fnnlib.systems.quadrotor import (
-    NOMINAL,
-    TEST_TRUTH,
-    TRAINING_TRUTH,
-    Quadrotor,
-    QuadrotorParams,
-    allocation_inverse,
-    allocation_matrix,
-    euler_from_rotation,
-    euler_rate_matrix,
-    inverse_euler_rate_matrix,
-    rotation_matrix,
-)
+from fnnlib.systems.allocation import allocation_inverse, allocation_matrix
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
+from fnnlib.systems.rotations import euler_from_rotation, euler_rate_matrix, inverse_euler_rate_matrix, rotation_matrix
 
 F64 = torch.float64
 
@@ -87,7 +77,7 @@ def test_hover_is_an_equilibrium_of_the_nominal_model() -> None:
 def test_drag_breaks_the_hover_of_the_training_vehicle() -> None:
     x = torch.zeros(12, dtype=F64)
     x[3:6] = torch.tensor([1.0, -2.0, 0.5])
-    u = Quadrotor().hover_input()
+    u = Quadrotor(NOMINAL).hover_input()
     nominal = Quadrotor(NOMINAL).f(x, u)
     truth = Quadrotor(TRAINING_TRUTH).f(x, u)
     assert torch.allclose(nominal[3:6], torch.zeros(3, dtype=F64), atol=1e-12)
@@ -117,7 +107,7 @@ def test_thrust_pushes_along_minus_body_z_and_the_disturbance_adds_f_over_m() ->
 def test_euler_rates_and_gyroscopic_term() -> None:
     x = _state(5)
     u = torch.tensor([1.0, 2.0, 3.0, 4.0], dtype=F64)
-    xdot = Quadrotor().f(x, u)
+    xdot = Quadrotor(NOMINAL).f(x, u)
     W = euler_rate_matrix(x[6:9])
     assert torch.allclose(xdot[6:9], W @ x[9:12], atol=1e-13)
     J = torch.diag(torch.tensor(NOMINAL.inertia, dtype=F64))
@@ -129,7 +119,7 @@ def test_euler_rates_and_gyroscopic_term() -> None:
 def test_residual_acceleration_enters_the_velocity_equation_only() -> None:
     x, u = _state(6), torch.tensor([1.0, 2.0, 3.0, 4.0], dtype=F64)
     a_res = torch.tensor([0.5, -1.0, 2.0], dtype=F64)
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     diff = quad.f(x, u, a_res) - quad.f(x, u)
     assert torch.allclose(diff, torch.cat([torch.zeros(3), a_res, torch.zeros(6)]).to(F64), atol=1e-13)
 
@@ -210,8 +200,8 @@ def test_rk4_converges_at_fourth_order() -> None:
     quad = Quadrotor(TRAINING_TRUTH)
     x = torch.tensor([0.1, -0.2, 0.3, 1.0, -2.0, 0.5, 0.3, -0.2, 0.4, 1.5, -1.0, 0.8], dtype=F64)
     u = torch.tensor([1.5, 2.5, 2.0, 3.0], dtype=F64)
-    ref = quad.step(x, u, dt=0.1, substeps=256)
-    errs = [float((quad.step(x, u, dt=0.1, substeps=s) - ref).abs().max()) for s in (2, 4, 8)]
+    ref = quad.step(x, u, Ts=0.1, substeps=256)
+    errs = [float((quad.step(x, u, Ts=0.1, substeps=s) - ref).abs().max()) for s in (2, 4, 8)]
     # 4th order: halving the sub-step divides the error by ~2^4 = 16 (measured 14.5 and 15.3)
     for coarse, fine in zip(errs, errs[1:], strict=False):
         assert 8.0 < coarse / fine < 32.0
@@ -227,22 +217,22 @@ def test_step_uses_the_residual_at_every_stage() -> None:
         calls.append(1)
         return (F / NOMINAL.mass).expand(*y.shape[:-1], 3)
 
-    stepped = Quadrotor(NOMINAL).step(x, u, dt=0.05, substeps=3, a_res_fn=a_res_fn)
+    stepped = Quadrotor(NOMINAL).step(x, u, Ts=0.05, substeps=3, a_res_fn=a_res_fn)
     assert len(calls) == 4 * 3
-    assert torch.allclose(stepped, with_F.step(x, u, dt=0.05, substeps=3), atol=1e-14)
+    assert torch.allclose(stepped, with_F.step(x, u, Ts=0.05, substeps=3), atol=1e-14)
 
 
 def test_rollout_repeats_steps_and_hover_stays_put() -> None:
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     x0 = _state(9, 2)
     u_seq = torch.rand(2, 5, 4, dtype=F64, generator=torch.Generator().manual_seed(0)) + 1.5
-    X = quad.rollout(x0, u_seq, dt=0.02, substeps=2)
+    X = quad.rollout(x0, u_seq, Ts=0.02, substeps=2)
     assert X.shape == (2, 6, 12)
     x = x0
     for k in range(5):
-        x = quad.step(x, u_seq[:, k], dt=0.02, substeps=2)
+        x = quad.step(x, u_seq[:, k], Ts=0.02, substeps=2)
         assert torch.allclose(X[:, k + 1], x, atol=1e-14)
-    hover = quad.rollout(torch.zeros(12, dtype=F64), quad.hover_input().expand(50, 4), dt=0.02)
+    hover = quad.rollout(torch.zeros(12, dtype=F64), quad.hover_input().expand(50, 4), Ts=0.02)
     assert torch.allclose(hover, torch.zeros(51, 12, dtype=F64), atol=1e-12)
 
 
@@ -250,7 +240,7 @@ def test_rollout_repeats_steps_and_hover_stays_put() -> None:
 
 
 def test_bad_inputs_are_refused_before_any_work() -> None:
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     x, u = _state(10), quad.hover_input()
     bad = x.clone()
     bad[7] = float("nan")
@@ -259,15 +249,15 @@ def test_bad_inputs_are_refused_before_any_work() -> None:
     with pytest.raises(ValueError, match=r"\(\.\.\., 12\)"):
         quad.f(x[:11], u)
     with pytest.raises(ValueError, match=r"\(\.\.\., 4\)"):
-        quad.step(x, u[:3])
+        quad.step(x, u[:3], Ts=0.02)
     with pytest.raises(ValueError, match="broadcast"):
         quad.f(_state(10, 3), u.expand(2, 4))
-    with pytest.raises(ValueError, match="dt"):
-        quad.step(x, u, dt=0.0)
+    with pytest.raises(ValueError, match="Ts"):
+        quad.step(x, u, Ts=0.0)
     with pytest.raises(ValueError, match="substeps"):
-        quad.step(x, u, substeps=0)
+        quad.step(x, u, Ts=0.02, substeps=0)
     with pytest.raises(TypeError, match="substeps"):
-        quad.step(x, u, substeps=1.5)  # type: ignore[arg-type]
+        quad.step(x, u, Ts=0.02, substeps=1.5)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="floating-point"):
         quad.f(torch.zeros(12, dtype=torch.int64), u)
     with pytest.raises(TypeError, match="QuadrotorParams"):
@@ -278,10 +268,10 @@ def test_a_batch_equals_separate_calls() -> None:
     quad = Quadrotor(TEST_TRUTH)
     x = _state(11, 5)
     u = torch.rand(5, 4, dtype=F64, generator=torch.Generator().manual_seed(1)) * 3.0
-    batched_f, batched_step = quad.f(x, u), quad.step(x, u, dt=0.02, substeps=2)
+    batched_f, batched_step = quad.f(x, u), quad.step(x, u, Ts=0.02, substeps=2)
     for i in range(5):
         assert torch.allclose(batched_f[i], quad.f(x[i], u[i]), atol=1e-13)
-        assert torch.allclose(batched_step[i], quad.step(x[i], u[i], dt=0.02, substeps=2), atol=1e-13)
+        assert torch.allclose(batched_step[i], quad.step(x[i], u[i], Ts=0.02, substeps=2), atol=1e-13)
     # leading dims broadcast: one input for a (2, 5) batch of states
     assert quad.f(x.expand(2, 5, 12), u[0]).shape == (2, 5, 12)
 
@@ -293,7 +283,7 @@ def test_float32_and_gradients() -> None:
     assert f32.dtype == torch.float32
     assert torch.allclose(f32.double(), quad.f(x, u), rtol=1e-5, atol=1e-4)
     xg, ug = x[:2].clone().requires_grad_(True), u[:2].clone().requires_grad_(True)
-    assert torch.autograd.gradcheck(lambda a, b: quad.step(a, b, dt=0.02), (xg, ug))
+    assert torch.autograd.gradcheck(lambda a, b: quad.step(a, b, Ts=0.02), (xg, ug))
 
 
 # --------------------------------------------------------------------------- the few-op right-hand side
@@ -343,10 +333,10 @@ def test_rk4_with_a_given_first_stage_is_the_same_step():
     x = torch.randn(5, 12, dtype=torch.float64) * 0.3
     u = torch.full((5, 4), 3.0, dtype=torch.float64)
     for substeps in (1, 3):
-        plain = q.step(x, u, dt=0.02, substeps=substeps)
-        given = q.step(x, u, dt=0.02, substeps=substeps, k1=q.f(x, u))
+        plain = q.step(x, u, Ts=0.02, substeps=substeps)
+        given = q.step(x, u, Ts=0.02, substeps=substeps, k1=q.f(x, u))
         torch.testing.assert_close(given, plain, rtol=0, atol=0)
     # a wrong first stage changes the step (it is used), a wrong shape is refused
-    assert not torch.equal(q.step(x, u, k1=torch.zeros(5, 12, dtype=torch.float64)), q.step(x, u))
+    assert not torch.equal(q.step(x, u, Ts=0.02, k1=torch.zeros(5, 12, dtype=torch.float64)), q.step(x, u, Ts=0.02))
     with pytest.raises(ValueError, match="k1 must have shape"):
-        q.step(x, u, k1=torch.zeros(12, dtype=torch.float64))
+        q.step(x, u, Ts=0.02, k1=torch.zeros(12, dtype=torch.float64))
