@@ -57,11 +57,14 @@ from fnnlib.systems.rotations import (
     trig_basis,
 )
 
-__all__ = ["NOMINAL", "TEST_TRUTH", "TRAINING_TRUTH", "Quadrotor", "QuadrotorConstants", "QuadrotorParams", "constants",
-           "vec3"]
+__all__ = ["NOMINAL", "STATE_GROUPS", "TEST_TRUTH", "TRAINING_TRUTH", "Quadrotor", "QuadrotorConstants", "QuadrotorParams",
+           "constants", "vec3"]
 
 Vec3 = tuple[float, float, float]
 AccelerationFn = Callable[[Tensor], Tensor]
+
+STATE_GROUPS = {"p": slice(0, 3), "v": slice(3, 6), "Theta": slice(6, 9), "omega": slice(9, 12)}
+"""Where each part of the state ``x = [p, v, Theta, omega]`` sits."""
 
 
 def vec3(value: Sequence[float] | Tensor, name: str) -> Vec3:

@@ -6,17 +6,20 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import Flights
+from fnnlib.metrics import relative_rmse
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
-from fnnlib.systems.quadrotor import Quadrotor
+from fnnlib.systems.quadrotor import STATE_GROUPS, Quadrotor
 from fnnlib.training.external import InputTrainHistory, make_segments, rollout, train_with_inputs
 
-__all__ = ["EnsembleFit", "closed_loop_step", "predict_flights", "train_residual_ensemble", "train_single_step"]
+__all__ = ["EnsembleFit", "closed_loop_step", "convergence_checks", "predict_flights", "state_group_errors",
+           "train_residual_ensemble", "train_single_step"]
 
 #: Loss weights of App. A.1's quadratic loss: the 12 vehicle states count, the 6 controller states do not
 #: (as in the authors' release).
@@ -117,6 +120,29 @@ def predict_flights(residual: Callable[[Tensor], Tensor] | None, flights: Flight
     """
     step = closed_loop_step(residual, controller, plant, Ts=flights.Ts, substeps=substeps)
     return rollout(step, flights.x[:, 0].to(dtype), flights.Psi.to(dtype))
+
+
+def state_group_errors(x_pred: Tensor, x_true: Tensor) -> dict[str, float]:
+    """Relative RMSE per state group ``p, v, Theta, omega`` (:data:`~fnnlib.systems.quadrotor.STATE_GROUPS`), Q2.
+
+    ``x_pred``, ``x_true`` (..., 12); each group's RMSE of the error norm over the RMS norm of its true values.
+    """
+    return {g: relative_rmse(x_pred[..., sl], x_true[..., sl]) for g, sl in STATE_GROUPS.items()}
+
+
+def convergence_checks(member_loss: np.ndarray, epochs: int) -> dict[str, bool]:
+    """Q1's rule on the per-member training losses ``member_loss`` (epochs + 1, E), row 0 before training.
+
+    Every member: final loss <= 10 % of the initial one, and the last 10 % of epochs change it by < 20 %;
+    and the members agree: the largest final loss is at most 2x the smallest.
+    """
+    final, first = member_loss[-1], member_loss[0]
+    tail = member_loss[int(np.floor(0.9 * epochs))]
+    return {
+        "every initialisation: final <= 10 % of initial loss": bool(np.all(final <= 0.1 * first)),
+        "every initialisation: last 10 % of epochs change the loss < 20 %": bool(np.all(np.abs(final - tail) <= 0.2 * tail)),
+        "initialisations agree: max/min final loss <= 2": bool(final.max() <= 2 * final.min()),
+    }
 
 
 def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int, batch_size: int, lr: float,

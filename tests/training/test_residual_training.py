@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -13,7 +14,8 @@ from fnnlib.models.residual import AeroResidual, EnsembleResidual
 from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_RESIDUAL_RECIPE, PAPER_TS
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 from fnnlib.training.external import make_segments, rollout
-from fnnlib.training.residual import closed_loop_step, predict_flights, train_residual_ensemble, train_single_step
+from fnnlib.training.residual import (closed_loop_step, convergence_checks, predict_flights, state_group_errors,
+                                      train_residual_ensemble, train_single_step)
 
 F64 = torch.float64
 CTRL, PLANT = DFBC(NOMINAL, **PAPER_DFBC_GAINS), Quadrotor(NOMINAL)
@@ -187,3 +189,30 @@ def test_train_single_step_refuses_bad_pairs():
     bad[3, 1] = float("nan")
     with pytest.raises(ValueError, match="NaN"):
         train_single_step(net, x, bad, epochs=1, batch_size=256, lr=1e-3, seed=0)
+
+
+# --------------------------------------------------------------------------- the claims' evaluation
+
+
+def test_convergence_checks_apply_q1s_rule():
+    epochs = 10
+    good = np.stack([np.geomspace(10.0, 0.5, epochs + 1), np.geomspace(12.0, 0.6, epochs + 1)], axis=1)
+    good[-2:] = good[-3]  # flat at the end
+    assert all(convergence_checks(good, epochs).values())
+    still_falling = good.copy()
+    still_falling[-1] = 0.5 * good[-2]  # the last 10 % of epochs halve the loss
+    assert not convergence_checks(still_falling, epochs)["every initialisation: last 10 % of epochs change the loss < 20 %"]
+    apart = good.copy()
+    apart[:, 1] *= 3.0  # one member ends 3x higher
+    assert not convergence_checks(apart, epochs)["initialisations agree: max/min final loss <= 2"]
+
+
+def test_state_group_errors_are_relative_rmse_per_group():
+    g = torch.Generator().manual_seed(0)
+    true = torch.randn(2, 30, 12, generator=g, dtype=F64)
+    pred = true.clone()
+    pred[..., 3:6] *= 1.1  # only v is off, by 10 % of its own size
+    errors = state_group_errors(pred, true)
+    assert list(errors) == ["p", "v", "Theta", "omega"]
+    assert errors["p"] == errors["Theta"] == errors["omega"] == 0.0
+    assert errors["v"] == pytest.approx(0.1, rel=1e-12)
