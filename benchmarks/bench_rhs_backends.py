@@ -30,7 +30,7 @@ from fnnlib.systems.rotations import rotation_matrix
 
 
 def numpy_twin(q: Quadrotor, net: AeroResidual):
-    """Eq. (27) + residual in numpy, the same formulas as ``Quadrotor._f`` (matrix form)."""
+    """Eq. (27) + residual in numpy, the same formulas as ``Quadrotor.rhs`` (matrix form)."""
     prm = q.params
     C = allocation_matrix(prm).numpy()
     J, D, F = (np.array(v) for v in (prm.inertia, prm.drag, prm.force_disturbance))

@@ -223,7 +223,7 @@ class DFBC:
         x, z = x18[..., :12], x18[..., 12:]
         u, z_dot = self._control(x, z, Psi_bar)
         a_res = a_res_fn(x) if a_res_fn is not None else None
-        x_dot = plant._f(x, u, a_res)
+        x_dot = plant.rhs(x, u, a_res)
         lead = x_dot.shape[:-1]
         return torch.cat([x_dot, z_dot.expand(*lead, self.nz)], dim=-1), u
 

@@ -319,7 +319,7 @@ def state_to_flat(
     x, u, u_dot = (t.expand(*lead, t.shape[-1]) for t in (x, u, u_dot))
 
     def acceleration(x_: Tensor, u_: Tensor) -> Tensor:
-        return quad._f(x_, u_)[..., 3:6]
+        return quad.rhs(x_, u_)[..., 3:6]
 
-    a, j = jvp(acceleration, (x, u), (quad._f(x, u), u_dot))
+    a, j = jvp(acceleration, (x, u), (quad.rhs(x, u), u_dot))
     return torch.cat([x[..., 0:6], a, j], dim=-1)

@@ -284,8 +284,11 @@ class Quadrotor:
             cache[key] = constants(self.params, like.dtype, like.device)
         return cache[key]
 
-    def _f(self, x: Tensor, u: Tensor, a_res: Tensor | None = None) -> Tensor:
-        """Eq. (27) without checks, in few batched ops (see :func:`fnnlib.systems.rotations._trilinear_maps`)."""
+    def rhs(self, x: Tensor, u: Tensor, a_res: Tensor | None = None) -> Tensor:
+        """Eq. (27) without checks, for callers that checked once (the integrators, the DFBC loop, the flat map).
+
+        Few batched ops (see :func:`fnnlib.systems.rotations._trilinear_maps`); arguments as in :meth:`f`.
+        """
         prm = self.params
         k = self._constants(x)
         v, omega = x[..., 3:6], x[..., 9:12]
@@ -330,7 +333,7 @@ class Quadrotor:
         if a_res is not None:
             check_last(a_res, 3, "a_res")
             _broadcast_lead(lead, a_res.shape[:-1], names=("x/u", "a_res"))
-        return self._f(x, u, a_res)
+        return self.rhs(x, u, a_res)
 
     def drag_acceleration(self, x: Tensor) -> Tensor:
         """Rotor-drag acceleration ``-R D R^T v`` (App. A.5).
@@ -349,8 +352,8 @@ class Quadrotor:
     def _step(self, x: Tensor, u: Tensor, Ts: float, substeps: int, a_res_fn: AccelerationFn | None,
               k1: Tensor | None = None) -> Tensor:
         if a_res_fn is None:
-            return rk4(lambda y: self._f(y, u), x, Ts, substeps, k1)
-        return rk4(lambda y: self._f(y, u, a_res_fn(y)), x, Ts, substeps, k1)
+            return rk4(lambda y: self.rhs(y, u), x, Ts, substeps, k1)
+        return rk4(lambda y: self.rhs(y, u, a_res_fn(y)), x, Ts, substeps, k1)
 
     def step(self, x: Tensor, u: Tensor, *, Ts: float, substeps: int = 1, a_res_fn: AccelerationFn | None = None,
              k1: Tensor | None = None) -> Tensor:

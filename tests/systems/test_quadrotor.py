@@ -1,15 +1,13 @@
-"""Eq. (27) `quadrotor_model`: equilibrium, drag, allocation, rotations, RK4 order, checks, batching."""
+"""Eq. (27) `quadrotor_model`: equilibrium, drag, the right-hand side, RK4 steps, checks, batching."""
 
 from __future__ import annotations
-
-import math
 
 import pytest
 import torch
 
-from fnnlib.systems.allocation import allocation_inverse, allocation_matrix
+from fnnlib.systems.allocation import allocation_matrix
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
-from fnnlib.systems.rotations import euler_from_rotation, euler_rate_matrix, inverse_euler_rate_matrix, rotation_matrix
+from fnnlib.systems.rotations import euler_rate_matrix, rotation_matrix
 
 F64 = torch.float64
 
@@ -21,14 +19,6 @@ def _state(seed: int = 0, n: int | None = None) -> torch.Tensor:
     x = torch.randn(*shape, generator=g, dtype=F64)
     x[..., 6:9] *= 0.4  # moderate Euler angles, far from gimbal lock
     return x
-
-
-def _hat(w: torch.Tensor) -> torch.Tensor:
-    wx, wy, wz = w.tolist()
-    return torch.tensor([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]], dtype=F64)
-
-
-# --------------------------------------------------------------------------- parameters
 
 
 def test_vehicles_hold_the_paper_and_release_values() -> None:
@@ -127,72 +117,6 @@ def test_residual_acceleration_enters_the_velocity_equation_only() -> None:
 # --------------------------------------------------------------------------- allocation
 
 
-def test_allocation_inverse_is_exact() -> None:
-    for params in (NOMINAL, NOMINAL.replace(arm=0.2, torque_coeff=0.02)):
-        C, C_inv = allocation_matrix(params), allocation_inverse(params)
-        assert torch.allclose(C @ C_inv, torch.eye(4, dtype=F64), atol=1e-12)
-        assert torch.allclose(C_inv @ C, torch.eye(4, dtype=F64), atol=1e-12)
-
-
-def test_allocation_torques_follow_the_motor_positions() -> None:
-    d = 0.15 / math.sqrt(2.0)
-    C = allocation_matrix(NOMINAL)
-    # raising the two motors with a '+' in tau_x (2 rear-left, 3 front-left) rolls right (+tau_x, FRD)
-    du = torch.tensor([0.0, 1.0, 1.0, 0.0], dtype=F64)
-    assert float((C @ du)[1]) > 0
-    # each motor at r_i (FRD) pushes -u_i e3: its torque is r_i x (-u_i e3)
-    r = torch.tensor([[d, d, 0.0], [-d, -d, 0.0], [d, -d, 0.0], [-d, d, 0.0]], dtype=F64)
-    e3 = torch.tensor([0.0, 0.0, 1.0], dtype=F64)
-    for i in range(4):
-        assert torch.allclose(C[1:3, i], torch.linalg.cross(r[i], -e3)[:2], atol=1e-15)
-    assert torch.allclose(C[3], torch.tensor([0.01, 0.01, -0.01, -0.01], dtype=F64))
-
-
-# --------------------------------------------------------------------------- rotations
-
-
-def test_rotation_matrix_is_a_proper_rotation() -> None:
-    Theta = _state(7, 50)[:, 6:9] * 3.0
-    R = rotation_matrix(Theta)
-    eye = torch.eye(3, dtype=F64).expand(50, 3, 3)
-    assert torch.allclose(R.transpose(-1, -2) @ R, eye, atol=1e-13)
-    assert torch.allclose(torch.linalg.det(R), torch.ones(50, dtype=F64), atol=1e-13)
-
-
-def test_rotation_matrix_known_cases() -> None:
-    e1 = torch.tensor([1.0, 0.0, 0.0], dtype=F64)
-    yaw90 = rotation_matrix(torch.tensor([0.0, 0.0, math.pi / 2], dtype=F64))
-    assert torch.allclose(yaw90 @ e1, torch.tensor([0.0, 1.0, 0.0], dtype=F64), atol=1e-15)  # nose east
-    pitch = rotation_matrix(torch.tensor([0.0, 0.3, 0.0], dtype=F64))
-    assert float((pitch @ e1)[2]) < 0  # positive pitch lifts the nose (z down)
-    # ZYX order: R = Rz Ry Rx
-    phi, theta, psi = 0.3, -0.5, 1.1
-    c, s = math.cos, math.sin
-    Rx = torch.tensor([[1, 0, 0], [0, c(phi), -s(phi)], [0, s(phi), c(phi)]], dtype=F64)
-    Ry = torch.tensor([[c(theta), 0, s(theta)], [0, 1, 0], [-s(theta), 0, c(theta)]], dtype=F64)
-    Rz = torch.tensor([[c(psi), -s(psi), 0], [s(psi), c(psi), 0], [0, 0, 1]], dtype=F64)
-    R = rotation_matrix(torch.tensor([phi, theta, psi], dtype=F64))
-    assert torch.allclose(R, Rz @ Ry @ Rx, atol=1e-15)
-    assert torch.allclose(euler_from_rotation(R), torch.tensor([phi, theta, psi], dtype=F64), atol=1e-14)
-
-
-def test_euler_rate_matrix_matches_finite_differences_along_a_rotation() -> None:
-    Theta0 = torch.tensor([0.4, -0.3, 0.7], dtype=F64)
-    omega = torch.tensor([1.2, -0.7, 0.5], dtype=F64)
-    R0 = rotation_matrix(Theta0)
-    h = 1e-5
-
-    def Theta(t: float) -> torch.Tensor:  # body rates omega held: R(t) = R0 exp(t [omega]x)
-        return euler_from_rotation(R0 @ torch.linalg.matrix_exp(t * _hat(omega)))
-
-    fd = (Theta(h) - Theta(-h)) / (2 * h)
-    # central difference: error ~ h^2 |Theta'''| / 6 ~ 1e-10
-    assert torch.allclose(euler_rate_matrix(Theta0) @ omega, fd, atol=1e-8)
-    assert torch.allclose(
-        inverse_euler_rate_matrix(Theta0) @ euler_rate_matrix(Theta0), torch.eye(3, dtype=F64), atol=1e-14
-    )
-
-
 # --------------------------------------------------------------------------- integration
 
 
@@ -287,19 +211,6 @@ def test_float32_and_gradients() -> None:
 
 
 # --------------------------------------------------------------------------- the few-op right-hand side
-
-
-def test_trilinear_rotation_equals_the_explicit_zyx_product():
-    """R from the (1, cos, sin) basis map equals Rz(psi) Ry(theta) Rx(phi) multiplied out by hand."""
-    torch.manual_seed(3)
-    Theta = (torch.rand(50, 3, dtype=torch.float64) - 0.5) * 6.0
-    phi, theta, psi = Theta.unbind(-1)
-    c, s = torch.cos, torch.sin
-    zero, one = torch.zeros_like(phi), torch.ones_like(phi)
-    Rx = torch.stack([one, zero, zero, zero, c(phi), -s(phi), zero, s(phi), c(phi)], -1).reshape(-1, 3, 3)
-    Ry = torch.stack([c(theta), zero, s(theta), zero, one, zero, -s(theta), zero, c(theta)], -1).reshape(-1, 3, 3)
-    Rz = torch.stack([c(psi), -s(psi), zero, s(psi), c(psi), zero, zero, zero, one], -1).reshape(-1, 3, 3)
-    torch.testing.assert_close(rotation_matrix(Theta), Rz @ Ry @ Rx, rtol=0, atol=1e-14)
 
 
 def test_rhs_attitude_rates_and_drag_equal_the_matrix_forms():
