@@ -135,7 +135,7 @@ F.save_figure(fig, out, "training_curves")
 # %% [markdown]
 # ## The MLP baseline (App. A.5.4)
 # A feed-forward network of the same size trained single-step: labels are the finite-difference acceleration
-# minus the nominal model's, $(v_{i+1} - v_i)/dt - a_{nom}(x_i, u_i)$, on the same flights (mean squared
+# minus the nominal model's, $(v_{i+1} - v_i)/T_s - a_{nom}(x_i, u_i)$, on the same flights (mean squared
 # error, Adam). It is used by the MPC comparison.
 
 # %%

@@ -1,7 +1,7 @@
 # %% [markdown]
 # # Model predictive control of a quadrotor under uncertainty (Sec. 5.2.2, App. A.5.3-A.5.4, A.9; Fig. 7, S8, S14)
 #
-# A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, dt = 0.02 s,
+# A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, Ts = 0.02 s,
 # Q = diag(100 x3, 50 x6, 1 x3), R = I4, thrust box, |Theta| <= pi/2). At every step the prediction model is
 # linearized along the previous plan and the time-varying QP is solved (OSQP, warm-started, the problem set up
 # once). Seven prediction models are compared on a test vehicle the models have never seen:
