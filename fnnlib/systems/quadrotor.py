@@ -234,7 +234,7 @@ class Quadrotor:
     Parameters
     ----------
     params : QuadrotorParams
-        Physical parameters; :data:`NOMINAL` by default.
+        Physical parameters (the paper's vehicles: :data:`NOMINAL`, :data:`TRAINING_TRUTH`, :data:`TEST_TRUTH`).
 
     Notes
     -----
@@ -247,7 +247,7 @@ class Quadrotor:
     n: ClassVar[int] = 12
     m: ClassVar[int] = 4
 
-    def __init__(self, params: QuadrotorParams = NOMINAL) -> None:
+    def __init__(self, params: QuadrotorParams) -> None:
         if not isinstance(params, QuadrotorParams):
             raise TypeError(f"params must be a QuadrotorParams, got {type(params).__name__}")
         self.params = params
