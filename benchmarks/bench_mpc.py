@@ -35,12 +35,12 @@ BOX = {"u_lb": np.zeros(NU), "u_ub": np.full(NU, 4.0),
 
 
 class RigidBody(nn.Module):
-    """x = (p, v, Theta, omega) in R^12, u = 4 thrusts; one RK4 step of length dt (float64)."""
+    """x = (p, v, Theta, omega) in R^12, u = 4 thrusts; one RK4 step of length Ts (float64)."""
 
-    def __init__(self, dt: float = DT) -> None:
+    def __init__(self, Ts: float = DT) -> None:
         super().__init__()
         torch.manual_seed(0)
-        self.dt, self.mass, self.g = dt, 1.0, 9.81
+        self.Ts, self.mass, self.g = Ts, 1.0, 9.81
         arm, kappa = 0.15, 0.02
         self.register_buffer("J", torch.tensor([0.01, 0.01, 0.02], dtype=torch.float64))
         self.register_buffer("C", torch.tensor([[1.0, 1.0, 1.0, 1.0], [0.0, arm, 0.0, -arm],
@@ -67,7 +67,7 @@ class RigidBody(nn.Module):
         return torch.cat([v, a, th_dot, w_dot], -1)
 
     def forward(self, x: torch.Tensor, u: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
-        h = self.dt
+        h = self.Ts
         k1 = self.f(x, u)
         k2 = self.f(x + 0.5 * h * k1, u)
         k3 = self.f(x + 0.5 * h * k2, u)

@@ -36,7 +36,6 @@ mlp_epochs = 300
 mlp_lr = 0.001
 
 # %%
-import json
 import time
 from pathlib import Path
 
@@ -47,23 +46,28 @@ import fnnlib as F
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
 from fnnlib.models.residual import AeroResidual
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
-from fnnlib.training.residual import predict_flights, train_residual_ensemble, train_single_step
+from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_MLP_RECIPE
+from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
+from fnnlib.training.residual import (convergence_checks, predict_flights, state_group_errors, train_residual_ensemble,
+                                      train_single_step)
 
+# %%
 if len(seeds) < 1 or len(set(seeds)) != len(seeds):
     raise ValueError(f"seeds must be distinct and non-empty, got {seeds}")
 if not 1 <= segment_length <= n_nodes:
     raise ValueError(f"segment_length must be in 1..{n_nodes}, got {segment_length}")
-truth = NOMINAL.replace(drag=tuple(truth_drag))  # validates the drag (>= 0)
+truth = TRAINING_TRUTH.replace(drag=tuple(truth_drag))  # validates the drag (>= 0)
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-controller, model_plant = DFBC(NOMINAL), Quadrotor(NOMINAL)
+controller, model_plant = DFBC(NOMINAL, **PAPER_DFBC_GAINS), Quadrotor(NOMINAL)
+draws = {"box": PAPER_FLIGHT_DATA["box"], "max_speed": PAPER_FLIGHT_DATA["max_speed"]}  # the release's waypoints
 
+# %%
 tic = time.perf_counter()
-train = make_flights(n_flights, n_nodes, dt=dt, seed=seed, truth=truth, n_waypoints=n_waypoints,
-                     substeps=truth_substeps)
-val = make_flights(val_flights, val_nodes, dt=dt, seed=seed + 1, truth=truth, n_waypoints=val_waypoints,
-                   substeps=truth_substeps)
+train = make_flights(n_flights, n_nodes, Ts=dt, seed=seed, truth=truth, controller=controller, n_waypoints=n_waypoints,
+                     substeps=truth_substeps, **draws)
+val = make_flights(val_flights, val_nodes, Ts=dt, seed=seed + 1, truth=truth, controller=controller,
+                   n_waypoints=val_waypoints, substeps=truth_substeps, **draws)
 save_flights(out / "flights_train.npz", train, {"seed": seed, "drag": truth_drag})
 save_flights(out / "flights_val.npz", val, {"seed": seed + 1, "drag": truth_drag})
 print(f"flew {train.n_flights} training flights x {train.n_steps} nodes and {val.n_flights} validation flights "
@@ -101,6 +105,11 @@ fit = train_residual_ensemble(seeds, train, controller=controller, plant=model_p
 member_loss = np.array(fit.member_loss)  # (epochs + 1, E)
 val_loss = np.array(fit.val_loss)  # (len(val_epochs), E)
 best = int(np.argmin(val_loss[-1]))
+per_model_s = fit.seconds / len(seeds)
+print(f"{len(seeds)} initialisations x {epochs} epochs in {fit.seconds:.0f} s ({per_model_s:.0f} s per model, "
+      f"{fit.history.n_updates} Adam updates each); kept seed {seeds[best]} (lowest validation loss)")
+
+# %%
 residual = fit.members[best].double()
 F.save_checkpoint(out / "residual.pt", residual, {"seed": seeds[best], "epochs": epochs, "lr": lr,
                                                   "segment_length": segment_length, "val_loss": float(val_loss[-1, best])})
@@ -111,9 +120,6 @@ for e, s in enumerate(seeds):
     F.save_checkpoint(out / name, fit.members[e].double(), {"seed": s, "epochs": epochs, "lr": lr,
                                                             "val_loss": float(val_loss[-1, e])})
     member_files.append(name)
-per_model_s = fit.seconds / len(seeds)
-print(f"{len(seeds)} initialisations x {epochs} epochs in {fit.seconds:.0f} s ({per_model_s:.0f} s per model, "
-      f"{fit.history.n_updates} Adam updates each); kept seed {seeds[best]} (lowest validation loss)")
 
 # %%
 fig, axes = F.new_figure(1, 2)
@@ -129,14 +135,15 @@ F.save_figure(fig, out, "training_curves")
 # %% [markdown]
 # ## The MLP baseline (App. A.5.4)
 # A feed-forward network of the same size trained single-step: labels are the finite-difference acceleration
-# minus the nominal model's, $(v_{i+1} - v_i)/dt - a_{nom}(x_i, u_i)$, on the same flights (mean squared
+# minus the nominal model's, $(v_{i+1} - v_i)/T_s - a_{nom}(x_i, u_i)$, on the same flights (mean squared
 # error, Adam). It is used by the MPC comparison.
 
 # %%
 x_ss, y_ss = single_step_labels(train, model_plant)
 torch.manual_seed(seed)
 mlp = AeroResidual(hidden, activation).double()
-mlp_loss = train_single_step(mlp, x_ss, y_ss, epochs=mlp_epochs, lr=mlp_lr, seed=seed)
+mlp_loss = train_single_step(mlp, x_ss, y_ss, epochs=mlp_epochs, batch_size=PAPER_MLP_RECIPE["batch_size"], lr=mlp_lr,
+                             seed=seed)
 F.save_checkpoint(out / "mlp.pt", mlp, {"seed": seed, "epochs": mlp_epochs, "final_mse": mlp_loss[-1]})
 print(f"MLP single-step MSE {mlp_loss[0]:.3f} -> {mlp_loss[-1]:.4f} (m/s^2)^2")
 
@@ -151,17 +158,10 @@ print(f"MLP single-step MSE {mlp_loss[0]:.3f} -> {mlp_loss[-1]:.4f} (m/s^2)^2")
 # (p, v, Theta, omega), i.e. all 12 states are predicted; (b) it is below the nominal model's for p and v.
 
 # %%
-groups = {"p": slice(0, 3), "v": slice(3, 6), "Theta": slice(6, 9), "omega": slice(9, 12)}
 pred = {name: predict_flights(res, val, controller=controller, plant=model_plant)
         for name, res in (("neural ODE", residual), ("nominal", None), ("MLP", mlp))}
 true = val.x[..., :12]
-
-
-def group_errors(x_pred):
-    return {g: F.relative_rmse(x_pred[..., sl], true[..., sl]) for g, sl in groups.items()}
-
-
-rel = {name: group_errors(x[..., :12]) for name, x in pred.items()}
+rel = {name: state_group_errors(x[..., :12], true) for name, x in pred.items()}
 for name, r in rel.items():
     print(f"{name:10s} " + "  ".join(f"{g}: {100 * v:5.2f} %" for g, v in r.items()))
 
@@ -170,7 +170,7 @@ labels = {"p": ["x", "y", "z"], "v": ["vx", "vy", "vz"], "Theta": ["roll", "pitc
 t_val = np.arange(val.n_steps + 1) * dt
 for k in range(val.n_flights):
     fig, axes = F.new_figure(4, 3, sharex=True)
-    for r, (g, sl) in enumerate(groups.items()):
+    for r, (g, sl) in enumerate(STATE_GROUPS.items()):
         for c in range(3):
             ax = axes[r, c]
             ax.plot(t_val, true[k, :, sl][:, c].numpy(), color="k", lw=1.2, label="flown")
@@ -187,12 +187,7 @@ for k in range(val.n_flights):
 
 # %%
 final, first = member_loss[-1], member_loss[0]
-tail = member_loss[int(np.floor(0.9 * epochs))]
-q1_checks = {
-    "every initialisation: final <= 10 % of initial loss": bool(np.all(final <= 0.1 * first)),
-    "every initialisation: last 10 % of epochs change the loss < 20 %": bool(np.all(np.abs(final - tail) <= 0.2 * tail)),
-    "initialisations agree: max/min final loss <= 2": bool(final.max() <= 2 * final.min()),
-}
+q1_checks = convergence_checks(member_loss, epochs)
 n_feedback_params = 0  # the linear feedback L(x - x_hat) has no trainable parameter: L and beta are set by hand
 q6_checks = {
     "linear feedback needs no training (0 trainable parameters)": n_feedback_params == 0,
@@ -202,6 +197,8 @@ q2_checks = {
     "neural ODE: relative RMSE <= 10 % for p, v, Theta and omega": all(v <= 0.10 for v in rel["neural ODE"].values()),
     "neural ODE below nominal for p and v": all(rel["neural ODE"][g] < rel["nominal"][g] for g in ("p", "v")),
 }
+
+# %%
 claims = [
     F.claim_result("Q1", checks=q1_checks, figure="figures/training_curves.png",
                    numbers={"seeds": seeds, "initial_loss": first.tolist(), "final_loss": final.tolist(),
@@ -217,6 +214,8 @@ claims = [
                             "target_seconds_per_model": 180},
                    rule="no trainable feedback parameter; 50 epochs of one model <= 30 min on this machine"),
 ]
+
+# %%
 F.write_results(out, task="quadrotor_learning", profile=profile, claims=claims,
                 metrics={"best_seed": seeds[best], "mlp_final_mse": mlp_loss[-1], "epochs": epochs,
                          "member_checkpoints": member_files})

@@ -1,7 +1,7 @@
 # %% [markdown]
 # # Model predictive control of a quadrotor under uncertainty (Sec. 5.2.2, App. A.5.3-A.5.4, A.9; Fig. 7, S8, S14)
 #
-# A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, dt = 0.02 s,
+# A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, Ts = 0.02 s,
 # Q = diag(100 x3, 50 x6, 1 x3), R = I4, thrust box, |Theta| <= pi/2). At every step the prediction model is
 # linearized along the previous plan and the time-varying QP is solved (OSQP, warm-started, the problem set up
 # once). Seven prediction models are compared on a test vehicle the models have never seen:
@@ -41,42 +41,44 @@ import json
 from pathlib import Path
 
 import numpy as np
-import torch
 
 import fnnlib as F
-from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.compiled import warm_up
-from fnnlib.mpc.flight import fly, lissajous_reference, tracking_rmse
-from fnnlib.models.residual import AdaptiveResidual
-from fnnlib.mpc.models import AdaptiveNNModel, paper_models
-from fnnlib.stability import theorem1_balls
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+from fnnlib.mpc.experiment import (CARRYING, QP_CLASSES, FlightTest, adapnn_flights, adapnn_model, claim_checks,
+                                   flight_row, make_mpc, seed_spread, speed_runs, speed_summary, spread_orderings,
+                                   theorem2_check)
+from fnnlib.mpc.flight import lissajous_reference, tracking_rmse
+from fnnlib.mpc.models import paper_models
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
+# %%
 up = Path(upstream_dirs["quadrotor_learning"])
 residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
 mlp, _ = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()
-truth = Quadrotor(NOMINAL.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
-                                  force_disturbance=tuple(disturbance)))
+truth = Quadrotor(TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
+                                     force_disturbance=tuple(disturbance)))
 F.check_gain(L, 12, dt)  # refuse an unstable feedback gain before any flight
 if not u_max or min(u_max) <= 0:
     raise ValueError(f"u_max must list positive thrust bounds, got {u_max}")
-QP_CLASSES = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
 if qp not in QP_CLASSES:
     raise ValueError(f"qp must be one of {sorted(QP_CLASSES)}, got {qp!r}")
 if backend not in ("torch", "numba"):
     raise ValueError(f"backend must be 'torch' or 'numba', got {backend!r}")
 
+# %%
+x_r, u_r = lissajous_reference(steps, N, Ts=dt, params=NOMINAL, curve=PAPER_LISSAJOUS)
+test = FlightTest(truth, x_r, u_r, steps=steps, Ts=dt, substeps=truth_substeps, backend=backend,
+                  linearize_method=linearize_method)
+models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=dt)
 
-def make_mpc(umax):
-    """Eq. (28) with the paper's weights, thrust box [0, umax] and |Theta| <= theta_max."""
-    return QP_CLASSES[qp](N, np.asarray(Q), np.asarray(R), u_lb=np.zeros(4), u_ub=np.full(4, umax), x_lb=x_lb,
-                          x_ub=-x_lb, solver=solver)
+
+def make_qp(umax):
+    """Eq. (28) with this run's weights, thrust box [0, umax] and |Theta| <= theta_max."""
+    return make_mpc(qp, N, Q, R, u_max=umax, theta_max=theta_max, solver=solver)
 
 
-x_lb = np.r_[np.full(6, -np.inf), np.full(3, -theta_max), np.full(3, -np.inf)]
-x_r, u_r = lissajous_reference(steps, N, dt=dt)
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 print(f"residual from seed {meta_res.get('seed')}; reference thrust range {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N "
@@ -104,12 +106,9 @@ compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
 print(f"compiled kernels ready in {compile_s:.1f} s" if backend == "numba" else "torch backend")
 flights = {}
 for umax in u_max:
-    mpc = make_mpc(umax)
-    models = paper_models(residual, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt)
-    flights[umax] = {m.name: fly(m, mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
-                                 linearize_method=linearize_method, backend=backend, progress=True) for m in models}
+    mpc = make_qp(umax)
+    flights[umax] = {m.name: test.fly(m, mpc, progress=True) for m in paper_models(residual, mlp, **models_kw)}
 names = list(flights[u_max[0]])
-six = names[:6]
 
 # %% [markdown]
 # The paper tunes AdapNN "for optimal performance": we fly it for every gain in `Gamma_adapnn_grid` and keep the
@@ -118,11 +117,7 @@ six = names[:6]
 # %%
 adapnn_sweep = {}
 for umax in u_max:
-    mpc = make_mpc(umax)
-    runs = {g: fly(AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(residual, g), dt=dt), mpc, truth,
-                   x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method,
-                   backend=backend)
-            for g in Gamma_adapnn_grid}
+    runs = adapnn_flights(residual, Gamma_adapnn_grid, make_qp(umax), test)
     adapnn_sweep[str(umax)] = {g: tracking_rmse(r.x, r.x_ref)["mean_axis"] for g, r in runs.items()}
     best_g = min(runs, key=lambda g: adapnn_sweep[str(umax)][g])
     flights[umax]["AdapNN"] = runs[best_g]
@@ -130,18 +125,7 @@ for umax in u_max:
 best_gamma = {str(umax): min(adapnn_sweep[str(umax)], key=adapnn_sweep[str(umax)].get) for umax in u_max}
 
 # %%
-def acc_rmse(r):
-    return float(np.sqrt(np.mean(np.sum((r.xdot_pred[:, 3:6] - r.xdot_true[:, 3:6]) ** 2, axis=1))))
-
-
-table = {str(umax): {n: {**tracking_rmse(r.x, r.x_ref), "acc_pred_rmse": acc_rmse(r), "fallbacks": r.n_fallbacks,
-                         "reference_linearizations": r.n_reference_linearizations,
-                         "step_ms_median": 1e3 * float(np.median(r.t_linearize + r.t_solve)),
-                         "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
-                         "linearize_ms_median": 1e3 * float(np.median(r.t_linearize)),
-                         "solve_ms_median": 1e3 * float(np.median(r.t_solve)),
-                         "flight_s": r.elapsed_s, "real_time_factor": r.real_time_factor}
-                     for n, r in fl.items()} for umax, fl in flights.items()}
+table = {str(umax): {n: flight_row(r) for n, r in fl.items()} for umax, fl in flights.items()}
 for umax, rows in table.items():
     print(f"thrust <= {umax} N   RMSE mean-axis   norm  acc-pred  fallbacks  ms/step (median, p95)  flight s  x real time")
     for n, v in rows.items():
@@ -160,28 +144,11 @@ for umax, rows in table.items():
 # repeats the measurement without the notebook around it, for both backends.
 
 # %%
-if int(speed_repeats) < 1:
-    raise ValueError(f"speed_repeats must be >= 1, got {speed_repeats}")
-timing = {}
-mpc = make_mpc(max(u_max))
-for m in paper_models(residual, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt):
-    if m.name == "AdapNN":  # the gain the sweep keeps at this bound
-        m = AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(residual, best_gamma[str(max(u_max))]), dt=dt)
-    runs = [fly(m, mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps, linearize_method=linearize_method,
-                backend=backend) for _ in range(int(speed_repeats))]
-    steps_ms = 1e3 * np.concatenate([r.t_linearize + r.t_solve for r in runs])
-    timing[m.name] = {"step_ms_median": float(np.median(steps_ms)), "step_ms_p95": float(np.percentile(steps_ms, 95)),
-                      "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
-                      "real_time_factor_each": [r.real_time_factor for r in runs]}
-speed = {"per_model": timing, "repeats": int(speed_repeats), "thrust_bound": max(u_max),
-         "step_ms_median_worst_model": max(v["step_ms_median"] for v in timing.values()),
-         "step_ms_median_best_model": min(v["step_ms_median"] for v in timing.values()),
-         "real_time_factor_worst_model": min(v["real_time_factor_median"] for v in timing.values()),
-         "real_time_factor_best_model": max(v["real_time_factor_median"] for v in timing.values()),
-         "targets": {"step_ms_median": 4.0, "real_time_factor": 5.0}, "qp": qp, "backend": backend,
-         "linearize_method": linearize_method if backend == "torch" else "exact (forward mode, compiled)",
-         "compile_s": compile_s}
-speed["met"] = (speed["step_ms_median_worst_model"] <= 4.0) and (speed["real_time_factor_worst_model"] >= 5.0)
+timed = paper_models(residual, mlp, **models_kw)
+timed[names.index("AdapNN")] = adapnn_model(residual, best_gamma[str(max(u_max))], Ts=dt)  # the gain the sweep keeps
+timing = speed_runs(timed, make_qp(max(u_max)), test, speed_repeats)
+speed = speed_summary(timing, repeats=speed_repeats, thrust_bound=max(u_max), qp=qp, backend=backend,
+                      linearize_method=linearize_method, compile_s=compile_s)
 for n, v in timing.items():
     print(f"  {n:8s} linearize + solve {v['step_ms_median']:.2f} ms (p95 {v['step_ms_p95']:.2f}); "
           f"x real time, median of {int(speed_repeats)}: {v['real_time_factor_median']:.1f} "
@@ -235,19 +202,12 @@ for umax, fl in flights.items():
 #   holds for >= 95 % of the AdapFNN flight after the transient.
 
 # %%
-k0 = int(round(transient_s / dt))
-thm2 = {}
+thm2 = {str(umax): theorem2_check(fl["AdapFNN"], L, int(round(transient_s / dt))) for umax, fl in flights.items()}
 for umax, fl in flights.items():
-    r = fl["AdapFNN"]
-    e = np.linalg.norm(r.x_tilde[k0:], axis=1)
-    gamma = float(np.linalg.norm(r.delta[k0:], axis=1).max())
-    ball_x, ball_f = theorem1_balls(L, gamma, 12)
-    thm2[str(umax)] = {"gamma": gamma, "ball_x": ball_x, "inside_fraction": float(np.mean(e <= ball_x)),
-                       "max_error": float(e.max())}
     fig, ax = F.new_figure()
-    ax.semilogy(t_grid[:-1], np.linalg.norm(r.x_tilde, axis=1), label="AdapFNN ||x - x_hat||")
+    ax.semilogy(t_grid[:-1], np.linalg.norm(fl["AdapFNN"].x_tilde, axis=1), label="AdapFNN ||x - x_hat||")
     ax.semilogy(t_grid[:-1], np.linalg.norm(fl["FNN"].x_tilde, axis=1), label="FNN ||x - x_hat||", alpha=0.7)
-    ax.axhline(ball_x, color="k", ls="--", label="Theorem 2 ball gamma / lambda_m(L)")
+    ax.axhline(thm2[str(umax)]["ball_x"], color="k", ls="--", label="Theorem 2 ball gamma / lambda_m(L)")
     ax.axvline(transient_s, color="gray", lw=0.8)
     ax.set(xlabel="t [s]", title=f"Observation error, thrust <= {umax} N (Fig. S14)")
     ax.legend(fontsize=7)
@@ -266,59 +226,37 @@ for umax, v in thm2.items():
 # the rules say; the fractions here show how often each ordering holds over seeds.
 
 # %%
-learning = json.loads((up / "results.json").read_text())
-member_files = learning.get("metrics", {}).get("member_checkpoints")
+member_files = json.loads((up / "results.json").read_text()).get("metrics", {}).get("member_checkpoints")
 if not member_files:
     raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
-carrying = ("Neural", "AdapNN", "FNN", "AdapFNN")
-spread = {str(umax): {n: {} for n in carrying} for umax in u_max}
-for fname in member_files:
-    net, meta = F.load_checkpoint(up / fname, expected_kind="AeroResidual")
-    net = net.double()
-    for umax in u_max:
-        mpc = make_mpc(umax)
-        ms = {m.name: m for m in paper_models(net, mlp, L=L, beta=beta, N=N, Gamma=Gamma, dt=dt)}
-        ms["AdapNN"] = AdaptiveNNModel("AdapNN", Quadrotor(NOMINAL), AdaptiveResidual(net, best_gamma[str(umax)]),
-                                       dt=dt)
-        for name in carrying:
-            r = fly(ms[name], mpc, truth, x_r, u_r, steps=steps, dt=dt, substeps=truth_substeps,
-                    linearize_method=linearize_method, backend=backend)
-            spread[str(umax)][name][str(meta["seed"])] = tracking_rmse(r.x, r.x_ref)["mean_axis"]
-            if meta["seed"] == meta_res.get("seed"):  # the network of the flights above: the same flight
-                assert abs(spread[str(umax)][name][str(meta["seed"])] - table[str(umax)][name]["mean_axis"]) < 1e-9
+members = [(str(meta["seed"]), net.double()) for net, meta in
+           (F.load_checkpoint(up / fname, expected_kind="AeroResidual") for fname in member_files)]
+spread = seed_spread(members, mlp, u_max=u_max, make_qp=make_qp, test=test, model_settings=models_kw,
+                     adapnn_gamma=best_gamma)
+kept = str(meta_res.get("seed"))  # the network of the flights above flies the same flights
+for u, per_model in spread.items():
+    for name, by_seed in per_model.items():
+        assert kept not in by_seed or abs(by_seed[kept] - table[u][name]["mean_axis"]) < 1e-9
+orderings = spread_orderings(spread, table)
 
-orderings = {}
-for umax in u_max:
-    u = str(umax)
-    fixed = {n: table[u][n]["mean_axis"] for n in ("Nomi", "MLP", "FB")}
-    seeds_u = list(spread[u]["FNN"])
-    per_seed = [{**fixed, **{n: spread[u][n][sd] for n in carrying}} for sd in seeds_u]
-    orderings[u] = {
-        "FNN best of the six": float(np.mean([min(six, key=r.get) == "FNN" for r in per_seed])),
-        "FNN < Neural": float(np.mean([r["FNN"] < r["Neural"] for r in per_seed])),
-        "FNN < AdapNN": float(np.mean([r["FNN"] < r["AdapNN"] for r in per_seed])),
-        "Neural < Nomi": float(np.mean([r["Neural"] < r["Nomi"] for r in per_seed])),
-        "AdapFNN >= FNN": float(np.mean([r["AdapFNN"] >= r["FNN"] for r in per_seed])),
-        "AdapFNN within 25 % of FNN": float(np.mean([abs(r["AdapFNN"] - r["FNN"]) <= 0.25 * r["FNN"]
-                                                      for r in per_seed])),
-    }
-    print(f"thrust <= {umax} N, {len(seeds_u)} seeds:")
-    for n in carrying:
-        v = np.array(list(spread[u][n].values()))
+# %%
+for u, per_model in spread.items():
+    print(f"thrust <= {u} N, {len(per_model['FNN'])} seeds:")
+    for n, by_seed in per_model.items():
+        v = np.array(list(by_seed.values()))
         print(f"  {n:8s} mean {v.mean():.3f}  std {v.std(ddof=1) if v.size > 1 else 0.0:.3f}  min {v.min():.3f}  "
               f"max {v.max():.3f}")
     print("  fraction of seeds where " + "; ".join(f"{k}: {v:.1f}" for k, v in orderings[u].items()))
 
+# %%
 fig, axes = F.new_figure(1, len(u_max))
-for ax, umax in zip(np.ravel(axes), u_max):  # one panel per thrust bound (a lone Axes when there is one)
-    u = str(umax)
-    for i, n in enumerate(carrying):
-        v = list(spread[u][n].values())
-        ax.plot(np.full(len(v), i), v, "o", alpha=0.7)
+for ax, u in zip(np.ravel(axes), spread):  # one panel per thrust bound (a lone Axes when there is one)
+    for i, n in enumerate(CARRYING):
+        ax.plot(np.full(len(spread[u][n]), i), list(spread[u][n].values()), "o", alpha=0.7)
     for n, style in (("Nomi", ":"), ("MLP", "-."), ("FB", "--")):
         ax.axhline(table[u][n]["mean_axis"], color="k", ls=style, lw=0.8, label=n)
-    ax.set(xticks=range(len(carrying)), xticklabels=carrying, ylabel="mean per-axis RMSE [m]", yscale="log",
-           title=f"thrust <= {umax} N: one dot per trained network")
+    ax.set(xticks=range(len(CARRYING)), xticklabels=CARRYING, ylabel="mean per-axis RMSE [m]", yscale="log",
+           title=f"thrust <= {u} N: one dot per trained network")
     ax.legend(fontsize=7)
 _ = F.save_figure(fig, out, "seed_spread")
 
@@ -326,37 +264,33 @@ _ = F.save_figure(fig, out, "seed_spread")
 # ## Verdicts
 
 # %%
-q3, q4, q5 = {}, {}, {}
-for umax, rows in table.items():
-    rm = {n: rows[n]["mean_axis"] for n in names}
-    ac = {n: rows[n]["acc_pred_rmse"] for n in names}
-    q3[f"{umax} N: FNN best of the six"] = min(six, key=rm.get) == "FNN"
-    q3[f"{umax} N: Neural < Nomi"] = rm["Neural"] < rm["Nomi"]
-    q3[f"{umax} N: MLP > Neural"] = rm["MLP"] > rm["Neural"]
-    q4[f"{umax} N: best first-step prediction is a feedback model"] = min(six, key=ac.get) in ("FB", "FNN")
-    q4[f"{umax} N: FNN < Neural"] = ac["FNN"] < ac["Neural"]
-    q5[f"{umax} N: AdapFNN within 25 % of FNN"] = abs(rm["AdapFNN"] - rm["FNN"]) <= 0.25 * rm["FNN"]
-    q5[f"{umax} N: AdapFNN >= FNN"] = rm["AdapFNN"] >= rm["FNN"]
-    q5[f"{umax} N: Theorem 2 ball holds >= 95 % after the transient"] = thm2[umax]["inside_fraction"] >= 0.95
+q3, q4, q5 = claim_checks(table, thm2)
 rmse_numbers = {u: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for u, rows in table.items()}
+acc_numbers = {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()} for u, rows in table.items()}
+
+
+def over_seeds(*keys):
+    """The fractions of ``orderings`` for ``keys``, per thrust bound."""
+    return {u: {k: o[k] for k in keys} for u, o in orderings.items()}
+
+
+# %%
 claims = [
     F.claim_result("Q3", checks=q3, figure=f"figures/tracking_u{u_max[0]:g}.png",
                    numbers={"mean_axis_rmse_m": rmse_numbers,
-                            "over_seeds_fraction": {u: {k: o[k] for k in ("FNN best of the six", "FNN < Neural",
-                                                                          "Neural < Nomi")}
-                                                    for u, o in orderings.items()}},
+                            "over_seeds_fraction": over_seeds("FNN best of the six", "FNN < Neural", "Neural < Nomi")},
                    rule="FNN lowest mean per-axis RMSE of the six; Neural < Nomi; MLP > Neural (every thrust bound)"),
     F.claim_result("Q4", checks=q4, figure=f"figures/acc_prediction_u{u_max[0]:g}.png",
-                   numbers={"acc_pred_rmse": {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()}
-                                              for u, rows in table.items()}},
+                   numbers={"acc_pred_rmse": acc_numbers},
                    rule="lowest first-step acceleration RMSE of the six is FB or FNN; FNN < Neural"),
     F.claim_result("Q5", checks=q5, figure=f"figures/adapfnn_u{u_max[0]:g}.png",
                    numbers={"mean_axis_rmse_m": {u: {n: rmse_numbers[u][n] for n in ("FNN", "AdapFNN")} for u in rmse_numbers},
                             "theorem2": thm2,
-                            "over_seeds_fraction": {u: {k: o[k] for k in ("AdapFNN >= FNN", "AdapFNN within 25 % of FNN")}
-                                                    for u, o in orderings.items()}},
+                            "over_seeds_fraction": over_seeds("AdapFNN >= FNN", "AdapFNN within 25 % of FNN")},
                    rule="AdapFNN within 25 % of FNN and >= FNN; Theorem 2 ball holds >= 95 % after the transient"),
 ]
+
+# %%
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
                 metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep, "speed": speed,
                          "seed_spread": {"mean_axis_rmse_m": spread, "orderings_fraction": orderings}})

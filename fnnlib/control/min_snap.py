@@ -1,23 +1,14 @@
-"""Reference trajectories for the quadrotor: minimum-snap flights and the Lissajous test.
+"""Minimum-snap reference flights for the quadrotor (App. A.5.4, Fig. S6 left): the training commands.
 
-Two kinds of flat-output references ``Psi = [p, v, a, j]`` (shape ``(T, 12)``)
-feed the differential-flatness controller of App. A.5:
+Random position waypoints in a box are joined by a minimum-snap piecewise polynomial (Mellinger & Kumar,
+ICRA 2011) that starts and ends at rest. :func:`min_snap` solves the equality-constrained quadratic
+programme in closed form; a :class:`MinSnapTrajectory` samples it. :func:`random_min_snap_flights` draws
+a seeded data set of such flights, as flat outputs ``Psi = [p, v, a, j]`` (shape ``(T, 12)``) for the
+differential-flatness controller of App. A.5.
 
-* **Training flights** (App. A.5.4, Fig. S6 left): random position waypoints
-  in a box, joined by a minimum-snap piecewise polynomial (Mellinger & Kumar,
-  ICRA 2011) that starts and ends at rest. :func:`min_snap` solves the
-  equality-constrained quadratic programme in closed form; a
-  :class:`MinSnapTrajectory` samples it. :func:`random_min_snap_flights` draws
-  a seeded data set of such flights.
-* **Test flight** (Sec. 5.2, App. A.5.5): the 3-D Lissajous curve of
-  :func:`lissajous`, with analytic derivatives up to snap.
-
-Everything here is NumPy, float64; callers convert to torch with
-``torch.as_tensor(psi)``.
-
-Frames: the quadrotor model of this library is z-down, like the authors'
-release. Position offsets (the Lissajous height ``h``, the waypoint box) have
-no effect on the dynamics because gravity is uniform.
+Everything here is NumPy, float64; callers convert to torch with ``torch.as_tensor(psi)``. Frames: the
+quadrotor model of this library is z-down, like the authors' release; the waypoint box has no effect on
+the dynamics because gravity is uniform.
 """
 
 from __future__ import annotations
@@ -28,28 +19,21 @@ from dataclasses import dataclass
 from typing import Iterable, Literal, NamedTuple, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
+
+from fnnlib.control.checks import FloatArray, as_float_array, check_finite_real, check_int, check_positive
 
 __all__ = [
-    "DEFAULT_BOX",
-    "FlatDerivatives",
     "MinSnapFlights",
     "MinSnapTrajectory",
     "allocate_times",
-    "lissajous",
-    "lissajous_flat_outputs",
     "min_snap",
     "random_min_snap_flights",
     "random_waypoints",
 ]
 
-FloatArray = NDArray[np.float64]
 Box = Sequence[Sequence[float]]
 Allocation = Literal["equal", "distance"]
-
-#: Waypoint box ``((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi))`` in metres of the
-#: authors' release (3 waypoints per 200-node training flight).
-DEFAULT_BOX: tuple[tuple[float, float], ...] = ((-3.0, 3.0), (-3.0, 3.0), (-2.0, 2.0))
 
 _DEGREE = 7  # minimum snap: Euler-Lagrange of int |p''''|^2 dt gives p^(8) = 0
 _N_COEF = _DEGREE + 1
@@ -59,55 +43,8 @@ _REST_ORDERS = (1, 2, 3)  # v = a = j = 0 at both ends
 
 # --------------------------------------------------------------------------- validation
 
-
-def _check_int(value: object, *, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if int(value) < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
-def _check_positive(value: object, *, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
-    if not (v > 0.0 and math.isfinite(v)):
-        raise ValueError(f"{name} must be a finite positive number, got {value!r}")
-    return v
-
-
-def _check_finite_real(value: object, *, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return v
-
-
-def _as_float_array(x: ArrayLike, *, name: str, ndim: int) -> FloatArray:
-    try:
-        arr = np.asarray(x)
-    except Exception as exc:  # ragged lists and the like
-        raise TypeError(f"{name} must be array-like of real numbers: {exc}") from exc
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    if np.iscomplexobj(arr):
-        raise TypeError(f"{name} must be real, got dtype {arr.dtype}")
-    if arr.ndim != ndim:
-        raise ValueError(f"{name} must have {ndim} axes, got shape {arr.shape}")
-    arr = arr.astype(np.float64)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        kind = "NaN" if np.isnan(arr).any() else "infinite"
-        raise ValueError(f"{name} holds a {kind} value (first at index {idx})")
-    return arr
-
-
 def _check_times(times: ArrayLike, *, name: str = "times") -> FloatArray:
-    t = _as_float_array(times, name=name, ndim=1)
+    t = as_float_array(times, name=name, ndim=1)
     if t.size < 2:
         raise ValueError(f"{name} needs at least 2 entries, got {t.size}")
     if np.any(np.diff(t) <= 0.0):
@@ -116,7 +53,7 @@ def _check_times(times: ArrayLike, *, name: str = "times") -> FloatArray:
 
 
 def _check_waypoints(waypoints: ArrayLike, *, name: str = "waypoints") -> FloatArray:
-    w = _as_float_array(waypoints, name=name, ndim=2)
+    w = as_float_array(waypoints, name=name, ndim=2)
     if w.shape[1] != 3:
         raise ValueError(f"{name} must have shape (n_waypoints, 3), got {w.shape}")
     if w.shape[0] < 2:
@@ -125,7 +62,7 @@ def _check_waypoints(waypoints: ArrayLike, *, name: str = "waypoints") -> FloatA
 
 
 def _check_box(box: Box) -> FloatArray:
-    b = _as_float_array(box, name="box", ndim=2)
+    b = as_float_array(box, name="box", ndim=2)
     if b.shape != (3, 2):
         raise ValueError(f"box must have shape (3, 2) as ((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi)), got {b.shape}")
     if np.any(b[:, 0] >= b[:, 1]):
@@ -203,7 +140,7 @@ class MinSnapTrajectory:
 
     def __post_init__(self) -> None:
         t = _check_times(self.times)
-        c = _as_float_array(self.coefficients, name="coefficients", ndim=3)
+        c = as_float_array(self.coefficients, name="coefficients", ndim=3)
         if c.shape != (t.size - 1, _N_COEF, 3):
             raise ValueError(f"coefficients must have shape (K, 8, 3) = ({t.size - 1}, 8, 3) for {t.size} times, got {c.shape}")
         t.setflags(write=False)
@@ -263,11 +200,11 @@ class MinSnapTrajectory:
         -------
         ndarray, shape (N, 3)
         """
-        k = _check_int(k, name="k", minimum=0)
+        k = check_int(k, name="k", minimum=0)
         if k >= self.n_segments:
             raise ValueError(f"k must be < n_segments = {self.n_segments}, got {k}")
         r = _check_order(order)
-        s = _as_float_array(tau, name="tau", ndim=1)
+        s = as_float_array(tau, name="tau", ndim=1)
         h = float(self.durations[k])
         return _basis(s, r) @ self.coefficients[k] / h**r
 
@@ -295,7 +232,7 @@ class MinSnapTrajectory:
             If a time lies outside ``[t_0, t_K]``.
         """
         r = _check_order(order)
-        tt = _as_float_array(t, name="t", ndim=1)
+        tt = as_float_array(t, name="t", ndim=1)
         tol = 1e-9 * max(1.0, self.t_end - self.t_start)
         if tt.size and (tt.min() < self.t_start - tol or tt.max() > self.t_end + tol):
             raise ValueError(
@@ -308,45 +245,45 @@ class MinSnapTrajectory:
         B = _basis(tau, r)  # (N, 8)
         return np.einsum("ni,nid->nd", B, self.coefficients[idx]) / h[:, None] ** r
 
-    def node_times(self, dt: float, n_nodes: int) -> FloatArray:
-        """Sample times ``t_0 + i dt``, ``i = 0..n_nodes-1``, shape ``(n_nodes,)``.
+    def node_times(self, Ts: float, n_nodes: int) -> FloatArray:
+        """Sample times ``t_0 + i Ts``, ``i = 0..n_nodes-1``, shape ``(n_nodes,)``.
 
         Raises
         ------
         ValueError
-            If ``dt <= 0``, ``n_nodes < 1`` or the last node is past ``t_K``.
+            If ``Ts <= 0``, ``n_nodes < 1`` or the last node is past ``t_K``.
         """
-        dt = _check_positive(dt, name="dt")
-        n = _check_int(n_nodes, name="n_nodes", minimum=1)
-        t = self.t_start + dt * np.arange(n)
+        Ts = check_positive(Ts, name="Ts")
+        n = check_int(n_nodes, name="n_nodes", minimum=1)
+        t = self.t_start + Ts * np.arange(n)
         tol = 1e-9 * max(1.0, self.t_end - self.t_start)
         if t[-1] > self.t_end + tol:
             raise ValueError(
-                f"(n_nodes - 1) * dt = {(n - 1) * dt:g} s exceeds the trajectory duration {self.t_end - self.t_start:g} s"
+                f"(n_nodes - 1) * Ts = {(n - 1) * Ts:g} s exceeds the trajectory duration {self.t_end - self.t_start:g} s"
             )
         return t
 
-    def flat_outputs(self, dt: float, n_nodes: int) -> FloatArray:
+    def flat_outputs(self, Ts: float, n_nodes: int) -> FloatArray:
         """Flat-output reference ``Psi = [p, v, a, j]`` on the node grid (App. A.5.2).
 
         Parameters
         ----------
-        dt : float
+        Ts : float
             Node spacing [s], > 0.
         n_nodes : int
-            Number of nodes; ``(n_nodes - 1) * dt`` must not exceed the duration.
+            Number of nodes; ``(n_nodes - 1) * Ts`` must not exceed the duration.
 
         Returns
         -------
         ndarray, shape (n_nodes, 12)
-            Columns ``[p_xyz, v_xyz, a_xyz, j_xyz]`` at ``t_0 + i dt``.
+            Columns ``[p_xyz, v_xyz, a_xyz, j_xyz]`` at ``t_0 + i Ts``.
         """
-        t = self.node_times(dt, n_nodes)
+        t = self.node_times(Ts, n_nodes)
         return np.concatenate([self.evaluate(t, r) for r in range(4)], axis=1)
 
-    def snap(self, dt: float, n_nodes: int) -> FloatArray:
+    def snap(self, Ts: float, n_nodes: int) -> FloatArray:
         """Snap ``d^4 p / dt^4`` on the node grid, shape ``(n_nodes, 3)``."""
-        return self.evaluate(self.node_times(dt, n_nodes), 4)
+        return self.evaluate(self.node_times(Ts, n_nodes), 4)
 
     def snap_cost(self) -> FloatArray:
         r"""Exact cost ``int_{t_0}^{t_K} (d^4 p_d / dt^4)^2 dt`` per axis ``d``, shape ``(3,)``.
@@ -364,7 +301,7 @@ def min_snap(waypoints: ArrayLike, times: ArrayLike, *, continuity: int = 4) -> 
 
     Per axis, ``K`` pieces of degree 7 minimise the snap cost
 
-    .. math:: J = \int_{t_0}^{t_K} \| p^{(4)}(t) \|^2 \, dt
+    .. math:: J = \int_{t_0}^{t_K} \| p^{(4)}(t) \|^2 \, Ts
               = \sum_k h_k^{-7} c_k^\top Q c_k
 
     subject to linear equalities ``A c = b``:
@@ -420,7 +357,7 @@ def min_snap(waypoints: ArrayLike, times: ArrayLike, *, continuity: int = 4) -> 
     t = _check_times(times)
     if t.size != W.shape[0]:
         raise ValueError(f"times has {t.size} entries but there are {W.shape[0]} waypoints; they must match")
-    m = _check_int(continuity, name="continuity", minimum=3)
+    m = check_int(continuity, name="continuity", minimum=3)
     if m > 6:
         raise ValueError(f"continuity must be in 3..6 (degree-7 pieces), got {m}")
 
@@ -510,8 +447,8 @@ def allocate_times(
         Strictly increasing times from ``t0`` to ``t0 + duration``.
     """
     W = _check_waypoints(waypoints)
-    T = _check_positive(duration, name="duration")
-    start = _check_finite_real(t0, name="t0")
+    T = check_positive(duration, name="duration")
+    start = check_finite_real(t0, name="t0")
     K = W.shape[0] - 1
     if allocation == "equal":
         weights = np.ones(K)
@@ -529,7 +466,8 @@ def allocate_times(
 def random_waypoints(
     n_waypoints: int,
     rng: np.random.Generator,
-    box: Box = DEFAULT_BOX,
+    *,
+    box: Box,
 ) -> FloatArray:
     """Waypoints drawn uniformly in an axis-aligned box.
 
@@ -540,15 +478,15 @@ def random_waypoints(
         200-node training flight).
     rng : numpy.random.Generator
         Source of randomness, e.g. ``numpy.random.default_rng(seed)``.
-    box : sequence, shape (3, 2)
-        ``((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi))`` [m]; default
-        :data:`DEFAULT_BOX` = ``((-3, 3), (-3, 3), (-2, 2))``.
+    box : sequence, shape (3, 2), keyword-only
+        ``((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi))`` [m]; the release's is
+        :data:`~fnnlib.quadrotor_presets.PAPER_WAYPOINT_BOX`.
 
     Returns
     -------
     ndarray, shape (n_waypoints, 3)
     """
-    n = _check_int(n_waypoints, name="n_waypoints", minimum=2)
+    n = check_int(n_waypoints, name="n_waypoints", minimum=2)
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator (numpy.random.default_rng(seed)), got {type(rng).__name__}")
     b = _check_box(box)
@@ -561,7 +499,7 @@ class MinSnapFlights(NamedTuple):
     Attributes
     ----------
     psi : ndarray, shape (n_flights, n_nodes, 12)
-        Flat outputs ``[p, v, a, j]`` on the nodes ``i dt``.
+        Flat outputs ``[p, v, a, j]`` on the nodes ``i Ts``.
     snap : ndarray, shape (n_flights, n_nodes, 3)
         Snap on the same nodes.
     waypoints : list of ndarray, each shape (n_waypoints, 3)
@@ -576,12 +514,12 @@ class MinSnapFlights(NamedTuple):
 def random_min_snap_flights(
     n_flights: int,
     n_nodes: int,
-    dt: float,
-    seed: int,
-    n_waypoints: int = 3,
-    box: Box = DEFAULT_BOX,
-    max_speed: float = 10.0,
     *,
+    Ts: float,
+    seed: int,
+    n_waypoints: int,
+    box: Box,
+    max_speed: float,
     allocation: Allocation = "equal",
     max_tries: int = 1000,
     progress: bool = False,
@@ -589,7 +527,7 @@ def random_min_snap_flights(
     """Random rest-to-rest minimum-snap flights: the training references of App. A.5.4.
 
     For each flight, ``n_waypoints`` waypoints are drawn uniformly in ``box``
-    (:func:`random_waypoints`), given arrival times over ``[0, (n_nodes - 1) dt]``
+    (:func:`random_waypoints`), given arrival times over ``[0, (n_nodes - 1) Ts]``
     by :func:`allocate_times` (default: equal segment durations), and joined by
     :func:`min_snap`. A flight whose speed ``|v|`` exceeds ``max_speed`` on any
     node is rejected and redrawn (the release's acceptance rule, speed
@@ -602,16 +540,19 @@ def random_min_snap_flights(
         Number of flights, >= 1 (the paper uses 40).
     n_nodes : int
         Nodes per flight, >= 2 (the paper uses 200).
-    dt : float
+    Ts : float
         Node spacing [s], > 0 (the release uses 0.02).
     seed : int
         Seed for ``numpy.random.default_rng``.
     n_waypoints : int
         Waypoints per flight, >= 2 (the release uses 3).
     box : sequence, shape (3, 2)
-        Waypoint box; default :data:`DEFAULT_BOX`.
+        Waypoint box (the release's: :data:`~fnnlib.quadrotor_presets.PAPER_WAYPOINT_BOX`).
     max_speed : float
-        Largest accepted speed [m/s], > 0.
+        Largest accepted speed [m/s], > 0 (the release's: 10).
+
+    ``Ts`` and everything after it are keyword-only (:data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`
+    holds the release's ``n_waypoints``, ``box`` and ``max_speed``).
     allocation : {"equal", "distance"}, keyword-only
         Time allocation, see :func:`allocate_times`.
     max_tries : int, keyword-only
@@ -629,14 +570,14 @@ def random_min_snap_flights(
     RuntimeError
         If ``max_tries`` draws in a row exceed ``max_speed``.
     """
-    n_f = _check_int(n_flights, name="n_flights", minimum=1)
-    n = _check_int(n_nodes, name="n_nodes", minimum=2)
-    step = _check_positive(dt, name="dt")
-    seed = _check_int(seed, name="seed", minimum=0)
-    n_wp = _check_int(n_waypoints, name="n_waypoints", minimum=2)
+    n_f = check_int(n_flights, name="n_flights", minimum=1)
+    n = check_int(n_nodes, name="n_nodes", minimum=2)
+    step = check_positive(Ts, name="Ts")
+    seed = check_int(seed, name="seed", minimum=0)
+    n_wp = check_int(n_waypoints, name="n_waypoints", minimum=2)
     b = _check_box(box)
-    v_max = _check_positive(max_speed, name="max_speed")
-    tries = _check_int(max_tries, name="max_tries", minimum=1)
+    v_max = check_positive(max_speed, name="max_speed")
+    tries = check_int(max_tries, name="max_tries", minimum=1)
     if allocation not in ("equal", "distance"):
         raise ValueError(f"allocation must be 'equal' or 'distance', got {allocation!r}")
 
@@ -653,7 +594,7 @@ def random_min_snap_flights(
         flights = tqdm(flights, desc="min-snap flights")
     for i in flights:
         for _ in range(tries):
-            W = random_waypoints(n_wp, rng, b)
+            W = random_waypoints(n_wp, rng, box=b)
             traj = min_snap(W, allocate_times(W, duration, allocation=allocation))
             flat = traj.flat_outputs(step, n)
             if float(np.linalg.norm(flat[:, 3:6], axis=1).max()) <= v_max:
@@ -661,104 +602,9 @@ def random_min_snap_flights(
         else:
             raise RuntimeError(
                 f"flight {i}: no draw in {tries} tries kept the speed <= max_speed = {v_max:g} m/s; "
-                "raise max_speed, the duration (n_nodes * dt) or shrink the box"
+                "raise max_speed, the duration (n_nodes * Ts) or shrink the box"
             )
         psi[i] = flat
         snap[i] = traj.snap(step, n)
         accepted.append(W)
     return MinSnapFlights(psi=psi, snap=snap, waypoints=accepted)
-
-
-# --------------------------------------------------------------------------- Lissajous
-
-
-class FlatDerivatives(NamedTuple):
-    """Position and its first four time derivatives, each of shape ``(N, 3)``."""
-
-    p: FloatArray
-    v: FloatArray
-    a: FloatArray
-    j: FloatArray
-    s: FloatArray
-
-
-def lissajous(
-    t: ArrayLike,
-    *,
-    r_x: float = 3.0,
-    r_y: float = 3.0,
-    r_z: float = 0.5,
-    T_x: float = 6.0,
-    T_y: float = 3.0,
-    T_z: float = 3.0,
-    h: float = 0.5,
-) -> FlatDerivatives:
-    r"""The 3-D Lissajous test reference of Sec. 5.2 / App. A.5.5, with analytic derivatives.
-
-    .. math:: p(t) = [\, r_x \sin(2\pi t / T_x),\; r_y \sin(2\pi t / T_y),\;
-              h + r_z \cos(2\pi t / T_z) \,]
-
-    The defaults are the paper's ``[r_x, r_y, r_z, T_x, T_y, T_z, h] =
-    [3.0, 3.0, 0.5, 6.0, 3.0, 3.0, 0.5]``. The authors' release uses
-    ``h = -0.5`` in its z-down frame; this library is z-down too, and the
-    height offset has no effect on the dynamics since gravity is uniform.
-
-    Derivatives use ``d^n/dt^n sin(w t) = w^n sin(w t + n pi / 2)`` (and the
-    same for cos).
-
-    Parameters
-    ----------
-    t : array_like, shape (N,)
-        Times [s].
-    r_x, r_y, r_z : float
-        Amplitudes [m].
-    T_x, T_y, T_z : float
-        Periods [s], > 0.
-    h : float
-        Height offset of the z axis [m].
-
-    Returns
-    -------
-    FlatDerivatives
-        ``(p, v, a, j, s)``, each of shape ``(N, 3)``.
-    """
-    tt = _as_float_array(t, name="t", ndim=1)
-    radii = np.array([_check_finite_real(r, name=nm) for r, nm in ((r_x, "r_x"), (r_y, "r_y"), (r_z, "r_z"))])
-    periods = np.array([_check_positive(T, name=nm) for T, nm in ((T_x, "T_x"), (T_y, "T_y"), (T_z, "T_z"))])
-    offset = _check_finite_real(h, name="h")
-
-    w = 2.0 * np.pi / periods  # (3,)
-    phase = w[None, :] * tt[:, None]  # (N, 3)
-    out = []
-    for order in range(5):
-        shifted = phase + order * np.pi / 2.0
-        wave = np.stack([np.sin(shifted[:, 0]), np.sin(shifted[:, 1]), np.cos(shifted[:, 2])], axis=1)
-        out.append(radii * w**order * wave)
-    out[0][:, 2] += offset
-    return FlatDerivatives(*out)
-
-
-def lissajous_flat_outputs(t0: float, n_nodes: int, dt: float, **curve: float) -> FloatArray:
-    """Flat-output reference ``Psi = [p, v, a, j]`` of :func:`lissajous` on ``t0 + i dt``.
-
-    Parameters
-    ----------
-    t0 : float
-        First node time [s].
-    n_nodes : int
-        Number of nodes, >= 1 (the test flight uses 300 at 0.02 s).
-    dt : float
-        Node spacing [s], > 0.
-    **curve : float
-        Curve parameters ``r_x, r_y, r_z, T_x, T_y, T_z, h`` passed to :func:`lissajous`
-        (defaults: the paper's).
-
-    Returns
-    -------
-    ndarray, shape (n_nodes, 12)
-    """
-    start = _check_finite_real(t0, name="t0")
-    n = _check_int(n_nodes, name="n_nodes", minimum=1)
-    step = _check_positive(dt, name="dt")
-    d = lissajous(start + step * np.arange(n), **curve)
-    return np.concatenate([d.p, d.v, d.a, d.j], axis=1)

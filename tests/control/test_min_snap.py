@@ -1,4 +1,4 @@
-"""Minimum-snap flights and the Lissajous reference (App. A.5.4-A.5.5)."""
+"""Minimum-snap reference flights (App. A.5.4): waypoints, rest, smoothness, optimality, seeded draws, checks."""
 
 from __future__ import annotations
 
@@ -8,22 +8,29 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import null_space
 
-from fnnlib.control.trajectories import (
-    DEFAULT_BOX,
+from fnnlib.control.min_snap import (
+    MinSnapFlights,
     MinSnapTrajectory,
     allocate_times,
-    lissajous,
-    lissajous_flat_outputs,
     min_snap,
     random_min_snap_flights,
     random_waypoints,
 )
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_WAYPOINT_BOX
+
+DRAW = {k: PAPER_FLIGHT_DATA[k] for k in ("n_waypoints", "box", "max_speed")}
+
+
+def flights(n_flights: int, n_nodes: int, Ts: float, **changes: object) -> MinSnapFlights:
+    """The release's random flights (3 waypoints, its box, <= 10 m/s), some settings changed."""
+    return random_min_snap_flights(n_flights, n_nodes, Ts=Ts, **{**DRAW, **changes})  # type: ignore[arg-type]
+
 
 
 def _random_problem(seed: int, n_segments: int) -> tuple[np.ndarray, np.ndarray]:
     """Waypoints in the default box and uneven durations in [0.3, 2.5] s."""
     rng = np.random.default_rng(seed)
-    W = random_waypoints(n_segments + 1, rng)
+    W = random_waypoints(n_segments + 1, rng, box=PAPER_WAYPOINT_BOX)
     t = np.concatenate([[rng.uniform(-1.0, 1.0)], rng.uniform(0.3, 2.5, n_segments)]).cumsum()
     return W, t
 
@@ -185,14 +192,14 @@ def test_two_waypoints_give_the_rest_to_rest_septic() -> None:
 def test_flat_outputs_and_snap_sample_the_polynomial_on_the_node_grid() -> None:
     W, t = _random_problem(4, 2)
     tr = min_snap(W, t)
-    dt = 0.02
-    n = int(np.floor((t[-1] - t[0]) / dt)) + 1
-    psi = tr.flat_outputs(dt, n)
-    nodes = t[0] + dt * np.arange(n)
+    Ts = 0.02
+    n = int(np.floor((t[-1] - t[0]) / Ts)) + 1
+    psi = tr.flat_outputs(Ts, n)
+    nodes = t[0] + Ts * np.arange(n)
     assert psi.shape == (n, 12) and psi.dtype == np.float64
     for r in range(4):
         np.testing.assert_array_equal(psi[:, 3 * r : 3 * r + 3], tr.evaluate(nodes, r))
-    np.testing.assert_array_equal(tr.snap(dt, n), tr.evaluate(nodes, 4))
+    np.testing.assert_array_equal(tr.snap(Ts, n), tr.evaluate(nodes, 4))
     # velocity is the derivative of position (central differences on a fine grid)
     tt = np.linspace(t[0] + 0.01, t[-1] - 0.01, 50)
     eps = 1e-5
@@ -210,37 +217,37 @@ def test_distance_allocation_is_proportional_to_segment_length() -> None:
 
 
 def test_random_flights_are_seeded_feasible_and_in_the_box() -> None:
-    n_f, n, dt = 6, 200, 0.02
-    a = random_min_snap_flights(n_f, n, dt, seed=11)
-    b = random_min_snap_flights(n_f, n, dt, seed=11)
-    c = random_min_snap_flights(n_f, n, dt, seed=12)
+    n_f, n, Ts = 6, 200, 0.02
+    a = flights(n_f, n, Ts, seed=11)
+    b = flights(n_f, n, Ts, seed=11)
+    c = flights(n_f, n, Ts, seed=12)
     assert a.psi.shape == (n_f, n, 12) and a.snap.shape == (n_f, n, 3)
     assert len(a.waypoints) == n_f and all(w.shape == (3, 3) for w in a.waypoints)
     np.testing.assert_array_equal(a.psi, b.psi)
     np.testing.assert_array_equal(a.snap, b.snap)
     assert not np.allclose(a.psi, c.psi)
-    box = np.array(DEFAULT_BOX)
+    box = np.array(PAPER_WAYPOINT_BOX)
     for psi, W in zip(a.psi, a.waypoints):
         assert np.all(W >= box[:, 0]) and np.all(W <= box[:, 1])
         np.testing.assert_allclose(psi[0, :3], W[0], atol=1e-9)
-        np.testing.assert_allclose(psi[-1, :3], W[-1], atol=1e-9)  # last node at (n - 1) dt = t_K
+        np.testing.assert_allclose(psi[-1, :3], W[-1], atol=1e-9)  # last node at (n - 1) Ts = t_K
         np.testing.assert_allclose(psi[[0, -1], 3:], 0.0, atol=1e-9)  # rest at both ends
     assert np.linalg.norm(a.psi[..., 3:6], axis=-1).max() <= 10.0
 
 
 def test_fast_flights_are_redrawn() -> None:
-    loose = random_min_snap_flights(8, 200, 0.02, seed=0)
-    tight = random_min_snap_flights(8, 200, 0.02, seed=0, max_speed=4.0)
+    loose = flights(8, 200, 0.02, seed=0)
+    tight = flights(8, 200, 0.02, seed=0, max_speed=4.0)
     speed = np.linalg.norm(loose.psi[..., 3:6], axis=-1).max(axis=1)
     assert speed.max() > 4.0  # some draw needs rejecting, else the test proves nothing
     assert np.linalg.norm(tight.psi[..., 3:6], axis=-1).max() <= 4.0
     with pytest.raises(RuntimeError, match="max_speed"):
-        random_min_snap_flights(1, 200, 0.02, seed=0, max_speed=0.01, max_tries=5)
+        flights(1, 200, 0.02, seed=0, max_speed=0.01, max_tries=5)
 
 
 def test_random_waypoints_respect_a_custom_box() -> None:
     box = ((1.0, 2.0), (-5.0, -4.0), (0.0, 0.1))
-    W = random_waypoints(500, np.random.default_rng(0), box)
+    W = random_waypoints(500, np.random.default_rng(0), box=box)
     assert W.shape == (500, 3)
     lo, hi = np.array(box).T
     assert np.all(W >= lo) and np.all(W <= hi)
@@ -248,42 +255,10 @@ def test_random_waypoints_respect_a_custom_box() -> None:
 
 
 def test_progress_bar_is_optional(capsys: pytest.CaptureFixture[str]) -> None:
-    random_min_snap_flights(2, 50, 0.02, seed=0)
+    flights(2, 50, 0.02, seed=0)
     assert capsys.readouterr().err == ""
-    random_min_snap_flights(2, 50, 0.02, seed=0, progress=True)
+    flights(2, 50, 0.02, seed=0, progress=True)
     assert "min-snap flights" in capsys.readouterr().err
-
-
-# --------------------------------------------------------------------------- Lissajous
-
-
-def test_lissajous_matches_the_paper_formula() -> None:
-    t = np.linspace(0.0, 6.0, 31)
-    d = lissajous(t)
-    expected = np.stack([3.0 * np.sin(2 * np.pi * t / 6), 3.0 * np.sin(2 * np.pi * t / 3), 0.5 + 0.5 * np.cos(2 * np.pi * t / 3)], 1)
-    np.testing.assert_allclose(d.p, expected, atol=1e-14)
-    np.testing.assert_allclose(lissajous([0.0], h=-0.5).p, [[0.0, 0.0, 0.0]], atol=1e-15)
-    for x in d:
-        assert x.shape == (31, 3) and x.dtype == np.float64
-    np.testing.assert_allclose(lissajous([6.0]).p, lissajous([0.0]).p, atol=1e-12)  # period 6 s
-
-
-@pytest.mark.parametrize("params", [{}, {"r_x": 1.0, "r_y": -2.0, "r_z": 0.7, "T_x": 4.0, "T_y": 2.5, "T_z": 5.0, "h": -0.5}])
-def test_lissajous_derivatives_match_central_differences(params: dict[str, float]) -> None:
-    t = np.linspace(0.0, 7.0, 71)
-    eps = 1e-4
-    d, dp, dm = lissajous(t, **params), lissajous(t + eps, **params), lissajous(t - eps, **params)
-    for r in range(4):
-        fd = (dp[r] - dm[r]) / (2 * eps)  # truncation ~ eps^2 w^3 / 6, round-off ~ 1e-16 / eps
-        exact = d[r + 1]
-        np.testing.assert_allclose(fd, exact, rtol=0, atol=1e-5 * np.abs(exact).max())
-
-
-def test_lissajous_flat_outputs_stack_p_v_a_j() -> None:
-    psi = lissajous_flat_outputs(1.0, 300, 0.02, T_x=5.0)
-    d = lissajous(1.0 + 0.02 * np.arange(300), T_x=5.0)
-    assert psi.shape == (300, 12)
-    np.testing.assert_array_equal(psi, np.concatenate([d.p, d.v, d.a, d.j], axis=1))
 
 
 # --------------------------------------------------------------------------- bad input
@@ -311,9 +286,9 @@ def test_min_snap_refuses_bad_input() -> None:
 
 def test_sampling_refuses_bad_input() -> None:
     tr = min_snap(np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]), [0.0, 1.0])
-    with pytest.raises(ValueError, match="dt must be a finite positive"):
+    with pytest.raises(ValueError, match="Ts must be a finite positive"):
         tr.flat_outputs(0.0, 10)
-    with pytest.raises(ValueError, match="dt must be a finite positive"):
+    with pytest.raises(ValueError, match="Ts must be a finite positive"):
         tr.snap(-0.1, 10)
     with pytest.raises(ValueError, match="exceeds the trajectory duration"):
         tr.flat_outputs(0.02, 52)
@@ -329,22 +304,16 @@ def test_sampling_refuses_bad_input() -> None:
 def test_generators_refuse_bad_input() -> None:
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="n_waypoints must be >= 2"):
-        random_waypoints(1, rng)
+        random_waypoints(1, rng, box=PAPER_WAYPOINT_BOX)
     with pytest.raises(TypeError, match="numpy.random.Generator"):
-        random_waypoints(3, 0)  # type: ignore[arg-type]
+        random_waypoints(3, 0, box=PAPER_WAYPOINT_BOX)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="lo < hi"):
-        random_waypoints(3, rng, ((1.0, -1.0), (0.0, 1.0), (0.0, 1.0)))
+        random_waypoints(3, rng, box=((1.0, -1.0), (0.0, 1.0), (0.0, 1.0)))
     with pytest.raises(ValueError, match="box must have shape"):
-        random_waypoints(3, rng, ((0.0, 1.0), (0.0, 1.0)))
-    with pytest.raises(ValueError, match="dt must be a finite positive"):
-        random_min_snap_flights(2, 200, 0.0, seed=0)
+        random_waypoints(3, rng, box=((0.0, 1.0), (0.0, 1.0)))
+    with pytest.raises(ValueError, match="Ts must be a finite positive"):
+        flights(2, 200, 0.0, seed=0)
     with pytest.raises(ValueError, match="n_nodes must be >= 2"):
-        random_min_snap_flights(2, 1, 0.02, seed=0)
+        flights(2, 1, 0.02, seed=0)
     with pytest.raises(ValueError, match="allocation"):
-        random_min_snap_flights(2, 200, 0.02, seed=0, allocation="uniform")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="T_y must be a finite positive"):
-        lissajous([0.0], T_y=0.0)
-    with pytest.raises(ValueError, match="NaN"):
-        lissajous([0.0, np.nan])
-    with pytest.raises(ValueError, match="dt must be a finite positive"):
-        lissajous_flat_outputs(0.0, 10, -0.02)
+        flights(2, 200, 0.02, seed=0, allocation="uniform")  # type: ignore[arg-type]
