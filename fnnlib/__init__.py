@@ -1,8 +1,8 @@
 """fnnlib: feedback neural ODEs (Jia et al., "Feedback Favors the Generalization of Neural ODEs", ICLR 2025).
 
 The public face is flat: everything a notebook needs is importable from here.
-Importing fnnlib sets torch to one intra-op thread (faster for these tiny
-networks); call :func:`set_num_threads` to change it.
+Importing fnnlib changes no global state; :func:`set_num_threads` sets torch's
+intra-op threads (the pipeline runner calls it in each notebook's kernel).
 """
 
 from fnnlib._threads import set_num_threads
@@ -37,8 +37,9 @@ from fnnlib.observers import (
     steady_state_gain,
 )
 from fnnlib.plotting import new_figure, save_figure
-from fnnlib.report import claim_result, read_results, verdict_from_checks, write_results
+from fnnlib.results import claim_result, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.settings import check_notebook_settings
 from fnnlib.stability import (
     discrete_residual,
     divergence_transition,
@@ -77,8 +78,6 @@ from fnnlib.training import (
 
 __version__ = "0.1.0"
 
-set_num_threads()
-
 __all__ = [
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
@@ -90,7 +89,7 @@ __all__ = [
     "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "claim_result", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
+    "check_gain", "check_notebook_settings", "claim_result", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

@@ -10,9 +10,10 @@ DEFAULT_THREADS = 1
 def set_num_threads(n: int = DEFAULT_THREADS) -> None:
     """Set torch's intra-op threads.
 
-    fnnlib sets 1 thread when it is imported: its networks are tiny (tens of
-    units), and on a few CPU cores one thread is faster than thread-pool
-    overhead. Call this with a larger ``n`` to change that.
+    Importing fnnlib leaves the thread count alone. The default, 1, suits its
+    tiny networks (tens of units): on a few CPU cores one thread is faster
+    than thread-pool overhead. The pipeline runner calls this at the start of
+    each notebook's kernel with cores / workers (1 when every core runs a task).
     """
     if int(n) < 1:
         raise ValueError(f"number of threads must be >= 1, got {n}")

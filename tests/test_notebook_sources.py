@@ -38,3 +38,11 @@ def test_source_notebook_has_no_outputs(src: Path) -> None:
     nb = json.loads((ROOT / "notebooks" / f"{src.stem}.ipynb").read_text(encoding="utf-8"))
     for cell in nb["cells"]:
         assert not cell.get("outputs") and not cell.get("execution_count"), "source notebooks carry no outputs"
+
+
+@pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
+def test_settings_are_checked_right_after_the_parameters_cell(src: Path) -> None:
+    """The notebook runs the same value checks as `fnn-pipeline check` (fnnlib.check_notebook_settings)."""
+    cells = _nbbuild().build(src).cells
+    first = next(i for i, c in enumerate(cells) if "parameters" in c.metadata.get("tags", []))
+    assert f'F.check_notebook_settings("{src.stem}", globals())' in cells[first + 1].source

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fnnlib.pipeline import PipelineSpec, load_spec, run
-from fnnlib.report.claims import RESULTS_FILENAME, VERDICTS, read_results
+from fnnbook import PipelineSpec, load_spec, run
+from fnnlib.results import RESULTS_FILENAME, VERDICTS, read_results
 
 PIPELINE = Path(__file__).resolve().parents[1] / "pipeline.yaml"
 PROFILE = "smoke"

@@ -5,6 +5,7 @@ a code cell whose marker line ends in ``tags=["parameters"]`` gets that tag.
 Markdown cells have their lines prefixed by ``# ``.
 
     .venv/bin/python tools/nbbuild.py notebooks/src/spiral.py notebooks/spiral.ipynb
+    .venv/bin/python tools/nbbuild.py          # every notebooks/src/<name>.py -> notebooks/<name>.ipynb
 """
 
 from __future__ import annotations
@@ -37,6 +38,13 @@ def build(src: Path) -> nbformat.NotebookNode:
 
 
 if __name__ == "__main__":
-    src, dst = Path(sys.argv[1]), Path(sys.argv[2])
-    nbformat.write(build(src), dst)
-    print(f"wrote {dst}")
+    if len(sys.argv) == 3:
+        pairs = [(Path(sys.argv[1]), Path(sys.argv[2]))]
+    elif len(sys.argv) == 1:
+        notebooks = Path(__file__).resolve().parents[1] / "notebooks"
+        pairs = [(src, notebooks / f"{src.stem}.ipynb") for src in sorted((notebooks / "src").glob("*.py"))]
+    else:
+        sys.exit("usage: nbbuild.py [SRC.py DST.ipynb]")
+    for src, dst in pairs:
+        nbformat.write(build(src), dst)
+        print(f"wrote {dst}")

@@ -12,7 +12,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from torch import Tensor
 from fnnlib.control.dfbc import DFBC
 from fnnlib.control.min_snap import random_min_snap_flights
 from fnnlib.data.bottle import DataError
+from fnnlib.io import atomic_write
 from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
 
 __all__ = ["Flights", "load_flights", "make_flights", "save_flights", "single_step_labels"]
@@ -128,15 +128,8 @@ def save_flights(path: str | os.PathLike[str], flights: Flights, meta: dict | No
     arrays["dt"] = np.asarray(flights.Ts)  # the file format keeps its key "dt"
     header = {"sha256": _digest(arrays), "meta": meta or {}}
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".npz")
-    os.close(fd)
-    try:
-        np.savez(tmp, header=np.asarray(json.dumps(header)), **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:
+        np.savez(fh, header=np.asarray(json.dumps(header)), **arrays)
     return path
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -12,6 +11,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from fnnlib.io import atomic_write
 from fnnlib.models import MODELS
 
 FORMAT = "fnnlib.checkpoint"
@@ -46,15 +46,8 @@ def save_checkpoint(path: str | os.PathLike[str], model: nn.Module, meta: Mappin
     payload = {"format": FORMAT, "version": VERSION, "kind": kind, "config": model.config,
                "state_dict": state, "sha256": _digest(state), "meta": dict(meta or {})}
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-    os.close(fd)
-    try:
-        torch.save(payload, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:  # a file object: the archive inside is named "archive", not after a temp file
+        torch.save(payload, fh)
     return path
 
 

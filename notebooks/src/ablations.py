@@ -43,6 +43,11 @@ band_factor = 2.0
 settle_threshold = 0.5
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("ablations", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 from pathlib import Path
 
 import matplotlib.pyplot as plt

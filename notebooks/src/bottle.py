@@ -28,6 +28,11 @@ N = 500
 synthetic_sizes = [21, 9, 1058]
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("bottle", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import time
 from pathlib import Path
 

@@ -54,6 +54,11 @@ d3_ratio = 0.5
 d3_flat = 0.1
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("neural_feedback", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import time
 from pathlib import Path
 

@@ -29,6 +29,11 @@ kf_p0_d = 100.0
 repeats = 3
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("observers", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import math
 from pathlib import Path
 

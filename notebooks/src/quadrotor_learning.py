@@ -36,6 +36,11 @@ mlp_epochs = 300
 mlp_lr = 0.001
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("quadrotor_learning", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import time
 from pathlib import Path
 

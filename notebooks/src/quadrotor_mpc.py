@@ -37,6 +37,11 @@ speed_repeats = 5
 transient_s = 1.0
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("quadrotor_mpc", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import json
 from pathlib import Path
 

@@ -36,6 +36,11 @@ noise_std = 0.01
 noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("spiral", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import time
 from pathlib import Path
 

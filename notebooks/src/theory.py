@@ -30,6 +30,11 @@ growth_threshold = 10.0
 rate_tolerance = 0.005
 
 # %%
+import fnnlib as F
+
+F.check_notebook_settings("theory", globals())  # the checks `fnn-pipeline check` runs first
+
+# %%
 import copy
 from pathlib import Path
 

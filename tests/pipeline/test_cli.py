@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnlib.pipeline.cli import main
+from fnnbook.cli import main
 
 from .nbfactory import MakePipeline, child_task, leaf_task
 

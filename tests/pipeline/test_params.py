@@ -8,8 +8,8 @@ import nbformat
 import pytest
 from .nbfactory import MakePipeline, child_task, leaf_task, write_notebook
 
-from fnnlib.pipeline import PipelineError, PipelineSpec, check, load_spec, read_parameters
-from fnnlib.pipeline.params import _type_ok
+from fnnbook import PipelineError, PipelineSpec, check, load_spec, read_parameters
+from fnnbook.params import _type_ok
 
 PARAMS = (
     'profile = "smoke"\n'
@@ -77,6 +77,8 @@ def test_not_a_notebook_is_an_error(tmp_path: Path) -> None:
     (1, False, False), (True, False, True), (True, 1, False), ([1], [2, 3], True), ([1], 1, False),
     ("a", "b", True), ("a", 1, False), (None, [1], True), (None, "x", True), ({"a": 1}, {}, True),
     ({"a": 1}, [], False), ((1, 2), [3, 4], True),
+    ([16, 16], [16, "a"], False), ([16, 16], [16, 16.7], False), ([1.0], [1, 2.5], True), ([], ["a"], True),
+    ([[1.0, 2.0]], [[1, 2], [3.5]], True), ([[1.0, 2.0]], [[1, "x"]], False), (["a"], [], True),
 ])
 def test_type_rule(default: object, value: object, ok: bool) -> None:
     assert _type_ok(default, value) is ok
@@ -150,6 +152,22 @@ def test_missing_profile_is_an_error(make_pipeline: MakePipeline) -> None:
         check(spec, "paper")
     with pytest.raises(PipelineError, match=r"unknown profile 'papr'; profiles: paper, smoke"):
         check(spec, "papr")
+
+
+def test_every_default_is_injected_and_overrides_win(make_pipeline: MakePipeline) -> None:
+    spec = load_spec(make_pipeline({"leaf": leaf_task(scale=2)}))
+    paper = check(spec, "paper").parameters["leaf"]
+    assert {k: paper[k] for k in ("value", "scale", "fail")} == {"value": 3, "scale": 1.0, "fail": False}
+    smoke = check(spec, "smoke").parameters["leaf"]
+    assert {k: smoke[k] for k in ("value", "scale", "fail")} == {"value": 2, "scale": 2, "fail": False}
+
+
+def test_list_elements_are_checked(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    write_notebook(tmp_path / "notebooks" / "leaf.ipynb", 'profile = ""\nout_dir = ""\nhidden = [16, 16]\n', "pass")
+    for bad in ([16, "a"], [16, 16.7]):
+        spec = load_spec(make_pipeline({"leaf": {**leaf_task(), "parameters": {"smoke": {"hidden": bad}}}}))
+        with pytest.raises(PipelineError, match=r"parameter 'hidden': got list"):
+            check(spec, "smoke")
 
 
 def test_resolved_parameters_inject_paths(make_pipeline: MakePipeline, tmp_path: Path) -> None:

@@ -10,8 +10,8 @@ import papermill
 import pytest
 import yaml
 
-from fnnlib.pipeline import PipelineError, PipelineSpec, RunReport, load_spec, run
-from fnnlib.pipeline.runner import FINGERPRINT_FILE
+from fnnbook import PipelineError, PipelineSpec, RunReport, load_spec, run
+from fnnbook.runner import FINGERPRINT_FILE
 
 from .nbfactory import MakePipeline, child_task, leaf_task
 
@@ -88,7 +88,7 @@ def test_failure_keeps_last_good_output(make_pipeline: MakePipeline) -> None:
     assert (log.parent / "leaf.ipynb").is_file()  # the failed executed notebook beside the log
     assert not (spec.output_root / "smoke" / ".staging" / "leaf").exists()
 
-    spec = _set_leaf(pipeline, fail=False)  # fixed: runs, and the stale failure notebook goes
+    spec = _set_leaf(pipeline, fail=False, value=4)  # fixed (and changed): runs, and the stale failure notebook goes
     assert _run(spec, ["leaf"])[0].ok
     assert not (log.parent / "leaf.ipynb").exists()
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import yaml
 
-from fnnlib.pipeline import PipelineError, load_spec
+from fnnbook import PipelineError, PipelineSpec, load_spec, read_parameters
 
 from .nbfactory import MakePipeline, child_task, leaf_task
 
@@ -37,6 +38,50 @@ def test_the_repository_pipeline_parses() -> None:
             raise
         pytest.skip(f"a notebook is not written yet: {exc}")
     assert spec.parts
+
+
+def test_the_repository_profiles_list_only_overrides() -> None:
+    """A notebook's parameters cell holds the paper values; no profile repeats one of them."""
+    root = Path(__file__).resolve().parents[2]
+    spec = load_spec(root / "pipeline.yaml")
+    for task in spec.tasks.values():
+        defaults = read_parameters(task.notebook)
+        assert task.parameters["paper"] == {}, task.name
+        for profile, values in task.parameters.items():
+            same = [k for k, v in values.items() if k in defaults and repr(defaults[k]) == repr(v)
+                    and not _from_shared_block(spec, k)]
+            assert not same, f"{task.name}/{profile} repeats notebook defaults: {same}"
+
+
+def _from_shared_block(spec: PipelineSpec, name: str) -> bool:
+    shared = yaml.safe_load(spec.path.read_text()).get("shared") or {}
+    return any(name in block for block in shared.values())
+
+
+def test_shared_blocks_merge_into_profiles(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    make_pipeline()
+    (tmp_path / "pipeline.yaml").write_text("""\
+claims_file: CLAIMS.md
+output_root: outputs
+shared:
+  small: &small {value: 7, scale: 0.5}
+parts: [{title: One, tasks: [leaf]}]
+tasks:
+  leaf:
+    title: Leaf
+    notebook: notebooks/leaf.ipynb
+    products: [value.txt]
+    parameters:
+      paper: {}
+      smoke:
+        <<: *small
+        scale: 2.0
+""")
+    spec = load_spec(tmp_path / "pipeline.yaml")
+    assert spec.tasks["leaf"].parameters == {"paper": {}, "smoke": {"value": 7, "scale": 2.0}}
+    (tmp_path / "pipeline.yaml").write_text("claims_file: C\noutput_root: o\nshared: [1]\nparts: []\ntasks: {}\n")
+    with pytest.raises(PipelineError, match="shared must be a mapping"):
+        load_spec(tmp_path / "pipeline.yaml")
 
 
 def test_cycle_is_an_error(make_pipeline: MakePipeline) -> None:

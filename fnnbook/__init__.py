@@ -4,9 +4,9 @@
 >>> report = run(spec, "smoke", ["spiral"])       # doctest: +SKIP
 """
 
-from fnnlib.pipeline.params import check_task_parameters, read_parameters, resolve_parameters
-from fnnlib.pipeline.runner import Plan, RunReport, TaskOutcome, check, is_up_to_date, run
-from fnnlib.pipeline.spec import Part, PipelineError, PipelineSpec, Task, load_spec
+from fnnbook.params import check_task_parameters, read_parameters, resolve_parameters
+from fnnbook.runner import Plan, RunReport, TaskOutcome, check, is_up_to_date, run
+from fnnbook.spec import Part, PipelineError, PipelineSpec, Task, load_spec
 
 __all__ = [
     "Part",

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fnnlib.report.scoreboard import NOT_RUN, read_claims, render_scoreboard, score_rows
+from fnnbook.scoreboard import NOT_RUN, read_claims, render_scoreboard, score_rows
 
 CLAIMS = """# What the book must reproduce
 
@@ -89,8 +89,8 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
 
 
 def test_self_check_flags_a_verdict_not_from_its_checks() -> None:
-    from fnnlib.report.claims import claim_result
-    from fnnlib.report.scoreboard import Claim, self_check
+    from fnnlib.results import claim_result
+    from fnnbook.scoreboard import Claim, self_check
 
     claims = [Claim(id="S1", group="g", text="t", figure=""), Claim(id="B3", group="g", text="t", figure="")]
     good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")

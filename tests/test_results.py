@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnlib.report.claims import VERDICTS, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
 
 
 @pytest.mark.parametrize(("checks", "verdict"), [

@@ -1,4 +1,4 @@
-"""Command line: ``fnn-pipeline {run,check,list,book}``.
+"""Command line: ``fnn-pipeline {run,check,list,book,data}``.
 
 Examples
 --------
@@ -8,7 +8,10 @@ Examples
     fnn-pipeline check --profile paper
     fnn-pipeline run --profile smoke spiral
     fnn-pipeline run --profile paper --force spiral
+    fnn-pipeline run --profile paper --workers 1                       # one task after another, in-process
+    fnn-pipeline run --profile paper --scheduler tcp://10.0.0.5:8786   # on a running Dask cluster
     fnn-pipeline book --profile paper
+    fnn-pipeline data fetch                                            # the authors' published throws
 """
 
 from __future__ import annotations
@@ -19,8 +22,12 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from fnnlib.pipeline.runner import check, is_up_to_date, run
-from fnnlib.pipeline.spec import PipelineError, PipelineSpec, load_spec
+from fnnbook.book import assemble_book, build_book
+from fnnbook.data import BOTTLE_URL, fetch_bottle
+from fnnbook.executor import default_workers
+from fnnbook.runner import check, is_up_to_date, read_status, run
+from fnnlib.data.bottle import DataError
+from fnnbook.spec import PipelineError, PipelineSpec, load_spec
 
 __all__ = ["main"]
 
@@ -56,7 +63,16 @@ def _parser() -> argparse.ArgumentParser:
     common(p_run)
     p_run.add_argument("tasks", nargs="*", metavar="TASK", help="tasks to run (default: all)")
     p_run.add_argument("--force", action="store_true", help="rerun the named tasks even if up to date")
-    p_run.add_argument("--no-progress", action="store_true", help="hide papermill's progress bar")
+    p_run.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    where = p_run.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="K",
+                       help="run on a local Dask cluster of K single-threaded worker processes (default: the "
+                            "cores, capped by memory); 1 runs the tasks one after another in this process")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a running Dask cluster (tcp://host:port); its workers need this checkout "
+                            "and venv at the same path and the same output root")
+    p_run.add_argument("--threads", type=int, metavar="N",
+                       help="torch threads per task (default: cores // workers, at least 1)")
 
     p_check = sub.add_parser("check", help="validate pipeline.yaml and every task's parameters")
     common(p_check)
@@ -68,6 +84,13 @@ def _parser() -> argparse.ArgumentParser:
     p_book = sub.add_parser("book", help="assemble the executed notebooks and scoreboard, build the book")
     common(p_book, data=False)
     p_book.add_argument("--book-dir", metavar="DIR", help="book folder (default: book/ beside pipeline.yaml)")
+
+    p_data = sub.add_parser("data", help="get the data the real-data tasks read")
+    data_sub = p_data.add_subparsers(dest="data_command", required=True)
+    p_fetch = data_sub.add_parser("fetch", help="download the authors' published throws (Sec. 5.1) into the "
+                                                "data directory and check their pinned SHA-256")
+    common(p_fetch, profile=False)
+    p_fetch.add_argument("--url", default=BOTTLE_URL, help="URL template with {name} (default: %(default)s)")
     return parser
 
 
@@ -79,7 +102,7 @@ def _spec(args: argparse.Namespace) -> PipelineSpec:
 def _list(spec: PipelineSpec) -> None:
     for part in spec.parts:
         print(part.title)
-        for name in part.tasks:
+        for name in (n for listed in part.tasks for n in spec.grids.get(listed, (listed,))):
             task = spec.tasks[name]
             status = []
             for profile in spec.profiles:
@@ -107,22 +130,32 @@ def main(argv: Sequence[str] | None = None) -> int:
             plan = check(spec, args.profile, args.tasks or None)
             print(f"ok: {len(plan.order)} task(s) valid in profile {args.profile!r}: "
                   f"{', '.join(plan.order)}")
+            for task, why in plan.missing_data.items():
+                print(f"note: {task} will not run: {why}")
             return 0
         if args.command == "run":
+            workers = args.workers if args.workers is not None else default_workers()
             report = run(spec, args.profile, args.tasks or None, force=args.force,
-                         progress_bar=not args.no_progress,
-                         echo=lambda line: print(line, flush=True))
+                         progress_bar=not args.no_progress, workers=workers, scheduler=args.scheduler,
+                         threads=args.threads, echo=lambda line: print(line, flush=True))
             return 0 if report.ok else 1
+        if args.command == "data":
+            if spec.data_dir is None:
+                raise PipelineError("the pipeline has no data_dir; pass --data-dir DIR")
+            fetch_bottle(spec.data_dir, url=args.url)
+            return 0
         if args.command == "book":
-            from fnnlib.report.book import assemble_book, build_book  # noqa: PLC0415
-
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
             assemble_book(spec, args.profile, book_dir)
+            not_run = {t: s["message"] for t, s in read_status(spec, args.profile).items()
+                       if s.get("status") in ("failed", "not run")}
+            for task, why in not_run.items():
+                print(f"note: {task} is shown as not run or from an older run ({why})")
             start = time.perf_counter()
             html = build_book(book_dir)
             print(f"book built in {time.perf_counter() - start:.1f} s: {html / 'index.html'}")
             return 0
-    except PipelineError as exc:
+    except (PipelineError, DataError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

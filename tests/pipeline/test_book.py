@@ -12,9 +12,9 @@ import nbformat
 import pytest
 import yaml
 
-from fnnlib.pipeline import PipelineError, PipelineSpec, load_spec
-from fnnlib.report.book import assemble_book, build_book
-from fnnlib.report.claims import claim_result, write_results
+from fnnbook import PipelineError, PipelineSpec, load_spec
+from fnnbook.book import assemble_book, build_book
+from fnnlib.results import claim_result, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
 

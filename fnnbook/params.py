@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from fnnlib.pipeline.spec import PipelineError, PipelineSpec, Task
+from fnnbook.spec import PipelineError, PipelineSpec, Task
 
 __all__ = ["INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters"]
 
@@ -97,7 +97,15 @@ def _type_ok(default: Any, value: Any) -> bool:
     if isinstance(default, float):
         return isinstance(value, (int, float))
     if isinstance(default, (list, tuple)):
-        return isinstance(value, (list, tuple))
+        if not isinstance(value, (list, tuple)):
+            return False
+        kinds = [d for d in default if d is not None]
+        if not kinds:
+            return True
+        # a homogeneous default list fixes its elements' type: [16, 16] refuses [16, "a"] and [16, 16.7]
+        return all(any(_type_ok(d, v) for d in kinds) for v in value)
+    if isinstance(default, Mapping):
+        return isinstance(value, Mapping)
     return isinstance(value, type(default))
 
 
@@ -110,7 +118,9 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
 
     Types: a ``None`` default accepts anything; a float default accepts int
     or float; a bool is accepted only where the default is a bool; a list
-    (or tuple) default accepts a list; otherwise the type must match.
+    (or tuple) default accepts a list whose every element passes this rule
+    against some element of the default (an empty default accepts any
+    list); otherwise the type must match.
 
     Parameters
     ----------
@@ -170,7 +180,9 @@ def resolve_parameters(
 ) -> dict[str, Any]:
     """Return the parameters papermill injects into ``task``'s notebook.
 
-    The task's profile parameters plus ``profile``, ``out_dir``, and where
+    Every default of the notebook's parameters cell, updated by the task's
+    profile overrides (so the executed notebook shows every value the run
+    used), plus ``profile``, ``out_dir``, and where
     the notebook declares them ``data_dir`` (a string) and ``upstream_dirs``
     (task name -> last good output folder of each upstream task).  Call
     :func:`check_task_parameters` first.
@@ -181,7 +193,8 @@ def resolve_parameters(
         If the notebook declares ``data_dir`` and the pipeline has none, or
         it does not exist.
     """
-    params: dict[str, Any] = dict(task.parameters[profile])
+    params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
+    params.update(task.parameters[profile])
     params["profile"] = profile
     params["out_dir"] = str(out_dir)
     if "data_dir" in declared:

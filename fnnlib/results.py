@@ -15,10 +15,11 @@ import datetime as _dt
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+from fnnlib.io import atomic_write
 
 VERDICTS = ("reproduced", "partly", "not reproduced")
 RESULTS_FILENAME = "results.json"
@@ -105,18 +106,10 @@ def write_results(
         "claims": [_plain(dict(c)) for c in claims],
         "metrics": _plain(dict(metrics or {})),
     }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / RESULTS_FILENAME
-    fd, tmp = tempfile.mkstemp(dir=out, prefix=".results-", suffix=".json")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(payload, fh, indent=2, sort_keys=False)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    path = Path(out_dir) / RESULTS_FILENAME
+    with atomic_write(path, "w") as fh:
+        json.dump(payload, fh, indent=2, sort_keys=False)
+        fh.write("\n")
     return path
 
 

@@ -2,7 +2,7 @@
 
 ``CLAIMS.md`` lists claims in markdown tables, one ``## section`` per group,
 rows like ``| S1 | claim text | Fig. 4c |``.  Each task's ``results.json``
-(:mod:`fnnlib.report.claims`) reports verdicts for some IDs; the rest are
+(:mod:`fnnlib.results`) reports verdicts for some IDs; the rest are
 shown as "not run".
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.report.claims import VERDICTS, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
 
 __all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "read_claims", "render_scoreboard", "score_rows",
            "self_check"]
@@ -183,6 +183,7 @@ def render_scoreboard(
     profile: str,
     pages: Mapping[str, str],
     figures: Mapping[str, str] | None = None,
+    notes: Mapping[str, str] | None = None,
 ) -> str:
     """Render the scoreboard page as MyST markdown.
 
@@ -196,6 +197,9 @@ def render_scoreboard(
     figures : mapping of str to str, optional
         Task -> folder (relative to the scoreboard) where its output's
         ``figure`` paths resolve.
+    notes : mapping of str to str, optional
+        Task -> why it has no results (e.g. "not run: data missing ..."),
+        shown for its claims.
 
     Returns
     -------
@@ -232,6 +236,8 @@ def render_scoreboard(
         numbers = "; ".join(f"{k} = {_number(v)}" for k, v in (entry.get("numbers") or {}).items())
         checks = "; ".join(f"{'✓' if ok else '✗'} {k}" for k, ok in (entry.get("checks") or {}).items())
         measured = "<br>".join(_code(s) for s in (numbers, checks) if s)
+        if row.result is None and row.task in (notes or {}):
+            measured = notes[row.task]
         where = []
         if row.task is not None and row.task in pages:
             where.append(f"[{row.task}]({pages[row.task]})")

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import itertools
+import json
 import os
 import re
 from collections.abc import Iterable, Mapping
@@ -24,9 +26,9 @@ __all__ = ["Part", "PipelineError", "PipelineSpec", "Task", "load_spec"]
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 
 _TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
-_TOP_OPTIONAL = ("data_dir",)
+_TOP_OPTIONAL = ("data_dir", "shared")
 _TASK_REQUIRED = ("title", "notebook", "products", "parameters")
-_TASK_OPTIONAL = ("claims", "upstream")
+_TASK_OPTIONAL = ("claims", "upstream", "grid")
 _PART_KEYS = ("title", "tasks")
 
 
@@ -89,7 +91,10 @@ class PipelineSpec:
         Absolute path of the data folder, if given.
     parts : tuple of Part
     tasks : mapping of str to Task
-        In topological order (every task after its upstream tasks).
+        In topological order (every task after its upstream tasks); a task
+        with a ``grid`` appears as one task per grid point.
+    grids : mapping of str to tuple of str
+        Grid task name -> the names of its points.
     """
 
     path: Path
@@ -99,6 +104,7 @@ class PipelineSpec:
     output_root: Path
     parts: tuple[Part, ...]
     tasks: Mapping[str, Task] = field(repr=False)
+    grids: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def profiles(self) -> tuple[str, ...]:
@@ -132,7 +138,7 @@ class PipelineSpec:
         if names is None:
             return list(self.tasks)
         wanted: set[str] = set()
-        stack = list(names)
+        stack = [point for name in names for point in self.grids.get(name, (name,))]
         for name in stack:
             if name not in self.tasks:
                 raise PipelineError(f"no task named {name!r}{_suggest(name, self.tasks)}; "
@@ -232,6 +238,29 @@ def _load_task(root: Path, name: str, data: Any) -> Task:
     )
 
 
+def _point_name(task: str, point: Mapping[str, Any]) -> str:
+    """``spiral__seed_3``: the task and each grid value, made safe for a folder name."""
+    parts = [f"{k}_{re.sub(r'[^A-Za-z0-9.]+', '_', str(v)).strip('_') or 'x'}" for k, v in point.items()]
+    return "__".join([task, *parts])
+
+
+def _expand_grid(task: Task, grid: Any) -> list[Task]:
+    """One task per point of ``grid`` (parameter -> list of values; the product of the lists)."""
+    where = f"task {task.name!r}: grid"
+    grid = _mapping(where, grid)
+    if not grid:
+        raise PipelineError(f"{where} must name at least one parameter")
+    for name, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise PipelineError(f"{where}.{name} must be a non-empty list of values, got {values!r}")
+        if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+            raise PipelineError(f"{where}.{name} lists a value twice: {values!r}")
+    points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
+    return [dataclasses.replace(task, name=_point_name(task.name, point),
+                                parameters={prof: {**values, **point} for prof, values in task.parameters.items()})
+            for point in points]
+
+
 def _topological(tasks: Mapping[str, Task]) -> list[str]:
     """Order tasks so that each follows its upstream tasks (file order otherwise)."""
     order: list[str] = []
@@ -282,12 +311,29 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
     where = str(file.name)
     data = _mapping(where, data)
     _check_keys(where, data, _TOP_REQUIRED, _TOP_OPTIONAL)
+    # `shared` only holds blocks that tasks merge with YAML anchors (`<<: *name`); yaml has merged them already
+    _mapping(f"{where}: shared", data.get("shared") or {})
     root = file.parent
 
     raw_tasks = _mapping(f"{where}: tasks", data["tasks"])
     if not raw_tasks:
         raise PipelineError(f"{where}: tasks is empty")
-    tasks = {name: _load_task(root, name, value) for name, value in raw_tasks.items()}
+    tasks: dict[str, Task] = {}
+    grids: dict[str, tuple[str, ...]] = {}
+    for name, value in raw_tasks.items():
+        task = _load_task(root, name, value)
+        if isinstance(value, Mapping) and "grid" in value:
+            points = _expand_grid(task, value["grid"])
+            grids[name] = tuple(p.name for p in points)
+            tasks.update((p.name, p) for p in points)
+        else:
+            tasks[name] = task
+    clash = sorted(set(raw_tasks) & {p for points in grids.values() for p in points})
+    if clash:
+        raise PipelineError(f"{where}: a grid point is named like a task: {', '.join(clash)}")
+    # an upstream grid means all its points (an aggregate step reads them all through upstream_dirs)
+    tasks = {n: dataclasses.replace(t, upstream=tuple(p for u in t.upstream for p in grids.get(u, (u,))))
+             for n, t in tasks.items()}
     for task in tasks.values():
         for up in task.upstream:
             if up == task.name:
@@ -309,7 +355,7 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
             raise PipelineError(f"{pwhere}: title must be a string")
         names = _str_list(f"{pwhere}: tasks", raw["tasks"])
         for name in names:
-            if name not in tasks:
+            if name not in tasks and name not in grids:
                 raise PipelineError(f"{pwhere} ({raw['title']!r}) lists task {name!r}, which "
                                     f"does not exist{_suggest(name, tasks)}")
             if name in placed:
@@ -317,7 +363,8 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
                                     f"{placed[name]!r} and {raw['title']!r}")
             placed[name] = raw["title"]
         parts.append(Part(title=raw["title"], tasks=names))
-    missing = [n for n in order if n not in placed]
+    in_grid = {p: g for g, points in grids.items() for p in points}
+    missing = [n for n in order if n not in placed and in_grid.get(n) not in placed]
     if missing:
         raise PipelineError(f"{where}: tasks in no part: {', '.join(missing)} "
                             "(every task must be listed under parts)")
@@ -331,4 +378,5 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
         output_root=_path(root, f"{where}: output_root", data["output_root"]),
         parts=tuple(parts),
         tasks={n: tasks[n] for n in order},
+        grids=grids,
     )

@@ -1,0 +1,182 @@
+"""Run pipeline tasks on a Dask cluster: a local one, or one already running.
+
+Each task that must run is submitted as :func:`fnnbook.runner.execute_task`
+with its upstream tasks' futures as dependencies, so independent tasks
+overlap and a task starts only when its upstream tasks are done; papermill
+runs inside the worker.  A worker process that dies mid-task makes the
+scheduler retry the task once on another worker (``allowed-failures: 1``),
+then report it failed; either way the task's outputs are replaced only by a
+whole successful run (staging folder + rename).  Ctrl-C cancels every task,
+stops the kernels of the running ones and closes the local cluster.
+
+Workers of a cluster given by address need the same checkout and venv at
+the same path, and the same output root (a shared file system).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import logging
+import os
+import shutil
+import signal
+import time
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
+import dask
+import psutil
+from distributed import Client, Future, LocalCluster, wait
+from tqdm.auto import tqdm
+
+from fnnbook.runner import Plan, TaskOutcome, _logs_dir, _staging_dir, cpu_count, execute_task, mark_killed
+from fnnbook.spec import PipelineError, PipelineSpec
+
+__all__ = ["TASK_MEMORY", "default_workers", "local_cluster", "run_on_dask"]
+
+_HAS_BOKEH = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
+
+#: memory one task may take (the largest, quadrotor_learning, peaks near 1.2 GiB)
+TASK_MEMORY = 2 * 1024**3
+
+
+def default_workers() -> int:
+    """Cores, capped so that each worker has :data:`TASK_MEMORY` of the available memory."""
+    by_memory = max(1, psutil.virtual_memory().available // TASK_MEMORY)
+    return int(max(1, min(cpu_count(), by_memory)))
+
+
+@contextlib.contextmanager
+def local_cluster(workers: int) -> Iterator[Client]:
+    """A LocalCluster of ``workers`` single-threaded worker processes, and a client to it."""
+    logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0" if _HAS_BOKEH else None,
+                               worker_dashboard_address=None, memory_limit=0)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+
+
+def _kill_kernels() -> int:
+    """Runs on a worker: end its child processes (the notebooks' kernels)."""
+    children = psutil.Process().children(recursive=True)
+    for child in children:
+        with contextlib.suppress(psutil.Error):
+            child.send_signal(signal.SIGKILL)
+    psutil.wait_procs(children, timeout=5)
+    return len(children)
+
+
+def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, workers: int,
+                scheduler: str | None, threads: int, echo: Callable[[str], None],
+                progress_bar: bool) -> dict[str, TaskOutcome]:
+    """Run the plan's tasks marked "run" on Dask; return every task's outcome.
+
+    Raises
+    ------
+    PipelineError
+        If the scheduler cannot be reached.
+    KeyboardInterrupt
+        After cancelling the tasks and stopping their kernels.
+    """
+    if scheduler is not None:
+        try:
+            ctx: contextlib.AbstractContextManager[Client] = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise PipelineError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
+    else:
+        ctx = local_cluster(workers)
+    with ctx as client:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        where = f"Dask scheduler {scheduler}" if scheduler else "a local Dask cluster"
+        echo(f"running on {where}: {n_workers} worker(s), {threads} torch thread(s) per task")
+        link = client.dashboard_link if (scheduler or _HAS_BOKEH) else None
+        echo(f"dashboard: {link}" if link else "dashboard: not available (install bokeh to get one)")
+        return _submit_and_wait(spec, plan, verdict, client, threads, echo, progress_bar)
+
+
+def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], client: Client,
+                     threads: int, echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
+    n = len(plan.order)
+    index = {name: i for i, name in enumerate(plan.order, 1)}
+    outcomes: dict[str, TaskOutcome] = {}
+    futures: dict[str, Future] = {}
+    stamp = f"{os.getpid()}-{time.time_ns()}"
+    for name in plan.order:
+        out = spec.output_dir(plan.profile, name)
+        if verdict[name] == "skipped":
+            outcomes[name] = TaskOutcome(name, "skipped", 0.0, out)
+        elif verdict[name].startswith("not run"):
+            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=verdict[name][len("not run: "):])
+        else:
+            deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
+            futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
+                                          key=f"{name}-{stamp}", pure=False)
+    for name, o in outcomes.items():
+        echo(f"[{index[name]}/{n}] {name} ... " + ("skipped (up to date)" if o.status == "skipped"
+                                                  else f"not run: {o.message}"))
+    bar = tqdm(total=n, initial=len(outcomes), desc="tasks", unit="task", disable=not progress_bar,
+               dynamic_ncols=True)
+    pending = {f.key: name for name, f in futures.items()}
+    try:
+        while pending:
+            try:
+                done, _ = wait([futures[name] for name in pending.values()], timeout=1.0,
+                               return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                done = set()
+            for fut in done:
+                name = pending.pop(fut.key)
+                outcomes[name] = _outcome(spec, plan, name, fut, outcomes)
+                o = outcomes[name]
+                line = {"ok": f"ok ({o.seconds:.1f} s)", "failed": f"FAILED (see log {o.log})\n    {o.message}",
+                        "not run": f"not run ({o.message})"}[o.status]
+                with tqdm.external_write_mode():
+                    echo(f"[{index[name]}/{n}] {name} ... {line}")
+                bar.update(1)
+            running = {k for keys in client.processing().values() for k in keys} & set(pending)
+            counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "failed", "skipped")}
+            bar.set_postfix(done=counts["ok"], running=len(running), failed=counts["failed"],
+                            skipped=counts["skipped"], refresh=True)
+    except BaseException:
+        bar.close()
+        _cancel(client, futures, spec, plan, pending)
+        raise
+    bar.close()
+    return outcomes
+
+
+def _outcome(spec: PipelineSpec, plan: Plan, name: str, fut: Future,
+             known: Mapping[str, TaskOutcome]) -> TaskOutcome:
+    out = spec.output_dir(plan.profile, name)
+    log = _logs_dir(spec, plan.profile) / f"{name}.log"
+    if fut.status == "finished":
+        return fut.result()
+    blocked = [u for u in spec.tasks[name].upstream if known.get(u) and known[u].status in ("failed", "not run")]
+    if blocked:
+        return TaskOutcome(name, "not run", 0.0, out, message=f"upstream {blocked[0]} failed")
+    exc = fut.exception()
+    why = f"{type(exc).__name__}: {exc}".splitlines()[0]
+    if type(exc).__name__ == "KilledWorker":
+        why = "the worker process running it died (twice, with the retry); outputs untouched"
+    mark_killed(log, why)
+    shutil.rmtree(_staging_dir(spec, plan.profile, name), ignore_errors=True)
+    return TaskOutcome(name, "failed", 0.0, out, log, why)
+
+
+def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, plan: Plan,
+            pending: Mapping[str, str]) -> None:
+    """Cancel every task, stop the running kernels, mark their logs."""
+    with contextlib.suppress(Exception):
+        client.cancel(list(futures.values()), force=True)
+    with contextlib.suppress(Exception):
+        client.run(_kill_kernels)
+    for name in pending.values():
+        mark_killed(_logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")
+        shutil.rmtree(_staging_dir(spec, plan.profile, name), ignore_errors=True)

@@ -1,0 +1,170 @@
+"""Each notebook's settings, checked before any work starts.
+
+One function, :func:`check_notebook_settings`, holds the value checks of
+every notebook (a stable feedback gain, a horizon that fits the data, sizes
+of at least one). A notebook calls it right after its ``parameters`` cell;
+``fnn-pipeline check`` and the start of ``fnn-pipeline run`` call it for
+every task before any task runs, so a bad value fails in seconds, not after
+the upstream tasks have trained.
+
+>>> check_notebook_settings("spiral", {"L": -1.0, "Ts": 0.01, "N": 50, "N_max": 100, "beta": 0.02,
+...                                    "n_samples": 1000})
+Traceback (most recent call last):
+...
+fnnlib.feedback.gains.GainError: ...
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from fnnlib.data.bottle import BOTTLE_FILES, TS as BOTTLE_TS, DataError
+from fnnlib.feedback import check_gain, decayed_gains
+from fnnlib.sweeps import colon_range
+
+__all__ = ["MissingDataError", "check_notebook_settings"]
+
+
+class MissingDataError(DataError):
+    """A notebook needs data files that are not in its data directory."""
+
+
+def _at_least(p: Mapping[str, Any], minimum: int, *names: str) -> None:
+    for name in names:
+        if name in p and not (isinstance(p[name], int) and p[name] >= minimum):
+            raise ValueError(f"{name} must be an integer >= {minimum}, got {p[name]!r}")
+
+
+def _sizes(p: Mapping[str, Any], *names: str) -> None:
+    """Layer widths: a list of integers >= 1."""
+    for name in names:
+        if name in p and (not p[name] or not all(isinstance(h, int) and h >= 1 for h in p[name])):
+            raise ValueError(f"{name} must list layer widths >= 1, got {p[name]!r}")
+
+
+def _gain_and_decay(p: Mapping[str, Any], n: int, Ts: float, N: int) -> None:
+    """A gain that Theorem 1 / Eq. (25) accept, and a decay Eq. (11) accepts over N layers."""
+    decayed_gains(check_gain(p["L"], n, Ts), N, p.get("beta", 0.0))
+
+
+def _horizon(p: Mapping[str, Any], N: int) -> None:
+    if not 1 <= N < p["n_samples"]:
+        raise ValueError(f"need 1 <= N < n_samples, got N={N}, n_samples={p['n_samples']}")
+
+
+def _grids(p: Mapping[str, Any]) -> None:
+    """Every ``*_range`` is a non-empty grid ``{start: step: stop}``."""
+    for name, value in p.items():
+        if name.endswith("_range") and isinstance(value, list):
+            if len(value) != 3:
+                raise ValueError(f"{name} must be [start, step, stop], got {value!r}")
+            colon_range(*value)
+
+
+def _spiral(p: Mapping[str, Any]) -> None:
+    _gain_and_decay(p, 2, p["Ts"], p["N_max"])
+    if not 1 <= p["N"] <= p["N_max"] < p["n_samples"]:
+        raise ValueError(f"need 1 <= N <= N_max < n_samples, got N={p['N']}, N_max={p['N_max']}, "
+                         f"n_samples={p['n_samples']}")
+    _at_least(p, 1, "iterations", "batch_size", "batch_time")
+    _sizes(p, "hidden")
+
+
+def _theory(p: Mapping[str, Any]) -> None:
+    for g in [p["L"], *p.get("L_sweep", [])]:
+        check_gain(g, 2, p["Ts"])
+    _at_least(p, 2, "n_samples")
+
+
+def _ablations(p: Mapping[str, Any]) -> None:
+    _grids(p)
+    _gain_and_decay(p, 2, p["Ts"], p["N"])
+    _horizon(p, p["N"])
+    _at_least(p, 1, "noise_draws")
+
+
+def _observers(p: Mapping[str, Any]) -> None:
+    _gain_and_decay(p, 2, p["Ts"], p["N"])
+    _horizon(p, p["N"])
+    _at_least(p, 1, "repeats")
+    _at_least(p, 0, "settle")
+
+
+def _neural_feedback(p: Mapping[str, Any]) -> None:
+    _grids(p)
+    _gain_and_decay(p, 2, p["Ts"], p["N"])
+    _horizon(p, p["N"])
+    _at_least(p, 1, "iterations", "batch_size", "batch_time", "fb_iterations", "fb_batch_size", "refresh_every",
+              "dr_n_samples")
+    _sizes(p, "hidden", "fb_hidden")
+
+
+def _bottle(p: Mapping[str, Any]) -> None:
+    if p["data"] not in ("real", "synthetic"):
+        raise ValueError(f"data must be 'real' or 'synthetic', got {p['data']!r}")
+    _gain_and_decay(p, 6, BOTTLE_TS, p["N"])
+    _at_least(p, 1, "iterations", "batch_size", "batch_time")
+    _sizes(p, "hidden")
+    if p["data"] == "real":
+        folder = Path(p.get("data_dir") or ".") / "bottle"
+        missing = [name for name in BOTTLE_FILES if not (folder / name).is_file()]
+        if missing:
+            raise MissingDataError(f"data missing: {', '.join(missing)} not in {folder}. Get the authors' "
+                                   "published throws with `fnn-pipeline data fetch` (see data/README.md).")
+
+
+def _quadrotor_learning(p: Mapping[str, Any]) -> None:
+    seeds = p["seeds"]
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct and non-empty, got {seeds}")
+    _at_least(p, 1, "n_flights", "n_nodes", "val_flights", "val_nodes", "epochs", "batch_size", "val_every",
+              "mlp_epochs", "truth_substeps")
+    if not 1 <= p["segment_length"] <= p["n_nodes"]:
+        raise ValueError(f"segment_length must be in 1..{p['n_nodes']}, got {p['segment_length']}")
+    _sizes(p, "hidden")
+
+
+def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
+    Ts = p["Ts"] if "Ts" in p else p["dt"]
+    check_gain(p["L"], 12, Ts)
+    if not p["u_max"] or min(p["u_max"]) <= 0:
+        raise ValueError(f"u_max must list positive thrust bounds, got {p['u_max']}")
+    _at_least(p, 1, "steps", "N", "speed_repeats", "truth_substeps")
+
+
+_CHECKS: dict[str, Callable[[Mapping[str, Any]], None]] = {
+    "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
+    "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
+    "quadrotor_mpc": _quadrotor_mpc,
+}
+
+
+def check_notebook_settings(notebook: str, settings: Mapping[str, Any]) -> None:
+    """Check a notebook's settings before any work; raise on the first bad value.
+
+    Parameters
+    ----------
+    notebook : str
+        The notebook's name (``"spiral"``; a leading ``"03_"`` or a
+        ``.ipynb`` suffix is ignored). A notebook without checks passes.
+    settings : mapping
+        Its parameters, e.g. ``globals()`` right after the parameters cell.
+
+    Raises
+    ------
+    ValueError
+        A value the notebook cannot use (:class:`~fnnlib.observers.GainError`
+        for an unstable gain).
+    MissingDataError
+        Data files the settings need are not in ``data_dir``.
+    """
+    name = re.sub(r"^\d+_", "", Path(notebook).stem)
+    check = _CHECKS.get(name)
+    if check is not None:
+        try:
+            check(settings)
+        except KeyError as exc:
+            raise ValueError(f"notebook {name!r}: setting {exc.args[0]!r} is missing") from exc

@@ -1,0 +1,233 @@
+"""The Dask executor on tiny notebooks: overlap, order, grids, faults, a real cluster, Ctrl-C.
+
+Each test starts a LocalCluster of 2 single-threaded worker processes (or a
+scheduler and two workers with the ``dask`` command line) on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+import yaml
+
+from fnnbook import PipelineSpec, load_spec, run
+from fnnbook.cli import main
+
+from .nbfactory import CHILD_BODY, CHILD_PARAMS, LEAF_BODY, LEAF_PARAMS, MakePipeline, child_task, leaf_task, write_notebook
+
+# A leaf that records when it ran (wall clock) and sleeps `nap` seconds in between.
+TIMED_PARAMS = LEAF_PARAMS + "nap = 0.0\n"
+TIMED_BODY = "import json, time\nstart = time.time()\ntime.sleep(nap)\n" + LEAF_BODY + """\
+(out / "times.json").write_text(json.dumps([start, time.time()]))
+"""
+CHILD_TIMED_BODY = "import json, time\nstart = time.time()\n" + CHILD_BODY + """\
+(pathlib.Path(out_dir) / "times.json").write_text(json.dumps([start, time.time()]))
+"""
+# The aggregate step of a grid: sums value.txt over every point it is given.
+AGG_BODY = """\
+import pathlib
+total = sum(float((pathlib.Path(d) / "value.txt").read_text()) for d in upstream_dirs.values())
+(pathlib.Path(out_dir) / "total.txt").write_text(f"{len(upstream_dirs)} {total}")
+"""
+# Kills the worker process that runs it (the kernel's parent) on the first attempt; `always` on every one.
+KILLER_BODY = """\
+import os, pathlib, signal
+marker = pathlib.Path(out_dir).parent.parent / "attempted"
+if always or not marker.exists():
+    marker.write_text("x")
+    os.kill(os.getppid(), signal.SIGKILL)
+(pathlib.Path(out_dir) / "value.txt").write_text("done")
+"""
+
+
+def _tasks(tmp_path: Path) -> dict[str, Any]:
+    write_notebook(tmp_path / "notebooks" / "timed.ipynb", TIMED_PARAMS, TIMED_BODY)
+    write_notebook(tmp_path / "notebooks" / "child.ipynb", CHILD_PARAMS, CHILD_TIMED_BODY)
+    write_notebook(tmp_path / "notebooks" / "agg.ipynb", CHILD_PARAMS, AGG_BODY)
+    def timed(**extra: Any) -> dict[str, Any]:
+        return {**leaf_task(nap=1.5), "notebook": "notebooks/timed.ipynb", "products": ["results.json", "times.json"],
+                **extra}
+
+    return {
+        "leaf": timed(),
+        "other": timed(claims=[]),
+        "child": {**child_task(), "products": ["double.txt", "times.json"]},
+        "pt": timed(claims=[], parameters={"smoke": {}, "paper": {}}, grid={"value": [1, 2]}),
+        "agg": {"title": "Aggregate", "notebook": "notebooks/agg.ipynb", "upstream": ["pt"],
+                "products": ["total.txt"], "parameters": {"smoke": {}}},
+    }
+
+
+def _times(spec: PipelineSpec, task: str) -> tuple[float, float]:
+    start, end = json.loads((spec.output_dir("smoke", task) / "times.json").read_text())
+    return start, end
+
+
+def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
+        make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    spec = load_spec(make_pipeline(_tasks(tmp_path)))
+    assert spec.grids == {"pt": ("pt__value_1", "pt__value_2")}
+    lines: list[str] = []
+    report = run(spec, "smoke", workers=2, progress_bar=False, echo=lines.append)
+    assert report.ok, lines
+    assert {o.status for o in report.outcomes} == {"ok"}
+    assert lines[0].startswith("running on a local Dask cluster: 2 worker(s), ")
+
+    leaf, other, child = _times(spec, "leaf"), _times(spec, "other"), _times(spec, "child")
+    assert child[0] >= leaf[1]  # after its upstream task
+    # two workers: some pair of independent tasks ran at the same time
+    spans = [_times(spec, t) for t in ("leaf", "other", "pt__value_1", "pt__value_2")]
+    assert any(a[0] < b[1] and b[0] < a[1] for i, a in enumerate(spans) for b in spans[i + 1:])
+
+    # the grid: one output folder and fingerprint per point; the aggregate read both
+    fp = [json.loads((spec.output_dir("smoke", p) / ".fingerprint.json").read_text())["fingerprint"]
+          for p in spec.grids["pt"]]
+    assert fp[0] != fp[1]
+    assert (spec.output_dir("smoke", "agg") / "total.txt").read_text() == "2 3.0"
+    assert max(_times(spec, p)[1] for p in spec.grids["pt"]) <= (
+        spec.output_dir("smoke", "agg") / "total.txt").stat().st_mtime
+
+    # the serial path gives the same results.json
+    serial = spec.with_paths(output_root=tmp_path / "serial")
+    assert run(serial, "smoke", ["leaf", "pt"], workers=1, progress_bar=False, echo=lambda _: None).ok
+    for task in ("leaf", "pt__value_1", "pt__value_2"):
+        assert (serial.output_dir("smoke", task) / "results.json").read_bytes() == (
+            spec.output_dir("smoke", task) / "results.json").read_bytes()
+
+    # nothing changed: everything skipped (no cluster work)
+    report = run(spec, "smoke", workers=2, progress_bar=False, echo=lambda _: None)
+    assert {o.status for o in report.outcomes} == {"skipped"}
+
+
+def test_a_failing_task_is_isolated(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    tasks = _tasks(tmp_path)
+    del tasks["pt"], tasks["agg"]
+    pipeline = make_pipeline(tasks, parts=[{"title": "P", "tasks": ["leaf", "other", "child"]}])
+    spec = load_spec(pipeline)
+    assert run(spec, "smoke", ["leaf"], workers=1, progress_bar=False, echo=lambda _: None).ok
+    before = {p.name: p.read_bytes() for p in spec.output_dir("smoke", "leaf").iterdir()}
+
+    doc = yaml.safe_load(pipeline.read_text())
+    doc["tasks"]["leaf"]["parameters"]["smoke"]["fail"] = True
+    pipeline.write_text(yaml.safe_dump(doc))
+    lines: list[str] = []
+    report = run(load_spec(pipeline), "smoke", workers=2, progress_bar=False, echo=lines.append)
+    assert not report.ok
+    assert [report.outcome(t).status for t in ("leaf", "other", "child")] == ["failed", "ok", "not run"]
+    assert report.outcome("child").message == "upstream leaf failed"
+    assert {p.name: p.read_bytes() for p in spec.output_dir("smoke", "leaf").iterdir()} == before
+    assert lines[-1].splitlines() == ["profile smoke: 1 ok, 1 failed, 1 not run",
+                          f"  FAILED leaf: log {spec.output_root / 'smoke' / '_logs' / 'leaf.log'}",
+                          "  NOT RUN child: upstream leaf failed"]
+
+
+@pytest.mark.parametrize("always", [False, True])
+def test_a_killed_worker_is_retried_once_then_reported(make_pipeline: MakePipeline, tmp_path: Path,
+                                                       always: bool) -> None:
+    write_notebook(tmp_path / "notebooks" / "killer.ipynb", 'profile = ""\nout_dir = ""\nalways = False\n',
+                   KILLER_BODY)
+    spec = load_spec(make_pipeline({"killer": {
+        "title": "Killer", "notebook": "notebooks/killer.ipynb", "products": ["value.txt"],
+        "parameters": {"smoke": {"always": always}}}}))
+    report = run(spec, "smoke", workers=2, progress_bar=False, echo=lambda _: None)
+    out = spec.output_dir("smoke", "killer")
+    staging = spec.output_root / "smoke" / ".staging" / "killer"
+    if always:
+        assert report.outcome("killer").status == "failed"
+        assert "worker process running it died" in report.outcome("killer").message
+        assert not out.exists()
+        assert "--- FAILED: the worker process running it died" in (
+            spec.output_root / "smoke" / "_logs" / "killer.log").read_text()
+    else:
+        assert report.ok and (out / "value.txt").read_text() == "done"
+        assert "--- FAILED: the process running this attempt was killed" in (
+            spec.output_root / "smoke" / "_logs" / "killer.previous.log").read_text()
+    assert not staging.exists()  # no half-written outputs
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_for_workers(address: str, n: int, timeout: float = 60.0) -> None:
+    from distributed import Client
+
+    with Client(address, timeout="30s") as client:
+        client.wait_for_workers(n, timeout=timeout)
+
+
+def test_runs_on_a_running_cluster(make_pipeline: MakePipeline, tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    tasks = _tasks(tmp_path)
+    del tasks["pt"], tasks["agg"]
+    pipeline = make_pipeline(tasks, parts=[{"title": "P", "tasks": ["leaf", "other", "child"]}])
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = [str(Path(sys.executable).parent / "dask")]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).parents[2]),
+                                                                      os.environ.get("PYTHONPATH")]))}
+    procs = [subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        for _ in range(2):
+            procs.append(subprocess.Popen([*dask, "worker", address, "--nthreads", "1", "--nworkers", "1",
+                                           "--no-dashboard", "--host", "127.0.0.1"], env=env,
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for_workers(address, 2)
+        assert main(["run", "--profile", "smoke", "--pipeline", str(pipeline), "--no-progress",
+                     "--scheduler", address]) == 0
+        out = capsys.readouterr().out
+        assert f"running on Dask scheduler {address}: 2 worker(s)" in out
+        assert "profile smoke: 3 ok" in out
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    assert all(p.poll() is not None for p in procs)
+
+
+def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    write_notebook(tmp_path / "notebooks" / "timed.ipynb", TIMED_PARAMS, TIMED_BODY)
+    timed = {**leaf_task(nap=120.0), "notebook": "notebooks/timed.ipynb"}
+    pipeline = make_pipeline({"leaf": timed, "other": {**timed, "claims": [], "parameters": {"smoke": {"nap": 120.0}}}},
+                             parts=[{"title": "P", "tasks": ["leaf", "other"]}])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).parents[2]),
+                                                                      os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, "-m", "fnnbook", "run", "--profile", "smoke", "--pipeline",
+                             str(pipeline), "--no-progress", "--workers", "2"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    logs = tmp_path / "outputs" / "smoke" / "_logs"
+    deadline = time.time() + 90
+    while time.time() < deadline and not all(
+            "--- kernel output ---" in (logs / f"{t}.log").read_text() if (logs / f"{t}.log").exists() else False
+            for t in ("leaf", "other")):
+        time.sleep(0.5)
+    time.sleep(3)  # the kernels are up and napping
+    family = psutil.Process(proc.pid).children(recursive=True)
+    assert len(family) >= 4  # two workers (with their nanny/spawn helpers) and two kernels
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole foreground process group
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out
+    assert "interrupted" in out
+    assert "Task exception was never retrieved" not in out
+    gone, alive = psutil.wait_procs(family, timeout=15)
+    assert not alive, [p.cmdline() for p in alive]
+    assert not (tmp_path / "outputs" / "smoke" / "leaf").exists()
+    assert "--- FAILED: interrupted (Ctrl-C)" in (logs / "leaf.log").read_text()
