@@ -42,7 +42,7 @@ steady_window = 1.0
 band_factor = 2.0
 settle_threshold = 0.5
 
-# %%
+# %% [tags: hide-input]
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -278,7 +278,7 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # ## Verdicts
 # The rules are the ones stated in each section; each check is computed from the numbers above.
 
-# %%
+# %% [tags: nbval-check-output]
 n_lv = len(res_levels)
 trend, within = f"(frac>={trend_fraction:g})", f"within_{settle_threshold:g}s"
 claims = [

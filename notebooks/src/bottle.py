@@ -27,7 +27,7 @@ beta = 0.02
 N = 500
 synthetic_sizes = [21, 9, 1058]
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -142,7 +142,7 @@ acc_rmse
 #   samples of the test throws) than the neural ODE's; (ii) its predicted positions "almost overlap" the truth:
 #   the mean 0.5 s position error is below 10 % of the mean distance flown in 0.5 s.
 
-# %%
+# %% [tags: nbval-check-output]
 travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
 claims = [

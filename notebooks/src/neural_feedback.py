@@ -53,7 +53,7 @@ d2_factor = 1.5
 d3_ratio = 0.5
 d3_flat = 0.1
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -242,7 +242,7 @@ fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 task_seconds = time.perf_counter() - task_start
 claims = [
     F.claim_result("D1", checks={"dr_worse_than_nominal_by_factor": d12["rel_rmse_dr_neural_ode"]

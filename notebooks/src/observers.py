@@ -28,7 +28,7 @@ kf_q_d = 0.01
 kf_p0_d = 100.0
 repeats = 3
 
-# %%
+# %% [tags: hide-input]
 import math
 from pathlib import Path
 
@@ -269,7 +269,7 @@ checks = {"same_data_all_metrics": finite and same_shape and len(table) == len(o
                                        design["rho_kalman_steady"]) < 1}
 checks
 
-# %%
+# %% [tags: nbval-check-output]
 numbers = {k: design[k] for k in ("luenberger_pole_err", "kf_L_rel_err_vs_dlqe", "filterpy_K_rel_err")}
 numbers |= {"lf_vs_twin_rel_diff": equiv["max_rel_diff_luenberger"], "linear_feedback_ranks": ranks,
             "rho_lf_luenberger_kalman": [design[k] for k in ("rho_linear_feedback", "rho_luenberger",

@@ -35,7 +35,7 @@ val_every = 10
 mlp_epochs = 300
 mlp_lr = 0.001
 
-# %%
+# %% [tags: hide-input]
 import json
 import time
 from pathlib import Path
@@ -185,7 +185,7 @@ for k in range(val.n_flights):
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 final, first = member_loss[-1], member_loss[0]
 tail = member_loss[int(np.floor(0.9 * epochs))]
 q1_checks = {

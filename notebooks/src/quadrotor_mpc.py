@@ -36,7 +36,7 @@ backend = "numba"
 speed_repeats = 5
 transient_s = 1.0
 
-# %%
+# %% [tags: hide-input]
 import json
 from pathlib import Path
 
@@ -325,7 +325,7 @@ _ = F.save_figure(fig, out, "seed_spread")
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 q3, q4, q5 = {}, {}, {}
 for umax, rows in table.items():
     rm = {n: rows[n]["mean_axis"] for n in names}

@@ -35,7 +35,7 @@ N_max = 100
 noise_std = 0.01
 noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -215,7 +215,7 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 # - **S4**: the feedback error is below the neural ODE's (i) at every $N \le$ `N` and (ii) at every
 #   $N \le$ `N_max`.
 
-# %%
+# %% [tags: nbval-check-output]
 noisy = [i for i, s in enumerate(sweep["noise_std"]) if s > 0]
 claims = [
     F.claim_result("S1", checks={"nominal_rate_rel_rmse<=0.05": s1_rel <= 0.05},

@@ -29,7 +29,7 @@ discrete_gains = [0.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 180.0, 190.0, 195.0,
 growth_threshold = 10.0
 rate_tolerance = 0.005
 
-# %%
+# %% [tags: hide-input]
 import copy
 from pathlib import Path
 
@@ -194,7 +194,7 @@ fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
 # ## Verdicts
 # The rules are the ones stated at the top; each check is computed from the numbers above.
 
-# %%
+# %% [tags: nbval-check-output]
 fb, ct = "feedback", "continuous"
 s5_checks = {
     "feedback_x_in_ball": s5[f"{fb}_max_x_after_transient"] <= ball1,
