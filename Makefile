@@ -32,8 +32,9 @@ pipeline: venv
 book: venv
 	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
 
+# -n auto: one pytest-xdist worker per core; the smoke pipeline still runs once (tests/conftest.py)
 test: venv
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto
 
 # Regenerate environment-lock.txt after changing pyproject.toml (needs pip-tools in some venv).
 lock:
