@@ -10,8 +10,10 @@ browser) need it.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from dataclasses import dataclass
+from types import ModuleType
 from pathlib import Path
 
 import pytest
@@ -23,6 +25,14 @@ from fnnlib.pipeline.runner import TaskOutcome
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "pipeline.yaml"
 SMOKE = "smoke"
+
+
+def load_nbbuild() -> ModuleType:
+    """``tools/nbbuild.py`` (a script, not a package module), loaded as a module."""
+    spec = importlib.util.spec_from_file_location("nbbuild", ROOT / "tools" / "nbbuild.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @dataclass(frozen=True)
