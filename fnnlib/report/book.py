@@ -30,7 +30,7 @@ _STATIC_PAGES = ("intro.md", "paper_vs_release.md", "_config.yml")
 
 
 #: a code cell longer than this (in lines) starts folded, like every cell that draws a figure
-FOLD_LINES = 15
+FOLD_LINES = 10
 _FOLD_TAGS = ("hide-input", "remove-input", "remove-cell", "hide-cell", "show-input")
 
 

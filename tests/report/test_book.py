@@ -125,7 +125,7 @@ def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, 
     assert copied.cells[4].outputs[0]["text"] == "wrote outputs/paper/alpha/results.json\n"
     tags = [c.metadata.get("tags", []) for c in copied.cells]
     assert "remove-cell" in tags[1] and "hide-input" not in tags[2]  # defaults gone, the run's values open
-    assert "hide-input" in tags[4] and "hide-input" in tags[5]  # draws a figure; longer than 15 lines
+    assert "hide-input" in tags[4] and "hide-input" in tags[5]  # draws a figure; longer than FOLD_LINES
     assert tags[6] == [] and tags[7] == ["show-input"]  # short; the author keeps it open
 
     html = build_book(book, quiet=True)
