@@ -15,6 +15,8 @@ from pathlib import Path
 import nbformat
 
 CHECKED = "nbval-check-output"
+#: regexes for what differs between runs by nature (wall times, object addresses)
+SANITIZE = Path(__file__).with_name("nbval_sanitize.cfg")
 
 
 def for_rerun(executed: Path, dst_dir: Path) -> Path:
@@ -47,5 +49,6 @@ def checked_cells(notebook: Path) -> int:
 def run_nbval(notebook: Path, timeout_s: int = 900) -> subprocess.CompletedProcess[str]:
     """``pytest --nbval-lax notebook`` in the current environment; the result with its output."""
     cmd = [sys.executable, "-m", "pytest", "--nbval-lax", "--nbval-current-env", "--nbval-cell-timeout=600",
+           f"--nbval-sanitize-with={SANITIZE}",
            "-p", "no:cacheprovider", "-o", "addopts=", "-q", "--rootdir", str(notebook.parent), str(notebook)]
     return subprocess.run(cmd, cwd=notebook.parent, capture_output=True, text=True, timeout=timeout_s, check=False)
