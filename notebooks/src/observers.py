@@ -80,7 +80,7 @@ print(f"loaded the neural ODE (seed {meta.get('seed')}, final loss {meta.get('fi
 # Every observer except the linear feedback predicts by rolling its corrected model
 # $x_{j+1} = x_j + T_s(f_{neural}(x_j) + \hat d_k)$ for $N$ steps from $(\hat x_{k|k}, \hat d_{k|k})$.
 
-# %%
+# %% [tags: remove-output]
 Q, R, P0 = [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [kf_p0_d] * 2
 observers = {
     "neural ODE": F.LinearFeedback(model, 0.0, Ts, 2),
