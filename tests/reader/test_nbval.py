@@ -42,18 +42,15 @@ def _printed(source: str, text: str, tags: list[str]) -> nbformat.NotebookNode:
 
 
 def test_nbval_fails_on_a_raising_cell_and_on_a_changed_marked_output(tmp_path: Path) -> None:
-    cells = {
-        "good": [_printed("print('S1: reproduced')", "S1: reproduced\n", [CHECKED]),
-                 _printed("import time; print(time.time())", "0\n", [])],  # unmarked: may differ
-        "raises": [nbformat.v4.new_code_cell("raise RuntimeError('a broken cell')")],
-        "changed": [_printed("print('S1: partly')", "S1: reproduced\n", [CHECKED])],
-    }
-    outcome = {}
-    for name, body in cells.items():
-        (tmp_path / name).mkdir()
-        notebook = for_rerun(_notebook(tmp_path / name / "src.ipynb", body), tmp_path / name / "run")
-        outcome[name] = run_nbval(notebook, timeout_s=300)
-    assert outcome["good"].returncode == 0, outcome["good"].stdout[-3000:]
-    assert outcome["raises"].returncode == 1 and "a broken cell" in outcome["raises"].stdout
-    assert outcome["changed"].returncode == 1
-    assert "S1: partly" in outcome["changed"].stdout  # nbval shows the new output against the stored one
+    cells = [_printed("print('S1: reproduced')", "S1: reproduced\n", [CHECKED]),  # same output: passes
+             _printed("import time; print(time.time())", "0\n", []),  # unmarked: may differ
+             _printed("print('S1: partly')", "S1: reproduced\n", [CHECKED]),  # a marked output that changed
+             nbformat.v4.new_code_cell("raise RuntimeError('a broken cell')")]
+    notebook = for_rerun(_notebook(tmp_path / "src.ipynb", cells), tmp_path / "run")
+    done = run_nbval(notebook, timeout_s=300)
+    assert done.returncode == 1, done.stdout[-3000:]
+    assert "2 failed, 3 passed" in done.stdout, done.stdout[-3000:]  # the injected cell and the first two pass
+    failed = [line.split(" - ")[0] for line in done.stdout.splitlines() if line.startswith("FAILED")]
+    assert failed == ["FAILED src.ipynb::Cell 3", "FAILED src.ipynb::Cell 4"], failed  # changed, raised
+    assert "S1: partly" in done.stdout  # nbval shows the new output against the stored one
+    assert "a broken cell" in done.stdout
