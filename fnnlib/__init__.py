@@ -37,7 +37,7 @@ from fnnlib.observers import (
     steady_state_gain,
 )
 from fnnlib.plotting import new_figure, save_figure
-from fnnlib.results import claim_result, read_results, verdict_from_checks, write_results
+from fnnlib.results import GuaranteeFailed, claim_result, headline_number, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.settings import check_notebook_settings
 from fnnlib.stability import (
@@ -89,7 +89,7 @@ __all__ = [
     "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "check_notebook_settings", "claim_result", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
+    "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

@@ -47,7 +47,7 @@ import fnnlib as F
 
 F.check_notebook_settings("ablations", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -285,7 +285,7 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # ## Verdicts
 # The rules are the ones stated in each section; each check is computed from the numbers above.
 
-# %%
+# %% [tags: nbval-check-output]
 trend = f"(frac>={trend_fraction:g})"
 claims = [
     F.claim_result("S7", checks={

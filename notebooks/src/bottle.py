@@ -32,7 +32,7 @@ import fnnlib as F
 
 F.check_notebook_settings("bottle", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -148,7 +148,7 @@ acc_rmse
 #   samples of the test throws) than the neural ODE's; (ii) its predicted positions "almost overlap" the truth:
 #   the mean 0.5 s position error is below 10 % of the mean distance flown in 0.5 s.
 
-# %%
+# %% [tags: nbval-check-output]
 travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
 per_throw = {f"per_throw_{k}": summary[name]["per_throw"] for k, name in

@@ -58,7 +58,7 @@ import fnnlib as F
 
 F.check_notebook_settings("neural_feedback", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -246,7 +246,7 @@ fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 claims = [
     F.claim_result("D1", checks={"dr_worse_than_nominal_by_factor": d12["rel_rmse_dr_neural_ode"]
                                  > d1_factor * d12["rel_rmse_nominal_neural_ode"]},

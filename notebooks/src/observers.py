@@ -33,7 +33,7 @@ import fnnlib as F
 
 F.check_notebook_settings("observers", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import math
 from pathlib import Path
 
@@ -84,7 +84,7 @@ print(f"loaded the neural ODE (seed {meta.get('seed')}, final loss {meta.get('fi
 # Every observer except the linear feedback predicts by rolling its corrected model
 # $x_{j+1} = x_j + T_s(f_{neural}(x_j) + \hat d_k)$ for $N$ steps from $(\hat x_{k|k}, \hat d_{k|k})$.
 
-# %%
+# %% [tags: remove-output]
 Q, R, P0 = [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [kf_p0_d] * 2
 observers = {
     "neural ODE": F.LinearFeedback(model, 0.0, Ts, 2),
@@ -279,7 +279,7 @@ checks = {"same_data_all_metrics": finite and same_shape and len(table) == len(o
                                        design["rho_kalman_steady"]) < 1}
 checks
 
-# %%
+# %% [tags: nbval-check-output]
 numbers = {k: design[k] for k in ("luenberger_pole_err", "kf_L_rel_err_vs_dlqe", "filterpy_K_rel_err")}
 numbers |= {"lf_vs_twin_rel_diff": equiv["max_rel_diff_luenberger"], "linear_feedback_ranks": ranks,
             "rho_lf_luenberger_kalman": [design[k] for k in ("rho_linear_feedback", "rho_luenberger",

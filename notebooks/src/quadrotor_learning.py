@@ -40,7 +40,7 @@ import fnnlib as F
 
 F.check_notebook_settings("quadrotor_learning", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -190,7 +190,7 @@ for k in range(val.n_flights):
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 final, first = member_loss[-1], member_loss[0]
 q1_checks = convergence_checks(member_loss, epochs)
 n_feedback_params = 0  # the linear feedback L(x - x_hat) has no trainable parameter: L and beta are set by hand

@@ -41,7 +41,7 @@ import fnnlib as F
 
 F.check_notebook_settings("quadrotor_mpc", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import json
 from pathlib import Path
 
@@ -268,7 +268,7 @@ _ = F.save_figure(fig, out, "seed_spread")
 # %% [markdown]
 # ## Verdicts
 
-# %%
+# %% [tags: nbval-check-output]
 q3, q4, q5 = claim_checks(table, thm2)
 rmse_numbers = {u: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for u, rows in table.items()}
 acc_numbers = {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()} for u, rows in table.items()}

@@ -40,7 +40,7 @@ import fnnlib as F
 
 F.check_notebook_settings("spiral", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import time
 from pathlib import Path
 
@@ -219,7 +219,7 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 # - **S4**: the feedback error is below the neural ODE's (i) at every $N \le$ `N` and (ii) at every
 #   $N \le$ `N_max`.
 
-# %%
+# %% [tags: nbval-check-output]
 claims = [
     F.claim_result("S1", checks={"nominal_rate_rel_rmse<=0.05": s1_rel <= 0.05},
                    numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},

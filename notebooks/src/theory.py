@@ -34,7 +34,7 @@ import fnnlib as F
 
 F.check_notebook_settings("theory", globals())  # the checks `fnn-pipeline check` runs first
 
-# %%
+# %% [tags: hide-input]
 import copy
 from pathlib import Path
 
@@ -199,7 +199,7 @@ fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
 # ## Verdicts
 # The rules are the ones stated at the top; each check is computed from the numbers above.
 
-# %%
+# %% [tags: nbval-check-output]
 fb, ct = "feedback", "continuous"
 s5_checks = {
     "feedback_x_in_ball": s5[f"{fb}_max_x_after_transient"] <= ball1,
