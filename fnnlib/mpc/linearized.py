@@ -686,6 +686,14 @@ class OSQPMPC(LinearizedMPC):
     def _setup(self) -> None:
         if self.solver != "OSQP":
             raise ValueError(f"OSQPMPC solves with OSQP only, got solver={self.solver!r}")
+        if not hasattr(self, "_T_A"):  # canonicalise once; reset() only rebuilds the OSQP object
+            self._canonicalise()
+        self._solver = osqp.OSQP()
+        self._solver.setup(self._P, np.zeros(self.n_var), self._A_pattern, self._lo0, self._hi0, verbose=False,
+                           **self.solver_options)
+
+    def _canonicalise(self) -> None:
+        """The cvxpy problem, its canonical QP and the maps from the parameter vector to OSQP's data."""
         super()._setup()
         data, _, _ = self.problem.get_problem_data(cp.OSQP, enforce_dpp=True)
         prob = data[cp.settings.PARAM_PROB]
@@ -729,11 +737,9 @@ class OSQPMPC(LinearizedMPC):
         # variables in cvxpy's z, flattened column-major
         self._z_x = slice(prob.var_id_to_col[self._x.id], prob.var_id_to_col[self._x.id] + self._x.size)
         self._z_u = slice(prob.var_id_to_col[self._u.id], prob.var_id_to_col[self._u.id] + self._u.size)
-        self._solver = osqp.OSQP()
-        A_ones = sp.csc_matrix((np.ones(pattern.nnz), pattern.indices, pattern.indptr), shape=pattern.shape)
-        self._solver.setup(sp.triu(sp.csc_matrix(P), format="csc"), np.zeros(self.n_var), A_ones, self._lo,
-                           np.where(np.arange(self._hi.size) < self.n_eq, 0.0, np.inf), verbose=False,
-                           **self.solver_options)
+        self._P = sp.triu(sp.csc_matrix(P), format="csc")
+        self._A_pattern = sp.csc_matrix((np.ones(pattern.nnz), pattern.indices, pattern.indptr), shape=pattern.shape)
+        self._lo0, self._hi0 = self._lo.copy(), np.where(np.arange(self._hi.size) < self.n_eq, 0.0, np.inf)
 
     def _solve_qp(self, x0: np.ndarray, A: np.ndarray, B: np.ndarray, c: np.ndarray, x_r: np.ndarray,
                   u_r: np.ndarray) -> tuple[str, np.ndarray | None, np.ndarray | None, float]:
