@@ -689,8 +689,9 @@ class OSQPMPC(LinearizedMPC):
         if not hasattr(self, "_T_A"):  # canonicalise once; reset() only rebuilds the OSQP object
             self._canonicalise()
         self._solver = osqp.OSQP()
-        self._solver.setup(self._P, np.zeros(self.n_var), self._A_pattern, self._lo0, self._hi0, verbose=False,
-                           **self.solver_options)
+        # copies: osqp keeps the matrices it is given and writes each update's Ax into their data
+        self._solver.setup(self._P.copy(), np.zeros(self.n_var), self._A_pattern.copy(), self._lo0.copy(),
+                           self._hi0.copy(), verbose=False, **self.solver_options)
 
     def _canonicalise(self) -> None:
         """The cvxpy problem, its canonical QP and the maps from the parameter vector to OSQP's data."""

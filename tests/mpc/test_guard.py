@@ -281,12 +281,17 @@ def test_reset_forgets_the_warm_start(cls: type) -> None:
     canonicalisation and rebuilds only the OSQP object)."""
     rng = np.random.default_rng(5)
     N = 4
-    steps = [(0.5 * rng.normal(size=2), rng.normal(size=(N, 2))) for _ in range(4)]
+    steps = [(0.5 * rng.normal(size=2), np.eye(2) + 0.3 * rng.normal(size=(N, 2, 2)), rng.normal(size=(N, 2, 1)),
+              rng.normal(size=(N, 2))) for _ in range(4)]
     mpc = boxed(cls, N, "as_flown")
-    first = [mpc.solve(x0, *lti(N), x_r, np.zeros(1)).u for x0, x_r in steps]
+
+    def fly_steps() -> list:
+        return [mpc.solve(x0, A, B, np.zeros((N, 2)), x_r, np.zeros(1)).u for x0, A, B, x_r in steps]
+
+    first = fly_steps()
     mpc.reset()
-    again = [mpc.solve(x0, *lti(N), x_r, np.zeros(1)).u for x0, x_r in steps]
+    again = fly_steps()
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
-    warm = [mpc.solve(x0, *lti(N), x_r, np.zeros(1)).u for x0, x_r in steps]  # no reset: warm-started
+    warm = fly_steps()  # no reset: warm-started
     assert any(not np.array_equal(a, b) for a, b in zip(first, warm))
