@@ -61,6 +61,11 @@ def test_the_gain_with_the_lowest_validation_rmse_is_chosen_and_diverged_gains_n
     assert sel.table[0.16]["rmse"] == pytest.approx(0.1) and sel.table[0.04]["rmse"] == pytest.approx(0.3)
     assert sel.table[2.56]["diverged"] and math.isinf(sel.table[2.56]["rmse"])
     assert sel.table[2.56]["fallback_share"] == 0.5
+    # parsimony: the smallest gain within (1 + rtol) of the best 0.1 (0.04 at 0.3 is within 3.5x, not 2.5x)
+    assert select_gain_on_validation(fly_fn, list(error), refs, rtol=1.5).value == 0.16
+    assert select_gain_on_validation(fly_fn, list(error), refs, rtol=2.5).value == 0.04
+    with pytest.raises(ValueError, match="rtol"):
+        select_gain_on_validation(fly_fn, list(error), refs, rtol=-0.1)
 
 
 def test_a_flight_that_fly_refuses_counts_as_diverged(refs) -> None:
