@@ -27,6 +27,7 @@ import torch
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
+from fnnlib.mpc.linearized import COSTS
 from fnnlib.mpc.compiled import warm_up
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.models.residual import AdaptiveResidual
@@ -49,11 +50,11 @@ Q, R = np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"])
 X_LB = np.r_[np.full(6, -np.inf), np.full(3, -PAPER_THETA_MAX), np.full(3, -np.inf)]
 
 CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps, backend)
-    "osqp direct, numba kernels with exact Jacobians, truth 1 RK4 step (notebook default)":
+    "osqp from cvxpy's canonical form, numba kernels with exact Jacobians, truth 1 RK4 step (notebook default)":
         (OSQPMPC, "exact", 1, "numba"),
-    "osqp direct, torch forward differences, truth 1 RK4 step": (OSQPMPC, "forward", 1, "torch"),
-    "osqp direct, torch central differences, truth 1 RK4 step": (OSQPMPC, "central", 1, "torch"),
-    "osqp direct, torch reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch forward differences, truth 1 RK4 step": (OSQPMPC, "forward", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch central differences, truth 1 RK4 step": (OSQPMPC, "central", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1, "torch"),
     "cvxpy Parameters, numba kernels, truth 1 RK4 step": (LinearizedMPC, "exact", 1, "numba"),
     "cvxpy Parameters, torch forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1, "torch"),
     "cvxpy Parameters, torch central differences, truth 4 RK4 sub-steps (session-2 setting)":
@@ -80,11 +81,14 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     ap.add_argument("--repeats", type=int, default=1, help="flights per model and configuration; medians reported")
     ap.add_argument("--only", default=None, help="run only the configurations whose name contains this text")
+    ap.add_argument("--cost", choices=COSTS, default="as_written",
+                    help="Eq. (28)'s weighting: as written in the paper, or as flown by the release (issue 16)")
     args = ap.parse_args()
     residual, mlp, origin = residuals(args.learning_dir)
     truth = Quadrotor(TEST_TRUTH)
     x_r, u_r = lissajous_reference(args.steps, N, Ts=TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
-    print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {TS} s")
+    print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {TS} s; "
+          f"cost {args.cost}")
     out: dict[str, dict[str, dict[str, float]]] = {}
     print(f"numba kernels compiled or loaded from the cache in {warm_up(residual, mlp):.1f} s (not timed below)")
     if args.repeats < 1:
@@ -96,7 +100,7 @@ def main() -> None:
         print(f"  {'model':8s} {'lin+solve med':>13s} {'p95':>6s} {'lin med':>8s} {'solve med':>9s} "
               f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
         rows = {}
-        mpc = cls(N, Q, R, u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
+        mpc = cls(N, Q, R, cost=args.cost, u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
         models = paper_models(residual, mlp, plant=Quadrotor(NOMINAL), L=PAPER_L, beta=PAPER_BETA, N=N,
                               Gamma=PAPER_GAMMA, Ts=TS)
         # AdapNN with the gain the notebook's sweep keeps (4.0): at the release's 8.0 it diverges at 6 N

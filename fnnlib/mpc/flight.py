@@ -16,7 +16,7 @@ from fnnlib.control.flatness import flat_reference
 from fnnlib.control.lissajous import lissajous
 from fnnlib.mpc.backends import FlightBackend, check_backend_name, make_backend
 from fnnlib.mpc.linearize import Linearization
-from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
+from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC, is_diverged
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
 
@@ -55,7 +55,10 @@ class FlightResult:
     ``n_reference_linearizations`` counts the steps after the first where the
     previous plan had left the model's domain (its linearization was not
     finite, as in a diverging flight) and the model was linearized along the
-    reference instead.
+    reference instead. ``fallback_reasons`` counts the MPC's fallbacks per
+    reason and ``n_reference_fallbacks`` those that flew the reference input
+    (see :meth:`~fnnlib.mpc.linearized.LinearizedMPC.solve`); :attr:`diverged`
+    marks a flight with too many fallbacks.
     """
 
     name: str
@@ -73,6 +76,18 @@ class FlightResult:
     statuses: list[str] = field(default_factory=list)
     n_reference_linearizations: int = 0
     elapsed_s: float = float("nan")
+    fallback_reasons: dict[str, int] = field(default_factory=dict)
+    n_reference_fallbacks: int = 0
+
+    @property
+    def fallback_share(self) -> float:
+        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`, issue 16)."""
+        return self.n_fallbacks / len(self.u)
+
+    @property
+    def diverged(self) -> bool:
+        """True when :attr:`fallback_share` exceeds :data:`~fnnlib.mpc.linearized.DIVERGED_FALLBACK_SHARE`."""
+        return is_diverged(self.n_fallbacks, len(self.u))
 
     @property
     def wall_time(self) -> float:
@@ -204,4 +219,5 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         name=model.name, x=np.stack(xs), u=np.stack(us), x_ref=X_r[:steps + 1].copy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
         delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
-        statuses=statuses, Ts=float(Ts), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference)
+        statuses=statuses, Ts=float(Ts), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference,
+        fallback_reasons=dict(mpc.fallback_reasons), n_reference_fallbacks=int(mpc.n_reference_fallbacks))

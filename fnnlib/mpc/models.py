@@ -122,6 +122,17 @@ class AdaptiveNNModel(PredictionModel):
     acceleration prediction error :math:`\tilde a_t = (v_{t+1} - \hat v_{t+1}) / Ts`, where
     :math:`\hat v_{t+1}` is the model's prediction from :math:`(x_t, u_t)` (there is no
     observer to supply :math:`\tilde x`).
+
+    **The gain's convention** (issue 16). Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
+    stepped by explicit Euler over :math:`T_s` with the error above, so each step is
+    :math:`\hat\chi \mathrel{+}= T_s \Gamma\, \tilde a_t \phi^\top = \Gamma\,(v_{t+1} - \hat v_{t+1})\,\phi^\top`
+    (measurement minus prediction; :meth:`AdaptiveResidual.adapt`). The authors' release steps
+    :math:`T_s \Gamma_{rel}\, e\, \phi^\top` with :math:`e` the velocity error taken with the opposite sign
+    convention, i.e. 1/50 of this update at the same number (:math:`T_s` = 0.02). A release gain converts as
+    :math:`\Gamma = T_s \Gamma_{rel}` (the sign absorbed by the error's definition): the paper's
+    :math:`\Gamma = 8` is :math:`\Gamma \approx 0.16` here, and :math:`\Gamma = 8` in this convention is 50 times
+    the release's adaptation (it runs away). Choose :math:`\Gamma` on validation flights,
+    :func:`fnnlib.mpc.tuning.select_gain_on_validation`, over a grid that brackets 0.16.
     """
 
     def __init__(self, name: str, plant: Quadrotor, residual: AdaptiveResidual, *, Ts: float,

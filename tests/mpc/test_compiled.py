@@ -160,7 +160,7 @@ def _mid_flight_models(reference) -> list:
     x_r, u_r = reference
     models = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
                           Gamma=4.0)
-    mpc = OSQPMPC(N, np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3), np.ones(4), u_lb=np.zeros(4),
+    mpc = OSQPMPC(N, np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3), np.ones(4), cost="as_written", u_lb=np.zeros(4),
                   u_ub=np.full(4, 6.0))
     for m in models:
         fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 7], u_r[:N + 6], steps=6, Ts=TS, substeps=1, backend="numba")
@@ -203,7 +203,7 @@ def test_numba_flight_equals_the_torch_flight(reference):
         for backend in ("torch", "numba"):
             m = {mm.name: mm for mm in paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
                           Gamma=4.0)}[name]
-            mpc = OSQPMPC(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+            mpc = OSQPMPC(N, Q, np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
             runs[backend] = fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps,
                                 Ts=TS, substeps=1, linearize_method="reverse", backend=backend)
         a, b = runs["torch"], runs["numba"]
@@ -220,7 +220,7 @@ def test_numba_flight_equals_the_torch_flight(reference):
 def test_fly_refuses_an_unknown_backend_a_mismatched_Ts_and_a_torch_backend_without_method(reference):
     x_r, u_r = reference
     m = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS, Gamma=4.0)[0]
-    mpc = OSQPMPC(N, np.ones(12), np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+    mpc = OSQPMPC(N, np.ones(12), np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
     with pytest.raises(ValueError, match="backend"):
         fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=TS, substeps=1, backend="jax")
     with pytest.raises(ValueError, match="Ts"):

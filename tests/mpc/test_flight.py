@@ -24,15 +24,16 @@ LOOP = {"Ts": TS, "substeps": 4, "backend": "torch", "linearize_method": "centra
 HOVER_EACH = NOMINAL.mass * NOMINAL.g / 4
 
 
-def _mpc(cls: type = LinearizedMPC, **options: float) -> LinearizedMPC | OSQPMPC:
-    """Eq. (28) with App. A.5.3's weights and boxes.
+def _mpc(cls: type = LinearizedMPC, cost: str = "as_written", **options: float) -> LinearizedMPC | OSQPMPC:
+    """Eq. (28) with App. A.5.3's weights and boxes (as written unless ``cost`` says otherwise).
 
     Q = diag(100 x3, 50 x6, 1 x3), R = I, 0 <= u <= 4, |Theta| <= pi/2.
     """
     Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
     x_lb, x_ub = np.full(12, -np.inf), np.full(12, np.inf)
     x_lb[6:9], x_ub[6:9] = -np.pi / 2, np.pi / 2
-    return cls(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub, **options)
+    return cls(N, Q, np.ones(4), cost=cost, u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub,
+               **options)
 
 
 def _fly(model, mpc, truth, x_r, u_r, **options):

@@ -158,8 +158,8 @@ def test_sequential_qp_converges_to_a_dynamically_consistent_plan() -> None:
     """Re-linearising at the solution and re-solving converges: the plan then satisfies the nonlinear model."""
     model = CartModel(Ts=0.05)
     N = 10
-    mpc = LinearizedMPC(N, [10.0, 10.0, 1.0, 1.0], [0.1, 0.1], u_lb=[-3.0, -3.0], u_ub=[3.0, 3.0],
-                        eps_abs=1e-9, eps_rel=1e-9, solver_options={"polishing": True})
+    mpc = LinearizedMPC(N, [10.0, 10.0, 1.0, 1.0], [0.1, 0.1], cost="as_written", u_lb=[-3.0, -3.0],
+                        u_ub=[3.0, 3.0], eps_abs=1e-9, eps_rel=1e-9, solver_options={"polishing": True})
     x0 = np.array([0.5, 0.8, 0.0, 0.0])
     x_bar, u_bar = np.tile(x0, (N, 1)), np.zeros((N, 2))
     steps = []
