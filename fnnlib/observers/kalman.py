@@ -158,11 +158,11 @@ class KalmanObserver(_KalmanBase):
             kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
         return K
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x, u = self.inputs(x)  # u_k = f_neural(y_k), as in Eq. (7)
+    def estimate(self, x: Tensor, u_ext: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``)."""
+        x, u = self.inputs(x, u_ext)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
-            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L))
+            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext)
         ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time
@@ -171,7 +171,7 @@ class KalmanObserver(_KalmanBase):
             means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
             z[i] = means
         z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
-        return split_estimate(self.f, z, x)
+        return split_estimate(self.f, z, x, u_ext)
 
     def __repr__(self) -> str:
         return f"KalmanObserver(n={self.n}, Ts={self.Ts}, steady_state={self.steady_state})"
@@ -220,8 +220,10 @@ class ExtendedKalmanObserver(_KalmanBase):
         x_next = x + Ts * (out[0].detach().double().numpy() + d)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}) + d_{k|k})
         return np.concatenate([x_next, d])[:, None], F
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n); autonomous models only."""
+        if u is not None:
+            raise NotImplementedError("the EKF takes autonomous models only; use KalmanObserver for inputs")
         x = as_trajectory(x, self.n)
         ys = x.reshape(-1, *x.shape[-2:]).double().numpy()
         C = self.C.numpy()
