@@ -192,7 +192,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
             loss = prediction_loss(cascade_forward(f, x, Ts, N, gains, u=u), x, N)
             loss.backward()
             opt.step()
-            result.loss.append(float(loss))
+            result.loss.append(loss.item())
     finally:
         for p in frozen:
             p.requires_grad_(True)

@@ -8,7 +8,7 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.cascade import cascade_predict
 from fnnlib.feedback.decay import check_beta
-from fnnlib.feedback.gains import check_gain, gain_compact
+from fnnlib.feedback.gains import check_gain, gain_compact, implied_n
 from fnnlib.feedback.layer import eval_field, feedback_layer
 from fnnlib.feedback.types import Estimate, VectorField
 
@@ -25,8 +25,9 @@ class LinearFeedback:
         :func:`~fnnlib.feedback.gains.check_gain`.
     Ts : float
         Sampling step of the measurements.
-    n : int
-        State dimension.
+    n : int, optional
+        State dimension; not needed when ``L`` is a vector or matrix or ``f`` has an ``n`` attribute
+        (a :class:`~fnnlib.models.NeuralODE` or a :class:`~fnnlib.systems.DynamicalSystem`).
     allow_unstable : bool
         Accept a gain that is not positive definite or has
         :math:`\rho(I - T_s L) \ge 1`.
@@ -39,11 +40,11 @@ class LinearFeedback:
         The base gain (layer 0 of the cascade; :meth:`observe` uses it alone).
     """
 
-    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int, *, allow_unstable: bool = False,
-                 beta: float = 0.0):
+    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int | None = None, *,
+                 allow_unstable: bool = False, beta: float = 0.0):
         self.f = f
         self.Ts = check_positive(Ts, name="Ts")
-        self.n = int(n)
+        self.n = implied_n(L, n if n is not None else getattr(f, "n", None))
         self.L = check_gain(L, self.n, self.Ts, allow_unstable=allow_unstable)  # (n, n) float64
         self.allow_unstable = bool(allow_unstable)
         self.beta = check_beta(beta)

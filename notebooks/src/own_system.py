@@ -106,8 +106,8 @@ def pendulum_run(seed: int) -> dict:
     gen = F.make_generator(seed)
     t = torch.arange(max(n_train, n_test), dtype=torch.float64) * Ts
     def inputs(T):  # a known torque, two sines with random phases
-        phase = 2 * torch.pi * torch.rand(3, 2, generator=gen, dtype=torch.float64)
-        return u_amp * (torch.sin(0.9 * t[:T, None] + phase[:, :1]) + 0.5 * torch.sin(2.3 * t[:T, None] + phase[:, 1:]))
+        p = 2 * torch.pi * torch.rand(2, generator=gen, dtype=torch.float64)
+        return u_amp * (torch.sin(0.9 * t[:T] + p[0]) + 0.5 * torch.sin(2.3 * t[:T] + p[1]))[:, None]
     u_train, u_tune, u_eval = inputs(n_train), inputs(n_test), inputs(n_test)
     x0 = 0.5 * torch.randn(3, 2, generator=gen, dtype=torch.float64)
     x_train = F.Pendulum(*nominal).simulate(x0[0], t[:n_train], u_train).float()
