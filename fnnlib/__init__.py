@@ -12,6 +12,8 @@ from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
 from fnnlib.feedback import (
     NOISE_AMPLIFICATION_LIMIT,
     CascadeGains,
+    MeasuredFeedback,
+    check_output_gain,
     Estimate,
     GainError,
     GainWarning,
@@ -91,7 +93,7 @@ __version__ = "0.1.0"
 set_num_threads()
 
 __all__ = [
-    "CascadeGains", "GainWarning", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
+    "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
     "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model",
     "tune_gains",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
