@@ -7,24 +7,17 @@ import torch
 
 from fnnlib import GainError, LinearSystem, MeasuredFeedback, check_output_gain, place_observer_gain
 
-F64 = torch.float64
-A = torch.tensor([[0.0, 1.0], [-4.0, -0.4]], dtype=F64)
-B = torch.tensor([[0.0], [1.0]], dtype=F64)
+from tests.feedback.test_inputs import A, B, F64, TS
+from tests.feedback.test_inputs import _euler_data as _euler
+
 C = torch.tensor([[1.0, 0.0]], dtype=F64)  # position only
-TS, T = 0.05, 200
+T = 200
 
 
 def _gain(poles=(0.6, 0.7)):
-    """L with eig(I + Ts (A - L C)) = poles: place on (Ad, Ts C) then L = L_d / Ts."""
+    """L with eig(I + Ts (A - L C)) = poles: placed on the pair (I + Ts A, Ts C)."""
     Ad = torch.eye(2, dtype=F64) + TS * A
     return place_observer_gain(Ad, TS * C, list(poles))
-
-
-def _euler(x0, u):
-    xs = [x0]
-    for k in range(u.shape[0] - 1):
-        xs.append(xs[-1] + TS * (A @ xs[-1] + B @ u[k]))
-    return torch.stack(xs)
 
 
 def test_estimate_converges_at_the_placed_rate_and_predicts_exactly():
