@@ -28,6 +28,7 @@ def test_n_is_implied_by_the_gain_or_the_model():
     assert F.check_gain(torch.tensor([1.0, 2.0]), None, 0.01).shape == (2, 2)
     with pytest.raises(ValueError, match="scalar gain L does not say the state dimension"):
         F.LinearFeedback(lambda t, x: x, 5.0, 0.01)
+    assert F.NeuralFeedbackObserver(model, F.NeuralFeedback(2, [4], "relu"), 0.01).n == 2
 
 
 def test_rate_takes_the_arguments_of_call():
