@@ -49,21 +49,21 @@ class LinearFeedback:
         self.allow_unstable = bool(allow_unstable)
         self.beta = check_beta(beta)
 
-    def observe(self, x: Tensor) -> Estimate:
-        """Run the feedback network along measurements ``x`` (..., T, n).
+    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+        """Run the feedback network along measurements ``x`` (..., T, n) (inputs ``u`` (..., T, m) of a controlled model).
 
         Returns ``x_hat`` (the estimate of Eq. (8)) and ``f_hat`` (the
         corrected change rate of Eq. (7)), both (..., T, n).
         """
         x = as_trajectory(x, self.n)
         with torch.no_grad():
-            fx = eval_field(self.f, x)
+            fx = eval_field(self.f, x, u)
         return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), self.Ts)
 
-    def predict(self, x: Tensor, N: int) -> Tensor:
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
         """N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
 
         :func:`~fnnlib.feedback.cascade.cascade_predict` with this base gain and the decay
         ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}``.
         """
-        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable)
+        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable, u=u)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import KalmanObserver, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
+from fnnlib import KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
 from fnnlib.feedback.layer import shift_inputs
 
 F64 = torch.float64
@@ -101,3 +101,12 @@ def test_bad_inputs_get_clear_errors():
         eval_field(model, x, torch.randn(10, 1, dtype=F64))
     with pytest.raises(TypeError, match=r"model's parameters are torch.float32 but the states are torch.float64.*x.to"):
         eval_field(model, x.double(), torch.randn(10, 1, dtype=F64))
+
+
+def test_linear_feedback_takes_inputs():
+    u = _inputs()
+    x = _euler_data(torch.tensor([1.0, -0.5], dtype=F64), u)
+    fb = LinearFeedback(LinearSystem(A, B), 3.0, TS, beta=0.1)
+    est = fb.observe(x, u)
+    torch.testing.assert_close(est.x_hat, x, rtol=0, atol=1e-12)  # exact model on its own Euler data: no error
+    torch.testing.assert_close(fb.predict(x, 4, u), cascade_predict(LinearSystem(A, B), x, TS, 4, 3.0, 0.1, u=u))
