@@ -41,7 +41,6 @@ def test_rate_takes_the_arguments_of_call():
     assert "How to write your own" in F.DynamicalSystem.__doc__
 
 
-@F.register_model
 class Twice(nn.Module):
     def __init__(self, n: int):
         super().__init__()
@@ -56,8 +55,12 @@ class Twice(nn.Module):
         return 2 * self.lin(x)
 
 
-def test_save_checkpoint_accepts_a_registered_module(tmp_path):
+def test_save_checkpoint_accepts_a_registered_module(tmp_path, monkeypatch):
+    monkeypatch.setattr(F.training.checkpoint, "MODELS", dict(F.MODELS))  # the registry is global: a copy here
     model = Twice(3)
+    with pytest.raises(TypeError, match=r"cannot checkpoint a Twice: register its class first"):
+        F.save_checkpoint(tmp_path / "twice.pt", model)
+    assert F.register_model(Twice) is Twice
     F.save_checkpoint(tmp_path / "twice.pt", model, {"note": "mine"})
     back, meta = F.load_checkpoint(tmp_path / "twice.pt", expected_kind="Twice")
     assert isinstance(back, Twice) and meta == {"note": "mine"}
