@@ -10,8 +10,17 @@ from fnnlib.data import load_bottle, synthetic_throws
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
 from fnnlib.feedback import (
+    NOISE_AMPLIFICATION_LIMIT,
+    CascadeGains,
+    MeasuredFeedback,
+    check_output_gain,
     Estimate,
     GainError,
+    GainWarning,
+    TunedGains,
+    cascade_forward,
+    noise_amplification,
+    tune_gains,
     VectorField,
     cascade_predict,
     cascade_predict_loop,
@@ -60,17 +69,21 @@ from fnnlib.sweeps import (
     paired_levels,
     simulate_levels,
 )
-from fnnlib.systems import DynamicalSystem, Spiral, SwitchedSystem, add_measurement_noise
+from fnnlib.stats import paired_win
+from fnnlib.systems import DynamicalSystem, LinearSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise
 from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
     PAPER_BOTTLE_RECIPE,
     PAPER_FEEDBACK_RECIPE,
     PAPER_SPIRAL_RECIPE,
+    QUICK_RECIPE,
     CheckpointError,
     FeedbackRecipe,
     ODERecipe,
     TrainHistory,
     load_checkpoint,
+    randomized_cases,
+    register_model,
     save_checkpoint,
     train_neural_feedback,
     train_neural_ode,
@@ -79,6 +92,9 @@ from fnnlib.training import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
+    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model",
+    "tune_gains",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
     "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",

@@ -15,6 +15,7 @@ Discrete time (Eq. (25)): :math:`\tilde x_k = (I - T_s L)\tilde x_{k-1} + T_s\De
 from __future__ import annotations
 
 import math
+import warnings
 
 import torch
 from torch import Tensor
@@ -169,7 +170,17 @@ def growth_factor(err: Tensor, *, early: tuple[float, float] = (0.4, 0.5),
         a, b = int(round(lo * T)), max(int(round(hi * T)), int(round(lo * T)) + 1)
         return err[..., a:b].amax(dim=-1)
 
-    return window(*late) / window(*early).clamp_min(torch.finfo(err.dtype).tiny)
+    if T < 2:
+        raise ValueError(f"growth_factor needs a record of at least 2 samples along the last axis, got shape "
+                         f"{tuple(err.shape)}")
+    ratio = window(*late) / window(*early).clamp_min(torch.finfo(err.dtype).tiny)
+    bad = ~torch.isfinite(ratio)
+    if bool(bad.any()):
+        what = "NaN" if bool(torch.isnan(err).any()) else "infinite"
+        warnings.warn(f"growth_factor: {int(bad.sum())} of {ratio.numel()} ratios are not finite because err holds "
+                      f"{what} values (an overflowed error? use scaled_error_norm); they are returned as NaN/inf",
+                      RuntimeWarning, stacklevel=2)
+    return ratio
 
 
 def scaled_error_norm(x: Tensor, x_hat: Tensor) -> Tensor:

@@ -19,21 +19,24 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N, decay_factors, decayed_gains
 from fnnlib.feedback.gains import check_gain, gain_batch, gain_compact
-from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains
+from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains, shift_inputs
 from fnnlib.feedback.types import VectorField
 
 
 def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float, *, diagonal: bool | None = None,
-                return_all: bool = False) -> Tensor:
+                return_all: bool = False, u: Tensor | None = None) -> Tensor:
     """The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
 
     ``x`` (..., T, n); returns :math:`z^{(N)}` of the same shape, or with
     ``return_all`` every depth stacked, (N+1, ..., T, n), depth 0 being ``x``.
+    With inputs ``u`` (..., T, m), layer ``i`` evaluates ``f(t, z, u)`` with row k's input
+    ``u_{k+i}`` (:func:`~fnnlib.feedback.layer.shift_inputs`). Differentiable: gradients flow to
+    the gains in ``L_stack``, to ``f``'s parameters and to ``x``.
     """
     z = x
     depths = [z] if return_all else None
-    for L_i in L_stack:
-        _, f_hat = feedback_layer(eval_field(f, z), z, L_i, Ts, diagonal=diagonal)
+    for i, L_i in enumerate(L_stack):
+        _, f_hat = feedback_layer(eval_field(f, z, shift_inputs(u, i)), z, L_i, Ts, diagonal=diagonal)
         z = z + Ts * f_hat  # z^{(i+1)} = z^{(i)} + Ts * f_hat^{(i)}
         if depths is not None:
             depths.append(z)
@@ -41,15 +44,19 @@ def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float,
 
 
 def _checked(x: Tensor, Ts: float, N: int) -> tuple[Tensor, float, int]:
-    """The checks every cascade makes before any work: a finite trajectory, Ts > 0, an integer N >= 1."""
+    """The checks every cascade makes before any work: a finite, non-empty trajectory, Ts > 0, an integer N >= 1."""
     N = check_N(N)
     Ts = check_positive(Ts, name="Ts")
-    return as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None), Ts, N
+    x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
+    if x.shape[-2] == 0 or x.shape[-1] == 0:
+        raise ValueError(f"x is an empty trajectory (shape {tuple(x.shape)}); give at least one sample of a "
+                         "state with at least one component")
+    return x, Ts, N
 
 
 @torch.no_grad()
 def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
-                    *, return_all: bool = False, allow_unstable: bool = False) -> Tensor:
+                    *, return_all: bool = False, allow_unstable: bool = False, u: Tensor | None = None) -> Tensor:
     r"""N-step prediction by the cascaded feedback network (Sec. 3.3, Eq. (11)), from every start time.
 
     With ``L = 0`` this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
@@ -70,6 +77,9 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Ten
         Decay rate of Eq. (11); 0 keeps every layer at ``L``.
     return_all : bool
         Also return every intermediate depth.
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model ``f(t, x, u)``, one row per sample
+        (the input held over the step from that sample).
 
     Returns
     -------
@@ -79,9 +89,9 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Ten
     """
     x, Ts, N = _checked(x, Ts, N)
     n = x.shape[-1]
-    L = check_gain(L, n, Ts, allow_unstable=allow_unstable)
+    L = check_gain(L, n, Ts, allow_unstable=allow_unstable, N=N, beta=beta)  # warns on strong noise amplification
     L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
-    return run_cascade(f, x, L_stack, Ts, return_all=return_all)
+    return run_cascade(f, x, L_stack, Ts, return_all=return_all, u=u)
 
 
 @torch.no_grad()

@@ -17,18 +17,65 @@ import torch
 from torch import Tensor
 
 from fnnlib._scan import linear_recurrence
-from fnnlib._validation import as_trajectory, check_positive
+from fnnlib._validation import as_trajectory, check_finite, check_positive
 from fnnlib.feedback.gains import gain_batch
 from fnnlib.feedback.types import Estimate, VectorField
 
 
-def eval_field(f: VectorField, x: Tensor) -> Tensor:
-    """Evaluate an autonomous ``f(t, x)`` on every sample of ``x`` (..., T, n) in one batch."""
+def eval_field(f: VectorField, x: Tensor, u: Tensor | None = None) -> Tensor:
+    """Evaluate ``f(t, x)`` (or a controlled ``f(t, x, u)``) on every sample of ``x`` (..., T, n) in one batch.
+
+    ``u`` (..., T, m), when given, holds the input at each sample (broadcast against ``x``'s leading axes)
+    and is passed as the third argument. A model whose parameters have another dtype than ``x`` is refused
+    with a clear error (``simulate`` returns float64, models are usually float32: call ``x.float()``).
+    """
     n = x.shape[-1]
-    out = f(0.0, x.reshape(-1, n))
+    check_model_dtype(f, x)
+    if u is None:
+        out = f(0.0, x.reshape(-1, n))
+    else:
+        u = check_inputs(u, x)
+        out = f(0.0, x.reshape(-1, n), u.expand(*x.shape[:-1], u.shape[-1]).reshape(-1, u.shape[-1]))
     if out.shape != (x[..., 0].numel(), n):
         raise ValueError(f"vector field returned shape {tuple(out.shape)} for input {(x[..., 0].numel(), n)}")
     return out.reshape(x.shape)
+
+
+def check_model_dtype(f: VectorField, x: Tensor) -> None:
+    """Raise a clear ``TypeError`` when ``f`` is a module whose floating parameters differ in dtype from ``x``."""
+    params = getattr(f, "parameters", None)
+    if params is None or not callable(params):
+        return
+    p = next((q for q in params() if q.is_floating_point()), None)
+    if p is not None and p.dtype != x.dtype:
+        raise TypeError(f"the model's parameters are {p.dtype} but the states are {x.dtype}; convert one of them "
+                        f"(e.g. x.to({p.dtype}) for simulated data, which is float64, or model.to({x.dtype}))")
+
+
+def check_inputs(u: Tensor, x: Tensor) -> Tensor:
+    """Check inputs ``u`` (..., T, m) against states ``x`` (..., T, n): a finite float tensor with x's dtype and T."""
+    if not isinstance(u, Tensor) or not u.is_floating_point() or u.ndim < 2:
+        raise TypeError(f"inputs u must be a floating-point tensor of shape (..., T, m), got "
+                        f"{type(u).__name__} {tuple(getattr(u, 'shape', ()))}")
+    if u.shape[-2] != x.shape[-2]:
+        raise ValueError(f"inputs u have {u.shape[-2]} samples but the states x have {x.shape[-2]}")
+    if u.dtype != x.dtype:
+        raise TypeError(f"inputs u are {u.dtype} but the states x are {x.dtype}")
+    check_finite(u, name="u")
+    return u
+
+
+def shift_inputs(u: Tensor | None, i: int) -> Tensor | None:
+    """``u`` advanced by ``i`` samples along time, the last input held: row k holds ``u_{min(k+i, T-1)}``.
+
+    Layer ``i`` of the cascade steps the state from :math:`t_{k+i}` to :math:`t_{k+i+1}`, so it needs
+    the input applied at :math:`t_{k+i}`.
+    """
+    if u is None or i == 0:
+        return u
+    T = u.shape[-2]
+    idx = torch.clamp(torch.arange(T) + i, max=T - 1)
+    return u.index_select(-2, idx)
 
 
 def feedback_layer(fx: Tensor, z: Tensor, L: Tensor, Ts: float, *, diagonal: bool | None = None) -> Estimate:

@@ -82,6 +82,11 @@ class NeuralODE(nn.Module):
             raise ValueError("model was built with n_input=0 but an input u was given")
         return self.net(x)
 
-    def forward(self, t: Tensor | float, x: Tensor) -> Tensor:
-        """``f(t, x)`` for torchdiffeq; autonomous models only."""
-        return self.vector_field(x)
+    @property
+    def n(self) -> int:
+        """The state dimension (the same number as ``n_state``; ``n`` is the name the observers use)."""
+        return self.n_state
+
+    def forward(self, t: Tensor | float, x: Tensor, u: Tensor | None = None) -> Tensor:
+        """``f(t, x)`` for torchdiffeq, or ``f(t, x, u)`` for a model with inputs (``n_input > 0``)."""
+        return self.vector_field(x, u)

@@ -29,7 +29,7 @@ from torch import Tensor
 from fnnlib._scan import linear_recurrence
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N
-from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.layer import eval_field, shift_inputs
 from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
@@ -100,7 +100,7 @@ def constant_gain_filter(A: Tensor, B: Tensor, C: Tensor, L: Tensor, u: Tensor, 
     return prior + (y - prior @ C.T) @ M.T  # z_{k|k} = z_{k|k-1} + M (y_k - C z_{k|k-1})
 
 
-def split_estimate(f: VectorField, z: Tensor, y: Tensor) -> DisturbanceEstimate:
+def split_estimate(f: VectorField, z: Tensor, y: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
     """Split filtered augmented states ``z`` (..., T, 2n) into the estimate, in ``y``'s dtype.
 
     The change rate is the observer's own model, :math:`\\hat f_k = f_{neural}(y_k) + \\hat d_{k|k}`.
@@ -108,12 +108,13 @@ def split_estimate(f: VectorField, z: Tensor, y: Tensor) -> DisturbanceEstimate:
     n = y.shape[-1]
     x_hat, d_hat = z[..., :n].to(y.dtype), z[..., n:].to(y.dtype)
     with torch.no_grad():
-        f_hat = eval_field(f, y) + d_hat
+        f_hat = eval_field(f, y, u) + d_hat
     return DisturbanceEstimate(x_hat, d_hat, f_hat)
 
 
 @torch.no_grad()
-def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float, N: int) -> Tensor:
+def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float, N: int,
+                      u: Tensor | None = None) -> Tensor:
     r"""N Euler steps of the corrected model from every start, the disturbance held frozen.
 
     :math:`z_{j+1} = z_j + T_s\,(f_{neural}(z_j) + \hat d_k)`, :math:`z_0 = \hat x_k`,
@@ -123,6 +124,8 @@ def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float,
     ----------
     x_start, d_hat : Tensor, shape (..., T, n)
         Start states and the disturbance estimate at each start.
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model; step ``j`` from start ``k`` uses ``u_{k+j}`` (the last one held).
 
     Returns
     -------
@@ -132,8 +135,8 @@ def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float,
     if x_start.shape != d_hat.shape:
         raise ValueError(f"x_start {tuple(x_start.shape)} and d_hat {tuple(d_hat.shape)} differ in shape")
     z = x_start
-    for _ in range(check_N(N)):
-        z = z + Ts * (eval_field(f, z) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j) + d_hat)
+    for j in range(check_N(N)):
+        z = z + Ts * (eval_field(f, z, shift_inputs(u, j)) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j, u_j) + d_hat)
     return z
 
 
@@ -163,25 +166,32 @@ class AugmentedObserver:
         self.n = int(n)
         self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:  # pragma: no cover - abstract
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def inputs(self, x: Tensor) -> tuple[Tensor, Tensor]:
-        """The checked measurements ``y`` (..., T, n) and the known input :math:`u_k = f_{neural}(y_k)`, as in Eq. (7)."""
+    def inputs(self, x: Tensor, u_ext: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """The checked measurements ``y`` (..., T, n) and the known input :math:`u_k = f_{neural}(y_k)`, as in Eq. (7).
+
+        For a controlled model, ``u_ext`` (..., T, m) are its inputs: :math:`u_k = f_{neural}(y_k, u^{ext}_k)`.
+        """
         x = as_trajectory(x, self.n)
         with torch.no_grad():
-            u = eval_field(self.f, x)
+            u = eval_field(self.f, x, u_ext)
         return x, u
 
-    def constant_gain_estimate(self, x: Tensor, u: Tensor, L: Tensor) -> DisturbanceEstimate:
+    def constant_gain_estimate(self, x: Tensor, u: Tensor, L: Tensor,
+                               u_ext: Tensor | None = None) -> DisturbanceEstimate:
         """:func:`constant_gain_filter` with the predictor-form gain ``L`` (2n, n), split into the estimate."""
-        return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x)
+        return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x, u_ext)
 
-    def observe(self, x: Tensor) -> Estimate:
-        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n)."""
-        return self.estimate(x).as_estimate()
+    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n).
 
-    def predict(self, x: Tensor, N: int) -> Tensor:
+        ``u`` (..., T, m): inputs of a controlled model.
+        """
+        return self.estimate(x, u).as_estimate()
+
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
         """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
-        est = self.estimate(x)
-        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
+        est = self.estimate(x, u)
+        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N, u)

@@ -100,18 +100,25 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
 class _KalmanBase(AugmentedObserver):
     """Shared set-up of the two Kalman filters: Q, R, P0 and the filterpy filter."""
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None):
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None):
         super().__init__(f, Ts, n)
         m = 2 * self.n
+        if C is not None:  # partial measurements y = C x: the augmented output matrix is [C 0]
+            C = torch.as_tensor(C, dtype=torch.float64)
+            if C.ndim != 2 or C.shape[1] != self.n or not bool(torch.isfinite(C).all()):
+                raise ValueError(f"C must be a finite (p, {self.n}) matrix, got shape {tuple(C.shape)}")
+            self.C = torch.cat([C, torch.zeros(C.shape[0], self.n, dtype=torch.float64)], 1)
+        self.p = self.C.shape[0]
         self.Q = as_covariance(Q, m, name="Q")
-        self.R = as_covariance(R, self.n, name="R", definite=True)
-        if P0 is None:  # first measurement's noise on x; a disturbance of order 10 (rate units) on d
-            P0 = torch.block_diag(self.R, 100.0 * torch.eye(self.n, dtype=torch.float64))
+        self.R = as_covariance(R, self.p, name="R", definite=True)
+        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
+            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
+            P0 = torch.block_diag(x_part, 100.0 * torch.eye(self.n, dtype=torch.float64))
         self.P0 = as_covariance(P0, m, name="P0")
 
     def _new(self, cls, *args):
         """A filterpy filter with this plant's matrices (numpy), started at P0."""
-        kf = cls(*args, dim_x=2 * self.n, dim_z=self.n)
+        kf = cls(*args, dim_x=2 * self.n, dim_z=self.p)
         kf.F, kf.H = self.A.numpy().copy(), self.C.numpy().copy()
         kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
         return kf
@@ -138,7 +145,7 @@ class KalmanObserver(_KalmanBase):
     """
 
     def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False):
-        super().__init__(f, Ts, n, Q, R, P0=P0)
+        super().__init__(f, Ts, n, Q, R, P0=P0)  # full-state measurements: f is evaluated at y (Eq. (7))
         self.steady_state = bool(steady_state)
         self.stationary = steady_state_gain(self.A, self.C, self.Q, self.R)
 
@@ -158,11 +165,11 @@ class KalmanObserver(_KalmanBase):
             kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
         return K
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x, u = self.inputs(x)  # u_k = f_neural(y_k), as in Eq. (7)
+    def estimate(self, x: Tensor, u_ext: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``)."""
+        x, u = self.inputs(x, u_ext)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
-            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L))
+            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext)
         ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time
@@ -171,7 +178,7 @@ class KalmanObserver(_KalmanBase):
             means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
             z[i] = means
         z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
-        return split_estimate(self.f, z, x)
+        return split_estimate(self.f, z, x, u_ext)
 
     def __repr__(self) -> str:
         return f"KalmanObserver(n={self.n}, Ts={self.Ts}, steady_state={self.steady_state})"
@@ -202,7 +209,11 @@ class ExtendedKalmanObserver(_KalmanBase):
     update is linear (:math:`H = C`). The change rate is the model's own,
     :math:`\hat f_k = f_{neural}(\hat x_{k|k}) + \hat d_{k|k}`.
 
-    Parameters are those of :class:`KalmanObserver` (no ``steady_state``).
+    Parameters are those of :class:`KalmanObserver` (no ``steady_state``), and ``C`` (p, n): measure
+    only :math:`y = C x` (default: every state; then ``R`` is (p, p) and the default ``P0`` puts unit
+    variance on the state). The model is evaluated at the estimate, so partial measurements need no
+    full state (the :class:`~fnnlib.feedback.measured.MeasuredFeedback` of the same ``C`` is its
+    constant-gain counterpart).
     filterpy advances one sample per call, so :meth:`estimate` loops over
     time and over the leading batch axes in Python.
     """
@@ -220,21 +231,24 @@ class ExtendedKalmanObserver(_KalmanBase):
         x_next = x + Ts * (out[0].detach().double().numpy() + d)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}) + d_{k|k})
         return np.concatenate([x_next, d])[:, None], F
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x = as_trajectory(x, self.n)
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n); autonomous models only."""
+        if u is not None:
+            raise NotImplementedError("the EKF takes autonomous models only; use KalmanObserver for inputs")
+        x = as_trajectory(x, self.p, name="y")
         ys = x.reshape(-1, *x.shape[-2:]).double().numpy()
         C = self.C.numpy()
+        C_pinv = np.linalg.pinv(C[:, : self.n])  # the least-squares state of a measurement
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
             ekf = self._new(_LearnedModelEKF, lambda s: self._step(s, x.dtype))
-            ekf.x = np.concatenate([y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [y_0; 0]
+            ekf.x = np.concatenate([C_pinv @ y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [C^+ y_0; 0]
             for k in range(y.shape[0]):
                 if k:
                     ekf.predict()  # z = Phi(z); P = F P F' + Q
                 ekf.update(y[k][:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s)  # K, z += K (y - C z)
                 z[i, k] = ekf.x[:, 0]
-        z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
+        z = torch.as_tensor(z).reshape(*x.shape[:-2], x.shape[-2], 2 * self.n)
         n = self.n
         x_hat, d_hat = z[..., :n].to(x.dtype), z[..., n:].to(x.dtype)
         with torch.no_grad():

@@ -8,7 +8,7 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.cascade import cascade_predict
 from fnnlib.feedback.decay import check_beta
-from fnnlib.feedback.gains import check_gain, gain_compact
+from fnnlib.feedback.gains import check_gain, gain_compact, implied_n
 from fnnlib.feedback.layer import eval_field, feedback_layer
 from fnnlib.feedback.types import Estimate, VectorField
 
@@ -25,8 +25,9 @@ class LinearFeedback:
         :func:`~fnnlib.feedback.gains.check_gain`.
     Ts : float
         Sampling step of the measurements.
-    n : int
-        State dimension.
+    n : int, optional
+        State dimension; not needed when ``L`` is a vector or matrix or ``f`` has an ``n`` attribute
+        (a :class:`~fnnlib.models.NeuralODE` or a :class:`~fnnlib.systems.DynamicalSystem`).
     allow_unstable : bool
         Accept a gain that is not positive definite or has
         :math:`\rho(I - T_s L) \ge 1`.
@@ -39,30 +40,30 @@ class LinearFeedback:
         The base gain (layer 0 of the cascade; :meth:`observe` uses it alone).
     """
 
-    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int, *, allow_unstable: bool = False,
-                 beta: float = 0.0):
+    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int | None = None, *,
+                 allow_unstable: bool = False, beta: float = 0.0):
         self.f = f
         self.Ts = check_positive(Ts, name="Ts")
-        self.n = int(n)
+        self.n = implied_n(L, n if n is not None else getattr(f, "n", None))
         self.L = check_gain(L, self.n, self.Ts, allow_unstable=allow_unstable)  # (n, n) float64
         self.allow_unstable = bool(allow_unstable)
         self.beta = check_beta(beta)
 
-    def observe(self, x: Tensor) -> Estimate:
-        """Run the feedback network along measurements ``x`` (..., T, n).
+    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+        """Run the feedback network along measurements ``x`` (..., T, n) (inputs ``u`` (..., T, m) of a controlled model).
 
         Returns ``x_hat`` (the estimate of Eq. (8)) and ``f_hat`` (the
         corrected change rate of Eq. (7)), both (..., T, n).
         """
         x = as_trajectory(x, self.n)
         with torch.no_grad():
-            fx = eval_field(self.f, x)
+            fx = eval_field(self.f, x, u)
         return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), self.Ts)
 
-    def predict(self, x: Tensor, N: int) -> Tensor:
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
         """N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
 
         :func:`~fnnlib.feedback.cascade.cascade_predict` with this base gain and the decay
         ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}``.
         """
-        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable)
+        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable, u=u)

@@ -135,9 +135,9 @@ class LuenbergerObserver(AugmentedObserver):
                                  "pass allow_unstable=True to use it anyway")
         self.poles = [complex(z) for z in (poles if poles is not None else self.error_poles())]
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        return self.constant_gain_estimate(*self.inputs(x), self.L)
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u``)."""
+        return self.constant_gain_estimate(*self.inputs(x, u), self.L, u)
 
     def error_poles(self) -> np.ndarray:
         """Eigenvalues of :math:`A - LC` (complex, shape (2n,))."""

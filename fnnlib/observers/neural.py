@@ -62,17 +62,20 @@ class NeuralFeedbackObserver:
         :class:`~fnnlib.models.NeuralFeedback`.
     Ts : float
         Sampling step of the measurements (also the prediction step).
-    n : int
-        State dimension.
+    n : int, optional
+        State dimension; by default ``f.n`` (a :class:`~fnnlib.models.NeuralODE` or a system has it).
     beta : float
         Decay of the feedback along the cascade, the analogue of Eq. (11): layer ``i`` uses
         :math:`e^{-\beta i} h_{neural}`. 0 (the default) keeps the learned feedback unchanged.
     """
 
-    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int, *, beta: float = 0.0):
+    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int | None = None, *, beta: float = 0.0):
         self.f = f
         self.h = h
         self.Ts = check_positive(Ts, name="Ts")
+        n = n if n is not None else getattr(f, "n", None)
+        if n is None:
+            raise ValueError("pass the state dimension n (f has no `n` attribute to take it from)")
         self.n = int(n)
         self.beta = check_beta(beta)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -40,6 +41,41 @@ class FeedbackRecipe(Recipe):
 #: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,
 #: the rollout refreshed every iteration as Alg. 1 writes it.
 PAPER_FEEDBACK_RECIPE = FeedbackRecipe(iterations=2000, batch_size=100, lr=0.01, optimizer="rmsprop", refresh_every=1)
+
+
+def randomized_cases(make_system, low: Sequence[float], high: Sequence[float], n_case: int, x0: Tensor,
+                     t: Tensor) -> tuple[Tensor, Tensor]:
+    r"""The randomized cases of Alg. 1: ``n_case`` systems with parameters spread evenly from ``low`` to ``high``.
+
+    Case ``i`` has parameters ``low + i (high - low) / (n_case - 1)`` (all parameters move together, as the
+    paper's 20 spiral cases do: :math:`\omega` {0.8:0.12:3.08}, :math:`\eta` {0.04:0.005:0.135},
+    :math:`\varepsilon` {-24:2.4:21.6}), and is simulated from ``x0`` over ``t``.
+
+    Parameters
+    ----------
+    make_system : callable
+        ``make_system(*params)`` -> a :class:`~fnnlib.systems.DynamicalSystem`, e.g. ``fnnlib.Spiral``.
+    low, high : sequence of float
+        The parameter range, one entry per parameter.
+    n_case : int
+        Number of cases (>= 2).
+    x0 : Tensor, shape (n,)
+    t : Tensor, shape (T,)
+
+    Returns
+    -------
+    (X, params)
+        ``X`` (n_case, T, n) float64, the input of :func:`train_neural_feedback`; ``params`` (n_case, P).
+    """
+    low, high = torch.as_tensor(low, dtype=torch.float64), torch.as_tensor(high, dtype=torch.float64)
+    if low.ndim != 1 or low.shape != high.shape:
+        raise ValueError(f"low and high must be 1-D of one length, got {tuple(low.shape)} and {tuple(high.shape)}")
+    if int(n_case) != n_case or int(n_case) < 2:
+        raise ValueError(f"n_case must be an integer >= 2, got {n_case!r}")
+    frac = torch.arange(int(n_case), dtype=torch.float64)[:, None] / (int(n_case) - 1)
+    params = low + frac * (high - low)
+    X = torch.stack([make_system(*p.tolist()).simulate(x0, t) for p in params])
+    return X, params
 
 
 def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float) -> Tensor:

@@ -237,7 +237,7 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # %%
 sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
 x10 = sw.simulate(torch.tensor(x0), t)
-f10 = sw.rate(x10, t).float()
+f10 = sw.rate(t, x10).float()
 x10 = x10.float()
 est10 = F.LinearFeedback(model, L, Ts, 2).observe(x10)
 with torch.no_grad():

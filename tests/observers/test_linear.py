@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import DynamicalSystem, GainError, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
+from fnnlib import DynamicalSystem, GainError, GainWarning, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
 
 F64 = torch.float64
 
@@ -231,11 +231,21 @@ def _obs(L=1.0, Ts=0.1, n=2, **kw):
     return LinearFeedback(Spiral(2.0, 0.1, 0.0), L, Ts, n, **kw)
 
 
-@pytest.mark.parametrize("L", [-1.0, torch.tensor([1.0, 0.0]), torch.tensor([[1.0, 3.0], [3.0, 1.0]])],
-                         ids=["negative", "semidefinite", "indefinite"])
+@pytest.mark.parametrize("L", [-1.0, torch.tensor([[1.0, 3.0], [3.0, 1.0]])], ids=["negative", "indefinite"])
 def test_gain_not_positive_definite(L):
     with pytest.raises(GainError, match=r"not positive definite .*lambda_min\(L\) > 0"):
         _obs(L)
+
+
+def test_semidefinite_gain_is_accepted_with_a_warning_naming_the_uncorrected_state():
+    with pytest.warns(GainWarning, match=r"positive semidefinite: states \[1\] are not corrected"):
+        obs = _obs(torch.tensor([1.0, 0.0]))
+    torch.testing.assert_close(obs.L, torch.diag(torch.tensor([1.0, 0.0], dtype=torch.float64)))
+    with pytest.raises(GainError, match=r"not positive definite .*lambda_min\(L\) > 0"):
+        check_gain(torch.tensor([1.0, 0.0]), 2, 0.1, allow_semidefinite=False)
+    with pytest.raises(GainError, match=r"rho\(I - Ts L\) = 1\.5 >= 1"):  # the corrected state is still checked
+        with pytest.warns(GainWarning):
+            check_gain(torch.tensor([25.0, 0.0]), 2, 0.1)
 
 
 def test_gain_makes_discrete_dynamics_unstable():
