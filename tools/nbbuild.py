@@ -15,7 +15,7 @@ cell's printed output; every other cell only has to run without error).
 Anything else on a separator line is an error.
 
     .venv/bin/python tools/nbbuild.py                       # every notebooks/src/*.py -> notebooks/*.ipynb
-    .venv/bin/python tools/nbbuild.py notebooks/src/spiral.py notebooks/spiral.ipynb
+    .venv/bin/python tools/nbbuild.py notebooks/src/01_spiral.py notebooks/01_spiral.ipynb
     .venv/bin/python tools/nbbuild.py          # every notebooks/src/<name>.py -> notebooks/<name>.ipynb
 """
 
