@@ -43,8 +43,9 @@ book: venv
 data: venv
 	$(VENV)/bin/fnn-pipeline data fetch --data-dir $(DATA_DIR)
 
+# -n auto: one pytest-xdist worker per core; the smoke pipeline still runs once (tests/conftest.py)
 test: venv
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto
 
 # Regenerate environment-lock.txt after changing pyproject.toml (needs pip-tools in some venv).
 lock:

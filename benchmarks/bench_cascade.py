@@ -25,8 +25,9 @@ def best_of(fn, repeats: int) -> float:
     return min(times)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def spiral_case(description: str):
+    """The command line (--repeats, --T, --N) and the paper's test case: an untrained 2-50-50-2 model, the test spiral."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--T", type=int, default=1000)
     ap.add_argument("--N", type=int, default=50)
@@ -35,6 +36,11 @@ def main() -> None:
     model = F.NeuralODE(2, (50, 50), "relu")
     t = torch.arange(args.T, dtype=torch.float64) * 0.01
     x = F.Spiral(3.0, 0.05, 10.0).simulate(torch.tensor([9.0, 0.0]), t).float()
+    return args, model, x
+
+
+def main() -> None:
+    args, model, x = spiral_case(__doc__.splitlines()[0])
     batched = best_of(lambda: F.cascade_predict(model, x, 0.01, args.N, 20.0, 0.02), args.repeats)
     loop = best_of(lambda: F.cascade_predict_loop(model, x, 0.01, args.N, 20.0, 0.02), max(1, args.repeats // 5))
     # agreement, in float64 (float32 rounding is amplified by up to (1 + Ts L)^N along the cascade)

@@ -40,12 +40,12 @@ class ToyLoop(nn.Module):
         return torch.cat([v, dv, om, dom, ep, et], dim=1)
 
 
-def rk4(f: nn.Module, x: Tensor, I: Tensor, dt: float) -> Tensor:
+def rk4(f: nn.Module, x: Tensor, I: Tensor, Ts: float) -> Tensor:
     k1 = f(x, I)
-    k2 = f(x + 0.5 * dt * k1, I)
-    k3 = f(x + 0.5 * dt * k2, I)
-    k4 = f(x + dt * k3, I)
-    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    k2 = f(x + 0.5 * Ts * k1, I)
+    k3 = f(x + 0.5 * Ts * k2, I)
+    k4 = f(x + Ts * k3, I)
+    return x + Ts / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def saved_mib(fn: Callable[[], object]) -> float:
@@ -84,15 +84,15 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     args = ap.parse_args()
     T, reps = (20, 3) if args.quick else (args.T, args.reps)
-    B, dt = args.B, 0.01
+    B, Ts = args.B, 0.01
     dtype, device = getattr(torch, args.dtype), torch.device(args.device)
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
 
     torch.manual_seed(0)
     model = ToyLoop().to(dtype=dtype, device=device)
-    step = lambda x, u: rk4(model, x, u, dt)  # noqa: E731
+    step = lambda x, u: rk4(model, x, u, Ts)  # noqa: E731
     params = list(model.parameters())
-    t = torch.arange(T, dtype=dtype, device=device) * dt
+    t = torch.arange(T, dtype=dtype, device=device) * Ts
     I = torch.sin(t[None, :, None] * (1.0 + torch.rand(B, 1, 6, dtype=dtype, device=device))
                   + 6.28 * torch.rand(B, 1, 6, dtype=dtype, device=device))  # (B, T, 6)
     x_r = rollout(step, 0.1 * torch.randn(B, 18, dtype=dtype, device=device), I)

@@ -27,22 +27,34 @@ import torch
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
+from fnnlib.mpc.linearized import COSTS
 from fnnlib.mpc.compiled import warm_up
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.models import AdaptiveNNModel, paper_models
-from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor
+from fnnlib.quadrotor_presets import (
+    PAPER_BETA,
+    PAPER_GAMMA,
+    PAPER_HORIZON,
+    PAPER_L,
+    PAPER_LISSAJOUS,
+    PAPER_MPC_WEIGHTS,
+    PAPER_RESIDUAL_RECIPE,
+    PAPER_THETA_MAX,
+    PAPER_TS,
+)
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
-N, DT = 10, 0.02
-Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
-X_LB = np.r_[np.full(6, -np.inf), np.full(3, -np.pi / 2), np.full(3, -np.inf)]
+N, TS = PAPER_HORIZON, PAPER_TS
+Q, R = np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"])
+X_LB = np.r_[np.full(6, -np.inf), np.full(3, -PAPER_THETA_MAX), np.full(3, -np.inf)]
 
 CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps, backend)
-    "osqp direct, numba kernels with exact Jacobians, truth 1 RK4 step (notebook default)":
+    "osqp from cvxpy's canonical form, numba kernels with exact Jacobians, truth 1 RK4 step (notebook default)":
         (OSQPMPC, "exact", 1, "numba"),
-    "osqp direct, torch forward differences, truth 1 RK4 step": (OSQPMPC, "forward", 1, "torch"),
-    "osqp direct, torch central differences, truth 1 RK4 step": (OSQPMPC, "central", 1, "torch"),
-    "osqp direct, torch reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch forward differences, truth 1 RK4 step": (OSQPMPC, "forward", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch central differences, truth 1 RK4 step": (OSQPMPC, "central", 1, "torch"),
+    "osqp from cvxpy's canonical form, torch reverse-mode autograd, truth 1 RK4 step": (OSQPMPC, "reverse", 1, "torch"),
     "cvxpy Parameters, numba kernels, truth 1 RK4 step": (LinearizedMPC, "exact", 1, "numba"),
     "cvxpy Parameters, torch forward differences, truth 1 RK4 step": (LinearizedMPC, "forward", 1, "torch"),
     "cvxpy Parameters, torch central differences, truth 4 RK4 sub-steps (session-2 setting)":
@@ -58,7 +70,8 @@ def residuals(learning_dir: Path | None) -> tuple[torch.nn.Module, torch.nn.Modu
         mlp, _ = F.load_checkpoint(learning_dir / "mlp.pt", expected_kind="AeroResidual")
         return res.double(), mlp.double(), f"trained, from {learning_dir}"
     torch.manual_seed(0)
-    return AeroResidual().double(), AeroResidual().double(), "freshly initialised (2 x 36 tanh)"
+    shape = (PAPER_RESIDUAL_RECIPE["hidden"], PAPER_RESIDUAL_RECIPE["activation"])
+    return AeroResidual(*shape).double(), AeroResidual(*shape).double(), "freshly initialised (2 x 36 tanh)"
 
 
 def main() -> None:
@@ -68,11 +81,14 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     ap.add_argument("--repeats", type=int, default=1, help="flights per model and configuration; medians reported")
     ap.add_argument("--only", default=None, help="run only the configurations whose name contains this text")
+    ap.add_argument("--cost", choices=COSTS, default="as_written",
+                    help="Eq. (28)'s weighting: as written in the paper, or as flown by the release (issue 16)")
     args = ap.parse_args()
     residual, mlp, origin = residuals(args.learning_dir)
     truth = Quadrotor(TEST_TRUTH)
-    x_r, u_r = lissajous_reference(args.steps, N, dt=DT)
-    print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {DT} s")
+    x_r, u_r = lissajous_reference(args.steps, N, Ts=TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    print(f"residual networks: {origin}; torch threads: {torch.get_num_threads()}; {args.steps} steps of {TS} s; "
+          f"cost {args.cost}")
     out: dict[str, dict[str, dict[str, float]]] = {}
     print(f"numba kernels compiled or loaded from the cache in {warm_up(residual, mlp):.1f} s (not timed below)")
     if args.repeats < 1:
@@ -84,13 +100,14 @@ def main() -> None:
         print(f"  {'model':8s} {'lin+solve med':>13s} {'p95':>6s} {'lin med':>8s} {'solve med':>9s} "
               f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
         rows = {}
-        mpc = cls(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
-        models = paper_models(residual, mlp, N=N, dt=DT)
+        mpc = cls(N, Q, R, cost=args.cost, u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
+        models = paper_models(residual, mlp, plant=Quadrotor(NOMINAL), L=PAPER_L, beta=PAPER_BETA, N=N,
+                              Gamma=PAPER_GAMMA, Ts=TS)
         # AdapNN with the gain the notebook's sweep keeps (4.0): at the release's 8.0 it diverges at 6 N
-        models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, 4.0), dt=DT)
+        models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, 4.0), Ts=TS)
         for model in models:
-            runs = [fly(model, mpc, truth, x_r, u_r, steps=args.steps, dt=DT, substeps=substeps,
-                        linearize_method=method if backend == "torch" else "forward", backend=backend)
+            runs = [fly(model, mpc, truth, x_r, u_r, steps=args.steps, Ts=TS, substeps=substeps,
+                        linearize_method=method if backend == "torch" else None, backend=backend)
                     for _ in range(args.repeats)]
             # the first step of each flight warms caches up
             lin = 1e3 * np.concatenate([r.t_linearize[1:] for r in runs])
@@ -100,7 +117,7 @@ def main() -> None:
                                 "step_ms_p95": float(np.percentile(lin + sol, 95)),
                                 "linearize_ms_median": float(np.median(lin)), "solve_ms_median": float(np.median(sol)),
                                 "loop_ms_per_step": 1e3 * elapsed / args.steps,
-                                "real_time_factor": args.steps * DT / elapsed,
+                                "real_time_factor": args.steps * TS / elapsed,
                                 "fallbacks": max(r.n_fallbacks for r in runs)}
             v = rows[model.name]
             print(f"  {model.name:8s} {v['step_ms_median']:13.2f} {v['step_ms_p95']:6.2f} {v['linearize_ms_median']:8.2f} "

@@ -23,11 +23,14 @@ import torch
 
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.compiled import CompiledQuadrotor, warm_up
-from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor, allocation_matrix, rotation_matrix
+from fnnlib.quadrotor_presets import PAPER_RESIDUAL_RECIPE, PAPER_TS
+from fnnlib.systems.allocation import allocation_matrix
+from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor
+from fnnlib.systems.rotations import rotation_matrix
 
 
 def numpy_twin(q: Quadrotor, net: AeroResidual):
-    """Eq. (27) + residual in numpy, the same formulas as ``Quadrotor._f`` (matrix form)."""
+    """Eq. (27) + residual in numpy, the same formulas as ``Quadrotor.rhs`` (matrix form)."""
     prm = q.params
     C = allocation_matrix(prm).numpy()
     J, D, F = (np.array(v) for v in (prm.inertia, prm.drag, prm.force_disturbance))
@@ -59,12 +62,12 @@ def numpy_twin(q: Quadrotor, net: AeroResidual):
         w_dot = (wr[:, 1:] - np.cross(w, J * w)) / J
         return np.concatenate([v, v_dot, th_dot, w_dot], -1)
 
-    def step(x: np.ndarray, u: np.ndarray, dt: float = 0.02) -> np.ndarray:
+    def step(x: np.ndarray, u: np.ndarray, Ts: float = PAPER_TS) -> np.ndarray:
         k1 = f(x, u)
-        k2 = f(x + 0.5 * dt * k1, u)
-        k3 = f(x + 0.5 * dt * k2, u)
-        k4 = f(x + dt * k3, u)
-        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        k2 = f(x + 0.5 * Ts * k1, u)
+        k3 = f(x + 0.5 * Ts * k2, u)
+        k4 = f(x + Ts * k3, u)
+        return x + Ts / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
     return step
 
@@ -83,7 +86,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=300)
     args = ap.parse_args()
     torch.manual_seed(0)
-    q, net = Quadrotor(TEST_TRUTH), AeroResidual().double()
+    q = Quadrotor(TEST_TRUTH)
+    net = AeroResidual(PAPER_RESIDUAL_RECIPE["hidden"], PAPER_RESIDUAL_RECIPE["activation"]).double()
     for p in net.parameters():
         p.requires_grad_(False)
     twin = numpy_twin(q, net)
@@ -96,16 +100,16 @@ def main() -> None:
         u = rng.uniform(1.0, 5.0, size=(B, 4))
         xt, ut = torch.tensor(x), torch.tensor(u)
         with torch.no_grad():
-            ref = q.step(xt, ut, dt=0.02, a_res_fn=net).numpy()
+            ref = q.step(xt, ut, Ts=PAPER_TS, a_res_fn=net).numpy()
             assert np.abs(twin(x, u) - ref).max() < 1e-12
             assert np.abs(rotation_matrix(xt[:, 6:9]).numpy()).max() <= 1.0 + 1e-12
-            t_torch = per_call_ms(lambda: q.step(xt, ut, dt=0.02, a_res_fn=net), args.repeats)
+            t_torch = per_call_ms(lambda: q.step(xt, ut, Ts=PAPER_TS, a_res_fn=net), args.repeats)
         t_numpy = per_call_ms(lambda: twin(x, u), args.repeats)
-        assert np.abs(compiled.step(x, u) - ref).max() < 1e-12
-        t_numba = per_call_ms(lambda: compiled.step(x, u), args.repeats)
+        assert np.abs(compiled.step(x, u, PAPER_TS) - ref).max() < 1e-12
+        t_numba = per_call_ms(lambda: compiled.step(x, u, PAPER_TS), args.repeats)
         print(f"{B:6d} {t_torch:9.3f} {t_numpy:9.3f} {t_numba:9.3f} {t_torch / t_numba:11.1f}")
     x, u = rng.normal(size=(10, 12)) * 0.3, rng.uniform(1.0, 5.0, size=(10, 4))
-    t_jac = per_call_ms(lambda: compiled.step_jacobian(x, u), args.repeats)
+    t_jac = per_call_ms(lambda: compiled.step_jacobian(x, u, PAPER_TS), args.repeats)
     print(f"numba step + exact Jacobians at the 10 plan points: {t_jac:.3f} ms")
 
 

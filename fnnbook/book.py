@@ -8,6 +8,7 @@ and ``<book>/_toc.yml``.  The hand-written pages (``intro.md``,
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -18,9 +19,10 @@ from typing import Any
 import yaml
 
 from fnnbook.runner import read_status
+from fnnbook.scoreboard import (SELF_CHECK_ID, plot_verdicts, read_claims, render_scoreboard, score_rows,
+                               self_check)
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.results import RESULTS_FILENAME, read_results
-from fnnbook.scoreboard import SELF_CHECK_ID, read_claims, render_scoreboard, score_rows, self_check
 
 __all__ = ["GENERATED", "assemble_book", "build_book"]
 
@@ -28,11 +30,45 @@ GENERATED = "_generated"
 _STATIC_PAGES = ("intro.md", "paper_vs_release.md", "_config.yml")
 
 
-def _copy_for_book(src: Path, dst: Path) -> None:
-    """Copy an executed notebook, hiding the cell of default parameters.
+#: a code cell longer than this (in lines) starts folded, like every cell that draws a figure
+FOLD_LINES = 10
+_FOLD_TAGS = ("hide-input", "remove-input", "remove-cell", "hide-cell", "show-input")
 
-    papermill's injected cell right after it shows the values the run used,
-    so the defaults would only mislead a reader.
+
+def _fold(cell: Any) -> None:
+    """Tag a long or plotting code cell ``hide-input``, unless its source's tags already decide.
+
+    The reader sees prose, figures and results; the code stays one click
+    away.  The cell with the injected parameters always stays open.
+    """
+    tags = list(cell.metadata.get("tags", []))
+    if cell.cell_type != "code" or "injected-parameters" in tags or any(t in tags for t in _FOLD_TAGS):
+        return
+    draws = any("image/png" in o.get("data", {}) or "image/svg+xml" in o.get("data", {})
+                for o in cell.get("outputs", []))
+    if draws or len(cell.source.splitlines()) > FOLD_LINES:
+        cell.metadata["tags"] = [*tags, "hide-input"]
+
+
+def _relative_paths(text: str, paths: list[str], root: Path) -> str:
+    """Write each absolute path in ``paths`` relative to ``root`` (the repository) inside a notebook's JSON."""
+    for path in sorted({p for p in paths if os.path.isabs(p)}, key=len, reverse=True):
+        rel = os.path.relpath(path, root)
+        for old, new in ((path, rel), (json.dumps(path)[1:-1], json.dumps(rel)[1:-1])):
+            text = text.replace(old, new)
+    return text
+
+
+def _copy_for_book(src: Path, dst: Path, root: Path) -> None:
+    """Copy an executed notebook for the book: defaults hidden, code folded, paths relative.
+
+    * The cell of default parameters is removed: papermill's injected cell
+      right after it shows the values the run used, so the defaults would
+      only mislead a reader.
+    * Long and plotting code cells are folded (:func:`_fold`).
+    * The paths papermill injected (``out_dir``, ``data_dir``,
+      ``upstream_dirs``) and the repository root are written relative to
+      the repository ``root``, wherever they appear (sources, outputs).
     """
     import nbformat
 
@@ -41,7 +77,13 @@ def _copy_for_book(src: Path, dst: Path) -> None:
         tags = cell.metadata.get("tags", [])
         if "parameters" in tags and "remove-cell" not in tags:
             cell.metadata["tags"] = [*tags, "remove-cell"]
-    nbformat.write(nb, dst)
+        _fold(cell)
+    params = nb.metadata.get("papermill", {}).get("parameters", {})
+    paths = [str(root)]
+    for value in params.values():
+        values = value.values() if isinstance(value, dict) else [value]
+        paths += [v for v in values if isinstance(v, str)]
+    dst.write_text(_relative_paths(nbformat.writes(nb), paths, root), encoding="utf-8")
 
 
 def _not_run_page(title: str, why: str) -> str:
@@ -113,7 +155,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
                 raise PipelineError(f"task {name!r}: {out} has no executed notebook {executed.name}")
             target = generated / name
             target.mkdir()
-            _copy_for_book(executed, target / executed.name)
+            _copy_for_book(executed, target / executed.name, spec.root)
             if (out / "figures").is_dir():
                 shutil.copytree(out / "figures", target / "figures")
             if (out / RESULTS_FILENAME).is_file():
@@ -128,8 +170,11 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     if any(c.id == SELF_CHECK_ID for c in claims):
         results = {**results, "scoreboard": {"claims": [self_check(claims, results)]}}
     rows = score_rows(claims, results, {n: t.claims for n, t in spec.tasks.items()})
+    plot_verdicts(rows, generated / "verdicts.png")
     (generated / "scoreboard.md").write_text(
-        render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes), encoding="utf-8")
+        render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes,
+                          summary_figure="verdicts.png"),
+        encoding="utf-8")
     parts.append({"caption": "Results", "chapters": [{"file": f"{GENERATED}/scoreboard"},
                                                      {"file": "paper_vs_release"}]})
     toc = {"format": "jb-book", "root": "intro", "parts": parts}

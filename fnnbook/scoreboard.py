@@ -17,8 +17,8 @@ from typing import Any
 
 from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
 
-__all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "read_claims", "render_scoreboard", "score_rows",
-           "self_check"]
+__all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of", "plot_verdicts", "read_claims",
+           "render_scoreboard", "score_rows", "self_check", "short_title", "verdict_counts"]
 
 #: the claim the scoreboard reports on itself ("the scoreboard page, computed from the runs")
 SELF_CHECK_ID = "B3"
@@ -168,13 +168,113 @@ def _number(value: Any) -> str:
     return str(value)
 
 
-def _cell(text: str) -> str:
-    """Make text safe inside a markdown table cell."""
-    return text.replace("\n", " ").replace("|", "\\|")
+def _inline(text: str) -> str:
+    """Make text safe as inline markdown on one line (no markup taken from it)."""
+    text = " ".join(str(text).split())
+    for ch in "\\`*_[]{}<>|$":
+        text = text.replace(ch, "\\" + ch)
+    return text
 
 
-def _code(text: str) -> str:
-    return "`" + text.replace("`", "'") + "`" if text else ""
+def short_title(text: str, words: int = 9) -> str:
+    """The claim in a few words: its first clause, cut to ``words`` words."""
+    head = re.split(r"[;:]\s", text, maxsplit=1)[0].strip()
+    parts = head.split()
+    return " ".join(parts[:words]) + (" …" if len(parts) > words else "") if parts else ""
+
+
+def headline_of(entry: Mapping[str, Any]) -> tuple[str, str]:
+    """The headline number of a result as ``(name, "value ± spread unit (n = k seeds)")``.
+
+    Uses the result's ``headline`` (see :func:`fnnlib.results.headline_number`).
+    A result without one (written before the field existed) shows how many
+    of its checks hold instead of guessing a number from ``numbers``;
+    ``("", "")`` when there is no result.
+    """
+    head = entry.get("headline")
+    if head:
+        text = _number(head.get("value"))
+        if head.get("spread") is not None:
+            text += f" ± {_number(head['spread'])}"
+        if head.get("unit"):
+            text += f" {head['unit']}"
+        if head.get("n"):
+            text += f" (n = {head['n']} seeds)"
+        return str(head.get("name", "")), text
+    checks = entry.get("checks") or {}
+    if checks:
+        return "checks holding", f"{sum(bool(v) for v in checks.values())} of {len(checks)}"
+    return "", ""
+
+
+def _bullets(marks: Mapping[str, bool]) -> list[str]:
+    return [f"- {'✓' if ok else '✗'} `{str(k).replace('`', chr(39))}`" for k, ok in marks.items()]
+
+
+def _details(row: ScoreRow, figure: str | None) -> list[str]:
+    """The folded body of a row: the paper's claim, rule, checks, guarantees, numbers, figure."""
+    entry = row.result or {}
+    out = [f"**Claim ({row.claim.figure or 'paper'}).** {_inline(row.claim.text)}", ""]
+    if not entry:
+        return out + ["No task has produced a result for this claim yet.", ""]
+    if entry.get("rule"):
+        out += [f"**Rule.** {_inline(entry['rule'])}", ""]
+    out += ["**Checks** (they decide the verdict):", "", *_bullets(entry.get("checks") or {}), ""]
+    guarantees = entry.get("guarantees") or {}
+    if guarantees:
+        out += ["**Guarantees** (hold by construction or by a theorem on the same run; asserted while the "
+                "notebook runs, never counted toward the verdict):", "", *_bullets(guarantees), ""]
+    numbers = entry.get("numbers") or {}
+    if numbers:
+        out += ["**Numbers.**", "", "| name | value |", "|---|---|"]
+        out += [f"| `{str(k).replace('`', chr(39))}` | {_inline(_number(v))} |" for k, v in numbers.items()]
+        out.append("")
+    if figure:
+        out += [f"({_figure_label(row)})=", f"```{{image}} {figure}", f":alt: figure of claim {row.claim.id}",
+                ":width: 100%", "```", ""]
+    return out
+
+
+def _figure_label(row: ScoreRow) -> str:
+    return f"claim-{row.claim.id.lower()}-figure"
+
+
+def verdict_counts(rows: Sequence[ScoreRow]) -> dict[str, dict[str, int]]:
+    """Group -> verdict -> number of claims, groups in order of first appearance."""
+    counts: dict[str, dict[str, int]] = {}
+    for row in rows:
+        group = counts.setdefault(row.claim.group, {v: 0 for v in (*VERDICTS, NOT_RUN)})
+        group[row.verdict] += 1
+    return counts
+
+
+#: badge colours of sphinx-design (Bootstrap), also used by the verdict figure
+_COLOURS = {"reproduced": "#198754", "partly": "#ffc107", "not reproduced": "#dc3545", NOT_RUN: "#6c757d"}
+
+
+def plot_verdicts(rows: Sequence[ScoreRow], path: str | os.PathLike[str]) -> Path:
+    """Draw the verdicts per section as horizontal stacked bars into ``path`` (PNG)."""
+    import matplotlib  # noqa: PLC0415 (only the book needs it)
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    counts = verdict_counts(rows)
+    groups = list(counts)[::-1]
+    fig, ax = plt.subplots(figsize=(6.4, 0.35 * len(groups) + 0.9), dpi=110)
+    left = [0] * len(groups)
+    for verdict in (*VERDICTS, NOT_RUN):
+        widths = [counts[g][verdict] for g in groups]
+        ax.barh(groups, widths, left=left, color=_COLOURS[verdict], label=verdict, height=0.6)
+        left = [a + b for a, b in zip(left, widths)]
+    ax.set_xlabel("claims")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.legend(ncols=4, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False, fontsize="small")
+    ax.spines[["top", "right"]].set_visible(False)
+    out = Path(path)
+    fig.savefig(out, bbox_inches="tight")
+    plt.close(fig)
+    return out
 
 
 def render_scoreboard(
@@ -184,8 +284,17 @@ def render_scoreboard(
     pages: Mapping[str, str],
     figures: Mapping[str, str] | None = None,
     notes: Mapping[str, str] | None = None,
+    summary_figure: str | None = None,
 ) -> str:
     """Render the scoreboard page as MyST markdown.
+
+    At the top, the counts of each verdict (and ``summary_figure``, the
+    verdicts per section, see :func:`plot_verdicts`).  Then one row per
+    claim, grouped by section: the claim in a few words, our headline
+    number (± its spread over seeds), the paper's statement, the verdict
+    badge, and links to the section and the figure.  Each row is a
+    dropdown that unfolds the rule, the checks, the guarantees (apart) and
+    every measured number.
 
     Parameters
     ----------
@@ -200,6 +309,8 @@ def render_scoreboard(
     notes : mapping of str to str, optional
         Task -> why it has no results (e.g. "not run: data missing ..."),
         shown for its claims.
+    summary_figure : str, optional
+        Image (relative to the scoreboard) shown under the counts.
 
     Returns
     -------
@@ -214,15 +325,18 @@ def render_scoreboard(
         + ", ".join(f"{counts[v]} {v}" for v in (*VERDICTS, NOT_RUN)) + ".",
         "",
     ]
+    if summary_figure:
+        out += [f"```{{image}} {summary_figure}", ":alt: verdicts per section", ":class: sb-summary", "```", ""]
     if profile != "paper":
         out += [":::{warning}",
                 f"These numbers come from the `{profile}` profile, not the paper's settings; "
                 "the verdicts say whether the code runs end to end, not whether the paper's "
                 "claims hold.", ":::", ""]
     out += [
-        "Each verdict is computed from the measured numbers by the rule shown: "
+        "Each verdict is computed from the measured numbers by the rule shown in the claim's fold-out: "
         "*reproduced* when every check holds, *partly* when some do, *not reproduced* when none "
-        "does; *not run* when no task has produced a result for the claim.",
+        "does; *not run* when no task has produced a result for the claim. Guarantees (what holds by "
+        "construction) are listed apart and never count. Click a row to unfold its checks and numbers.",
         "",
     ]
     group = None
@@ -230,24 +344,33 @@ def render_scoreboard(
         if row.claim.group != group:
             group = row.claim.group
             out += ["", f"## {group}", "",
-                    "| ID | claim | paper | verdict | measured | rule | where |",
-                    "|---|---|---|---|---|---|---|"]
+                    '<div class="sb-head"><span class="sb-id">ID</span><span class="sb-claim">claim</span>'
+                    '<span class="sb-ours">ours (headline number)</span><span class="sb-verdict">verdict</span>'
+                    '<span class="sb-where">see</span></div>', ""]
         entry = row.result or {}
-        numbers = "; ".join(f"{k} = {_number(v)}" for k, v in (entry.get("numbers") or {}).items())
-        checks = "; ".join(f"{'✓' if ok else '✗'} {k}" for k, ok in (entry.get("checks") or {}).items())
-        measured = "<br>".join(_code(s) for s in (numbers, checks) if s)
+        name, value = headline_of(entry)
+        ours = f"{_inline(name)}: **{_inline(value)}**" if name else (_inline(value) or "—")
+        paper = entry.get("paper") or row.claim.text
+        paper_label = f"paper, {row.claim.figure}" if row.claim.figure else "paper"
         if row.result is None and row.task in (notes or {}):
-            measured = notes[row.task]
+            ours = _inline(notes[row.task])
         where = []
         if row.task is not None and row.task in pages:
-            where.append(f"[{row.task}]({pages[row.task]})")
-        fig = entry.get("figure")
-        if fig and row.task in figures:
-            where.append(f"[figure]({figures[row.task]}/{fig})")
-        out.append("| " + " | ".join(_cell(c) for c in (
-            f"**{row.claim.id}**", row.claim.text, row.claim.figure,
-            f"{{bdg-{_BADGE[row.verdict]}}}`{row.verdict}`", measured, entry.get("rule", ""),
-            " ".join(where))) + " |")
+            where.append(f"[section]({pages[row.task]})")
+        fig = f"{figures[row.task]}/{entry['figure']}" if entry.get("figure") and row.task in figures else None
+        if fig:  # opens the row and scrolls to the figure inside it
+            where.append(f"{{ref}}`figure <{_figure_label(row)}>`")
+        title = entry.get("title") or short_title(row.claim.text)
+        summary = " ".join([
+            f"[{row.claim.id}]{{.sb-id}}",
+            f"[{_inline(title)}]{{.sb-claim}}",
+            f"[{ours}]{{.sb-ours}}",
+            f"[*{_inline(paper_label)}:* {_inline(paper)}]{{.sb-paper}}",
+            f"[{{bdg-{_BADGE[row.verdict]}}}`{row.verdict}`]{{.sb-verdict}}",
+            f"[{' '.join(where) or '—'}]{{.sb-where}}",
+        ])
+        out += [f"::::{{dropdown}} {summary}", f":name: claim-{row.claim.id.lower()}",
+                ":class-container: sb-row", "", *_details(row, fig), "::::", ""]
     return "\n".join(out) + "\n"
 
 

@@ -6,12 +6,37 @@ intra-op threads (the pipeline runner calls it in each notebook's kernel).
 """
 
 from fnnlib._threads import set_num_threads
-from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse
+from fnnlib.data import load_bottle, synthetic_throws
+from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, mlp
-from fnnlib.observers import (
+from fnnlib.feedback import (
+    NOISE_AMPLIFICATION_LIMIT,
+    CascadeGains,
+    MeasuredFeedback,
+    check_output_gain,
     Estimate,
+    GainError,
+    GainWarning,
+    TunedGains,
+    cascade_forward,
+    noise_amplification,
+    tune_gains,
+    VectorField,
+    cascade_predict,
+    cascade_predict_loop,
+    cascade_sweep,
+    check_gain,
+    decayed_gains,
+    eval_field,
+    gain_matrix,
+    observe_gains,
+    rollout_predict,
+    spectral_radius,
+)
+from fnnlib.observers import (
     ExtendedKalmanObserver,
     KalmanObserver,
+    LinearFeedback,
     LuenbergerObserver,
     NeuralFeedbackObserver,
     Observer,
@@ -19,42 +44,46 @@ from fnnlib.observers import (
     linear_feedback_gain,
     place_observer_gain,
     steady_state_gain,
-    GainError,
-    LinearFeedback,
-    check_gain,
-    decayed_gains,
-    gain_matrix,
-    spectral_radius,
 )
 from fnnlib.plotting import new_figure, save_figure
-from fnnlib.prediction import cascade_predict, cascade_predict_loop, rollout_predict
-from fnnlib.results import claim_result, read_results, verdict_from_checks, write_results
+from fnnlib.results import GuaranteeFailed, claim_result, headline_number, read_results, verdict_from_checks, write_results
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.settings import check_notebook_settings
 from fnnlib.stability import (
     discrete_residual,
+    divergence_transition,
     gain_eigen_bounds,
     growth_factor,
     iss_bound,
     observe_continuous,
     reconvergence,
+    scaled_error_norm,
     settling_time,
     theorem1_balls,
 )
 from fnnlib.sweeps import (
-    cascade_sweep,
     colon_range,
     n_step_errors,
-    observe_gains,
+    offset_spirals,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
 )
-from fnnlib.systems import DynamicalSystem, Spiral, SwitchedSystem, add_measurement_noise
+from fnnlib.stats import paired_win
+from fnnlib.systems import DynamicalSystem, LinearSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise
+from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
+    PAPER_BOTTLE_RECIPE,
+    PAPER_FEEDBACK_RECIPE,
+    PAPER_SPIRAL_RECIPE,
+    QUICK_RECIPE,
     CheckpointError,
+    FeedbackRecipe,
+    ODERecipe,
     TrainHistory,
     load_checkpoint,
+    randomized_cases,
+    register_model,
     save_checkpoint,
     train_neural_feedback,
     train_neural_ode,
@@ -63,16 +92,21 @@ from fnnlib.training import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
+    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model",
+    "tune_gains",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
     "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
-    "settling_time", "theorem1_balls", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
+    "settling_time", "theorem1_balls", "divergence_transition", "scaled_error_norm", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
-    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback",
+    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
+    "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
+    "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "check_notebook_settings", "claim_result", "decayed_gains", "error_norm", "gain_matrix", "load_checkpoint",
+    "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
-    "rollout_predict", "rmse", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
 ]

@@ -13,6 +13,11 @@ def error_norm(pred: Tensor, true: Tensor) -> Tensor:
     return torch.linalg.vector_norm(pred - true, dim=-1)
 
 
+def rmse_over_time(pred: Tensor, true: Tensor) -> Tensor:
+    """Root mean squared 2-norm error over time only, one per leading index: shape ``(...)``."""
+    return error_norm(pred, true).pow(2).mean(-1).sqrt()
+
+
 def mean_error_norm(pred: Tensor, true: Tensor) -> float:
     """Mean over time (and batch) of the 2-norm error, the paper's "mean 2-norm error"."""
     return float(error_norm(pred, true).mean())

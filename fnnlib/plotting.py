@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 #: width, height in inches per panel; figures are panels * this size
@@ -50,9 +52,6 @@ def plot_rate_curve(ax, f_true, f_est, *, title: str, label: str = "model", vmax
     stars mark the start. ``f_true``, ``f_est``: arrays of shape (T, 2).
     Returns the colour-mapped line (for a colour bar).
     """
-    import numpy as np
-    from matplotlib.collections import LineCollection
-
     f_true, f_est = np.asarray(f_true), np.asarray(f_est)
     err = np.linalg.norm(f_est - f_true, axis=-1)
     ax.plot(f_true[:, 0], f_true[:, 1], "--", color=COLORS["truth"], lw=1.2, label="truth")

@@ -11,18 +11,19 @@ the upstream tasks have trained.
 ...                                    "n_samples": 1000})
 Traceback (most recent call last):
 ...
-fnnlib.observers.gains.GainError: ...
+fnnlib.feedback.gains.GainError: ...
 """
 
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from fnnlib.data.bottle import BOTTLE_FILES, TS as BOTTLE_TS, DataError
-from fnnlib.observers import check_gain, decayed_gains
+from fnnlib.feedback import GainWarning, check_gain, decayed_gains
 from fnnlib.sweeps import colon_range
 
 __all__ = ["MissingDataError", "check_notebook_settings"]
@@ -135,10 +136,26 @@ def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
     _at_least(p, 1, "steps", "N", "speed_repeats", "truth_substeps")
 
 
+def _own_system(p: Mapping[str, Any]) -> None:
+    if len(p["seeds"]) < 2 or len(set(p["seeds"])) != len(p["seeds"]):
+        raise ValueError(f"seeds must be at least 2 distinct values (wins are paired over seeds), got {p['seeds']}")
+    if not 1 <= p["N"] < p["n_test"]:
+        raise ValueError(f"need 1 <= N < n_test, got N={p['N']}, n_test={p['n_test']}")
+    if not 1 <= p["spiral_N"] < p["spiral_tune_samples"] <= p["spiral_n_samples"]:
+        raise ValueError("need 1 <= spiral_N < spiral_tune_samples <= spiral_n_samples, got "
+                         f"{p['spiral_N']}, {p['spiral_tune_samples']}, {p['spiral_n_samples']}")
+    _at_least(p, 1, "n_train", "iterations", "tune_iterations", "spiral_tune_iterations")
+    _sizes(p, "hidden")
+    with warnings.catch_warnings():  # the hand-picked gain amplifies noise on purpose: the chapter shows it
+        warnings.simplefilter("ignore", GainWarning)
+        check_gain(p["L_hand"], 2, p["Ts"], N=p["N"], beta=p["beta_hand"])
+        check_gain(p["spiral_L"], 2, p["spiral_Ts"], N=p["spiral_N"], beta=p["spiral_beta"])
+
+
 _CHECKS: dict[str, Callable[[Mapping[str, Any]], None]] = {
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
-    "quadrotor_mpc": _quadrotor_mpc,
+    "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system,
 }
 
 

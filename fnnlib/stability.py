@@ -15,14 +15,15 @@ Discrete time (Eq. (25)): :math:`\tilde x_k = (I - T_s L)\tilde x_{k-1} + T_s\De
 from __future__ import annotations
 
 import math
+import warnings
 
 import torch
 from torch import Tensor
 from torchdiffeq import odeint
 
 from fnnlib._validation import as_trajectory, check_finite, check_positive
-from fnnlib.observers.gains import gain_matrix
-from fnnlib.observers.linear import Estimate, VectorField
+from fnnlib.feedback.gains import gain_matrix
+from fnnlib.feedback.types import Estimate, VectorField
 from fnnlib.systems.base import DynamicalSystem
 
 
@@ -169,11 +170,46 @@ def growth_factor(err: Tensor, *, early: tuple[float, float] = (0.4, 0.5),
         a, b = int(round(lo * T)), max(int(round(hi * T)), int(round(lo * T)) + 1)
         return err[..., a:b].amax(dim=-1)
 
-    return window(*late) / window(*early).clamp_min(torch.finfo(err.dtype).tiny)
+    if T < 2:
+        raise ValueError(f"growth_factor needs a record of at least 2 samples along the last axis, got shape "
+                         f"{tuple(err.shape)}")
+    ratio = window(*late) / window(*early).clamp_min(torch.finfo(err.dtype).tiny)
+    bad = ~torch.isfinite(ratio)
+    if bool(bad.any()):
+        what = "NaN" if bool(torch.isnan(err).any()) else "infinite"
+        warnings.warn(f"growth_factor: {int(bad.sum())} of {ratio.numel()} ratios are not finite because err holds "
+                      f"{what} values (an overflowed error? use scaled_error_norm); they are returned as NaN/inf",
+                      RuntimeWarning, stacklevel=2)
+    return ratio
+
+
+def scaled_error_norm(x: Tensor, x_hat: Tensor) -> Tensor:
+    """The 2-norm of ``x - x_hat`` over the last axis without overflow: each row is scaled by its largest entry first.
+
+    A diverging observer (App. A.2) reaches errors of 1e176, whose squares are inf in float64.
+    """
+    diff = x - x_hat
+    scale = diff.abs().amax(-1, keepdim=True).clamp_min(1e-300)
+    return (diff / scale).norm(dim=-1) * scale[..., 0]
+
+
+def divergence_transition(rho: Tensor, diverges: Tensor) -> tuple[int, float, float]:
+    """Where runs sorted by spectral radius ``rho`` switch from bounded to diverging (App. A.2).
+
+    Returns the number of class switches along the sorted ``rho``, the largest
+    bounded ``rho`` and the smallest diverging one (NaN where there is none).
+    """
+    if rho.shape != diverges.shape or rho.ndim != 1:
+        raise ValueError(f"rho and diverges must be 1-D of one length, got {tuple(rho.shape)}, {tuple(diverges.shape)}")
+    cls = diverges[torch.argsort(rho)]
+    switches = int((cls[1:] != cls[:-1]).sum())
+    rho_lo = float(rho[~diverges].max()) if bool((~diverges).any()) else float("nan")
+    rho_hi = float(rho[diverges].min()) if bool(diverges.any()) else float("nan")
+    return switches, rho_lo, rho_hi
 
 
 def reconvergence(t: Tensor, err: Tensor, t_switch: float, *, window: float,
-                  band_factor: float = 2.0) -> dict[str, float]:
+                  band_factor: float) -> dict[str, float]:
     """How fast an error returns to its steady level after a step change at ``t_switch``.
 
     Steady levels: the largest ``err`` over the ``window`` seconds before the

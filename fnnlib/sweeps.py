@@ -1,11 +1,9 @@
-"""Parameter sweeps in one tensor pass: batches of gains, decay rates and uncertainty levels.
+"""Sweep grids, uncertainty levels and the N-step errors the ablations score them by (Sec. 3.4, App. A.3).
 
-The ablations of Sec. 3.4 and App. A.3 run the linear feedback (Eqs. (7)-(8))
-and the cascade with gain decay (Eq. (11)) for many gains and many test
-systems. Here a sweep is a leading batch axis ``G``: every gain (and decay
-rate) of the sweep runs on every trajectory at once, with one batched network
-call and one linear scan per cascade layer. The paper writes its grids in
-MATLAB colon form ``{start: +step: stop}``; :func:`colon_range` reads them.
+The paper writes its grids in MATLAB colon form ``{start: +step: stop}``
+(:func:`colon_range`) and pairs them into uncertainty levels
+(:func:`paired_levels`); the batched runs over many gains and decay rates are
+:func:`fnnlib.feedback.observe_gains` and :func:`fnnlib.feedback.cascade_sweep`.
 """
 
 from __future__ import annotations
@@ -16,11 +14,8 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
-from fnnlib._scan import linear_recurrence
-from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.observers.gains import check_gain
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
 from fnnlib.systems.base import DynamicalSystem
+from fnnlib.systems.spiral import Spiral
 
 
 def colon_range(start: float, step: float, stop: float) -> Tensor:
@@ -59,145 +54,37 @@ def paired_levels(*grids: Sequence[float] | Tensor) -> Tensor:
     return torch.stack(cols, dim=-1)
 
 
-def simulate_levels(systems: Sequence[DynamicalSystem], x0: Tensor, t: Tensor) -> Tensor:
+def simulate_levels(systems: Sequence[DynamicalSystem], x0: Tensor, t: Tensor, *, exact: bool = False) -> Tensor:
     """Simulate each system from ``x0`` on the grid ``t``; stack on a leading axis.
 
-    Returns float64 of shape (len(systems), ..., T, n) for ``x0`` of shape (..., n).
+    With ``exact`` each system's closed form ``exact_solution`` is used instead of
+    the ODE solver. Returns float64 of shape (len(systems), ..., T, n) for ``x0`` of shape (..., n).
     """
     if len(systems) == 0:
         raise ValueError("simulate_levels needs at least one system")
-    return torch.stack([s.simulate(x0, t) for s in systems])
+    if exact and not all(hasattr(s, "exact_solution") for s in systems):
+        raise ValueError("exact=True needs systems with a closed form (an exact_solution method)")
+    return torch.stack([s.exact_solution(x0, t) if exact else s.simulate(x0, t) for s in systems])
 
 
-def _gain_batch(L: float | Sequence[float] | Tensor, n: int, Ts: float, *, allow_unstable: bool) -> Tensor:
-    """Gains as a (G, n) float64 tensor of diagonals; each checked by :func:`check_gain`.
+def offset_spirals(base: Sequence[float], offsets: Tensor) -> list[Spiral]:
+    """The spirals ``base + offsets[j]`` in (omega, eta, eps), one per row of ``offsets`` (levels, 3).
 
-    ``L`` scalar: one gain ``L I``; shape (G,): G scalar gains ``L_g I``; shape (G, n): G diagonal gains.
+    The 12 learning-residual levels of App. A.7.1 (S8, Fig. S9 and S10) are the
+    nominal spiral plus the paired offsets of :func:`paired_levels`.
     """
-    L = torch.as_tensor(L, dtype=torch.float64)
-    if L.ndim == 0:
-        L = L.reshape(1)
-    if L.ndim == 1:
-        L = L[:, None].expand(-1, n)
-    elif L.ndim != 2 or L.shape[1] != n:
-        raise ValueError(f"gain batch L must be a scalar, shape (G,) (scalar gains) or (G, {n}) (diagonal gains); "
-                         f"got shape {tuple(L.shape)}")
-    if L.shape[0] == 0:
-        raise ValueError("gain batch L is empty")
-    for g in L:
-        check_gain(g, n, Ts, allow_unstable=allow_unstable)
-    return L.contiguous()
-
-
-def _decay_batch(beta: float | Sequence[float] | Tensor, G: int) -> tuple[Tensor, int]:
-    """Decay rates as a float64 tensor broadcastable against G gains; returns (beta, batch size)."""
-    beta = torch.as_tensor(beta, dtype=torch.float64).reshape(-1)
-    if beta.numel() == 0 or not bool(torch.isfinite(beta).all()) or bool((beta < 0).any()):
-        raise ValueError(f"decay rates beta must be finite and >= 0, got {beta.tolist()}")
-    if beta.numel() != 1 and G != 1 and beta.numel() != G:
-        raise ValueError(f"{G} gains and {beta.numel()} decay rates do not pair up (give one of either, or as many)")
-    return beta, max(G, beta.numel())
-
-
-def _lead(v: Tensor, ndim: int) -> Tensor:
-    """(G, n) -> (G, 1, ..., 1, n) to broadcast against a (G, ..., T, n) trajectory batch of ``ndim`` axes."""
-    return v.reshape(v.shape[0], *([1] * (ndim - 2)), v.shape[-1])
-
-
-def _feedback_batch(fz: Tensor, z: Tensor, L: Tensor, Ts: float) -> Estimate:
-    """Eqs. (7)-(8) for a batch of diagonal gains: ``z``, ``fz`` (G, ..., T, n), ``L`` (G, n)."""
-    Lb = _lead(L, z.ndim)
-    b = Ts * (fz + Lb * z)  # x_hat_{k+1} = (1 - Ts L) x_hat_k + Ts (f(z_k) + L z_k)   (Eq. 8)
-    x_hat = linear_recurrence((1.0 - Ts * Lb).squeeze(-2), b[..., :-1, :], z[..., 0, :], diagonal=True)
-    f_hat = fz + Lb * (z - x_hat)  # f_hat = f_neural + L (z - x_hat)   (Eq. 7)
-    return Estimate(x_hat, f_hat)
-
-
-@torch.no_grad()
-def observe_gains(f: VectorField, x: Tensor, Ts: float, L: float | Sequence[float] | Tensor,
-                  *, allow_unstable: bool = False) -> Estimate:
-    r"""The linear feedback Eqs. (7)-(8) along ``x`` for a whole batch of diagonal gains at once.
-
-    Equals :meth:`fnnlib.LinearFeedback.observe` run once per gain.
-
-    Parameters
-    ----------
-    f : callable
-        Learned vector field ``f(t, x)``, evaluated once on ``x``.
-    x : Tensor, shape (..., T, n)
-        Measurements.
-    Ts : float
-        Sample step.
-    L : float, Tensor (G,) or Tensor (G, n)
-        G scalar gains (``L_g I``) or G diagonal gains.
-    allow_unstable : bool
-        Accept gains with :math:`\rho(I - T_s L) \ge 1` (to show divergence, App. A.2).
-
-    Returns
-    -------
-    Estimate
-        ``x_hat`` and ``f_hat`` of shape (G, ..., T, n).
-    """
-    Ts = check_positive(Ts, name="Ts")
-    x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
-    n = x.shape[-1]
-    gains = _gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)
-    G = gains.shape[0]
-    fx = eval_field(f, x)
-    expand = (G, *x.shape)
-    return _feedback_batch(fx.expand(expand), x.expand(expand), gains, Ts)
-
-
-@torch.no_grad()
-def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Sequence[float] | Tensor,
-                  beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False) -> Tensor:
-    r"""The N-step cascade (Sec. 3.3, Eq. (11)) for a batch of (gain, decay rate) pairs in one pass.
-
-    Batch element ``g`` runs :func:`fnnlib.cascade_predict` with gain ``L_g`` and
-    decay rate ``beta_g``: layer ``i`` uses :math:`L_g e^{-\beta_g i}`. Gains and
-    decay rates pair up by broadcasting (one of either, or as many of each).
-
-    Parameters
-    ----------
-    f : callable
-        Learned vector field ``f(t, x)``.
-    x : Tensor, shape (..., T, n)
-        Measurements (any leading axes: levels, noise draws).
-    Ts : float
-        Sample step (also the prediction step).
-    N : int
-        Prediction steps (layers).
-    L : float, Tensor (G,) or Tensor (G, n)
-        Scalar or diagonal base gains.
-    beta : float or Tensor (G,)
-        Decay rates of Eq. (11).
-
-    Returns
-    -------
-    Tensor, shape (G, ..., T, n)
-        Row ``k`` predicts the state at ``t_{k+N}``.
-    """
-    if int(N) != N or int(N) < 1:
-        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
-    Ts = check_positive(Ts, name="Ts")
-    x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
-    n = x.shape[-1]
-    gains = _gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)
-    betas, G = _decay_batch(beta, gains.shape[0])
-    gains = gains.expand(G, n)
-    z = x.expand(G, *x.shape)
-    for i in range(int(N)):
-        L_i = gains * torch.exp(-betas * i).to(x.dtype)[:, None]  # L_i = L e^{-beta i}   (Eq. 11)
-        _, f_hat = _feedback_batch(eval_field(f, z), z, L_i, Ts)
-        z = z + Ts * f_hat  # z^{(i+1)} = z^{(i)} + Ts f_hat^{(i)}
-    return z
+    offsets = torch.as_tensor(offsets, dtype=torch.float64)
+    if offsets.ndim != 2 or offsets.shape[1] != 3 or len(base) != 3:
+        raise ValueError(f"need a base (omega, eta, eps) and offsets of shape (levels, 3); got base {list(base)}, "
+                         f"offsets {tuple(offsets.shape)}")
+    return [Spiral(*(torch.tensor(base, dtype=torch.float64) + d).tolist()) for d in offsets]
 
 
 def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
     """2-norm errors of N-step predictions from every start that has a truth sample N steps later.
 
     ``pred`` (..., T, n): row ``k`` predicts ``truth[..., k + N, :]`` (the
-    layout of :func:`cascade_sweep` and :func:`fnnlib.cascade_predict`);
+    layout of :func:`fnnlib.cascade_sweep` and :func:`fnnlib.cascade_predict`);
     ``truth`` (T, n) or broadcastable. Returns shape (..., T - N).
     """
     N = int(N)

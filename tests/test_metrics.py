@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import error_norm, mean_error_norm, relative_rmse, rmse
+from fnnlib import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 
 
 def test_error_norm_per_step():
@@ -41,3 +41,9 @@ def test_relative_rmse_zero_reference():
 def test_shape_mismatch(fn):
     with pytest.raises(ValueError, match=r"shape mismatch: pred \(4, 2\) vs true \(5, 2\)"):
         fn(torch.ones(4, 2), torch.ones(5, 2))
+
+
+def test_rmse_over_time_per_series():
+    true = torch.zeros(2, 2, 2)
+    pred = torch.tensor([[[3.0, 4.0], [0.0, 0.0]], [[1.0, 0.0], [0.0, 1.0]]])
+    torch.testing.assert_close(rmse_over_time(pred, true), torch.tensor([math.sqrt(25 / 2), 1.0]))

@@ -2,21 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
+import re
 from pathlib import Path
 
 import pytest
+from conftest import load_nbbuild
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = sorted((ROOT / "notebooks" / "src").glob("*.py"))
 
 
-def _nbbuild():
-    spec = importlib.util.spec_from_file_location("nbbuild", ROOT / "tools" / "nbbuild.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+_nbbuild = load_nbbuild
 
 
 @pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
@@ -45,4 +42,5 @@ def test_settings_are_checked_right_after_the_parameters_cell(src: Path) -> None
     """The notebook runs the same value checks as `fnn-pipeline check` (fnnlib.check_notebook_settings)."""
     cells = _nbbuild().build(src).cells
     first = next(i for i, c in enumerate(cells) if "parameters" in c.metadata.get("tags", []))
-    assert f'F.check_notebook_settings("{src.stem}", globals())' in cells[first + 1].source
+    task = re.sub(r"^\d+_", "", src.stem)  # files are numbered in paper order: 01_spiral.py runs task spiral
+    assert f'F.check_notebook_settings("{task}", globals())' in cells[first + 1].source

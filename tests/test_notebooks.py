@@ -1,7 +1,8 @@
 """Every pipeline task, executed in the smoke profile: one test per task of pipeline.yaml.
 
-The tasks share one output root for the session, so a task's upstream tasks
-run once (later tests find them up to date).
+The tasks share one output root for the run (the ``smoke_outputs`` fixture of
+``tests/conftest.py``), so a task and its upstream tasks run once; later tests,
+here or in another xdist worker, find them up to date.
 """
 
 from __future__ import annotations
@@ -11,24 +12,20 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fnnbook import PipelineSpec, load_spec, run
+from conftest import SMOKE, SmokeOutputs
+
 from fnnlib.results import RESULTS_FILENAME, VERDICTS, read_results
 
 PIPELINE = Path(__file__).resolve().parents[1] / "pipeline.yaml"
-PROFILE = "smoke"
+PROFILE = SMOKE
 TASKS = list(yaml.safe_load(PIPELINE.read_text(encoding="utf-8"))["tasks"])
-
-
-@pytest.fixture(scope="session")
-def smoke_spec(tmp_path_factory: pytest.TempPathFactory) -> PipelineSpec:
-    """The repository's pipeline, writing into a fresh output root for this session."""
-    return load_spec(PIPELINE).with_paths(output_root=tmp_path_factory.mktemp("outputs"))
 
 
 @pytest.mark.notebook
 @pytest.mark.parametrize("task", TASKS)
-def test_task_runs_in_smoke_profile(smoke_spec: PipelineSpec, task: str) -> None:
-    report = run(smoke_spec, PROFILE, [task], progress_bar=False, threads=1)  # one torch thread, as before
+def test_task_runs_in_smoke_profile(smoke_outputs: SmokeOutputs, task: str) -> None:
+    smoke_spec = smoke_outputs.spec
+    report = smoke_outputs.run([task])
     outcome = report.outcome(task)
     assert outcome.status in ("ok", "skipped"), (
         f"{task}: {outcome.status} ({outcome.message}); log: {outcome.log}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -13,14 +14,18 @@ from fnnlib.settings import MissingDataError
 NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
 
 
+def _name(notebook: Path) -> str:
+    return re.sub(r"^\d+_", "", notebook.stem)  # 01_spiral -> spiral
+
+
 def _defaults(name: str) -> dict:
-    params = read_parameters(next(p for p in NOTEBOOKS if p.stem == name))
+    params = read_parameters(next(p for p in NOTEBOOKS if _name(p) == name))
     return {**params, "data": "synthetic"} if name == "bottle" else params
 
 
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_the_paper_values_pass(notebook: Path) -> None:
-    F.check_notebook_settings(notebook.stem, _defaults(notebook.stem))
+    F.check_notebook_settings(notebook.stem, _defaults(_name(notebook)))
 
 
 @pytest.mark.parametrize(("notebook", "change", "message"), [

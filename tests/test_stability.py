@@ -11,11 +11,13 @@ import torch
 from fnnlib import LinearFeedback, Spiral, mlp
 from fnnlib.stability import (
     discrete_residual,
+    divergence_transition,
     gain_eigen_bounds,
     growth_factor,
     iss_bound,
     observe_continuous,
     reconvergence,
+    scaled_error_norm,
     settling_time,
     theorem1_balls,
 )
@@ -107,7 +109,7 @@ def test_discrete_observer_converges_to_the_continuous_one_at_first_order():
 def test_continuous_observer_accepts_a_float64_model_copy():
     torch.manual_seed(1)
     net = mlp(2, 2, (4,), "relu")
-    x, est = observe_continuous(Spiral(), lambda t, z: copy.deepcopy(net).double()(z), 3.0,
+    x, est = observe_continuous(Spiral(2.0, 0.1, 0.0), lambda t, z: copy.deepcopy(net).double()(z), 3.0,
                                 torch.tensor([[1.0, 0.0], [0.0, 1.0]]), torch.linspace(0, 0.5, 6))
     assert x.shape == est.x_hat.shape == est.f_hat.shape == (2, 6, 2)
 
@@ -143,4 +145,23 @@ def test_reconvergence_after_a_step():
     assert r["time"] == pytest.approx(0.11, abs=1e-9)
     assert r["time"] == r["time_pre_band"]
     with pytest.raises(ValueError, match="need a 4 s window"):
-        reconvergence(t, err, 7.0, window=4.0)
+        reconvergence(t, err, 7.0, window=4.0, band_factor=2.0)
+
+
+def test_scaled_error_norm_survives_huge_errors():
+    x = torch.tensor([[3e200, 4e200], [3.0, 4.0]], dtype=torch.float64)
+    norms = scaled_error_norm(x, torch.zeros_like(x))
+    assert torch.isfinite(norms).all()
+    torch.testing.assert_close(norms, torch.tensor([5e200, 5.0], dtype=torch.float64))
+    assert torch.linalg.vector_norm(x[0]).isinf()  # what the scaling avoids
+
+
+def test_divergence_transition_finds_the_switch():
+    rho = torch.tensor([1.2, 0.5, 0.99, 1.01, 0.8])
+    assert divergence_transition(rho, rho > 1) == (1, pytest.approx(0.99), pytest.approx(1.01))
+    switches, lo, hi = divergence_transition(rho, torch.tensor([True, False, True, False, False]))
+    assert switches == 3 and lo == pytest.approx(1.01) and hi == pytest.approx(0.99)
+    switches, lo, hi = divergence_transition(rho, torch.zeros(5, dtype=torch.bool))
+    assert switches == 0 and lo == pytest.approx(1.2) and math.isnan(hi)
+    with pytest.raises(ValueError, match="1-D of one length"):
+        divergence_transition(rho, torch.zeros(4, dtype=torch.bool))

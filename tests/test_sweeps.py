@@ -9,11 +9,11 @@ import torch
 
 from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict, mlp
 from fnnlib._scan import linear_recurrence
+from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
-    cascade_sweep,
     colon_range,
     n_step_errors,
-    observe_gains,
+    offset_spirals,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
@@ -146,7 +146,7 @@ def test_cascade_sweep_zero_gain_is_an_euler_rollout(f, x):
 @pytest.mark.parametrize("kwargs, err, match", [
     (dict(N=0), ValueError, "N must be an integer >= 1"),
     (dict(N=2.5), ValueError, "N must be an integer >= 1"),
-    (dict(beta=-0.1), ValueError, "decay rates beta must be finite and >= 0"),
+    (dict(beta=-0.1), ValueError, "decay rate beta must be finite and >= 0"),
     (dict(beta=torch.tensor([0.0, 0.1])), ValueError, "3 gains and 2 decay rates do not pair up"),
     (dict(L=torch.ones(3, 3)), ValueError, r"shape \(G,\) \(scalar gains\) or \(G, 2\)"),
     (dict(L=torch.tensor([])), ValueError, "gain batch L is empty"),
@@ -178,3 +178,22 @@ def test_outward_increase_fraction():
     assert outward_increase_fraction(v[0], 0).tolist() == 0.5  # from the left end: 5->3, 3->1 shrink; 1->2, 2->4 grow
     with pytest.raises(ValueError, match="centre level 5"):
         outward_increase_fraction(v, 5)
+
+
+def test_offset_spirals_add_the_offsets_to_the_base():
+    offsets = paired_levels([-0.1, 0.0, 0.2], [0.01, 0.0, -0.02], [-1.0, 0.0, 3.0])
+    systems = offset_spirals([2.0, 0.1, 0.0], offsets)
+    assert [(s.omega, s.eta, s.eps) for s in systems] == [(2.0 - 0.1, 0.1 + 0.01, -1.0), (2.0, 0.1, 0.0),
+                                                          (2.0 + 0.2, 0.1 - 0.02, 3.0)]
+    with pytest.raises(ValueError, match="offsets of shape"):
+        offset_spirals([2.0, 0.1, 0.0], torch.zeros(3, 2))
+
+
+def test_simulate_levels_exact_uses_the_closed_form():
+    systems = [Spiral(2.0, 0.1, 0.0), Spiral(3.0, 0.05, 1.0)]
+    t = torch.arange(30, dtype=F64) * TS
+    x0 = torch.tensor([9.0, 0.0], dtype=F64)
+    exact = simulate_levels(systems, x0, t, exact=True)
+    for s, xs in zip(systems, exact):
+        assert torch.equal(xs, s.exact_solution(x0, t))
+    torch.testing.assert_close(exact, simulate_levels(systems, x0, t), rtol=1e-7, atol=1e-7)  # dopri5 at 1e-10

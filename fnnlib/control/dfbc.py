@@ -24,8 +24,8 @@ Attitude loop
     thrusts :math:`u = C^{-1}[T, \tau]`.
 
 ``z = [z_I (3), z_F (3)]``. The controller uses its own model parameters
-(:data:`~fnnlib.systems.quadrotor.NOMINAL` by default), never the plant's.
-The default gains are those of the authors' release.
+(the paper's: :data:`~fnnlib.systems.quadrotor.NOMINAL`), never the plant's.
+The gains of the authors' release are :data:`~fnnlib.quadrotor_presets.PAPER_DFBC_GAINS`.
 
 Notes
 -----
@@ -50,18 +50,10 @@ from collections.abc import Callable, Sequence
 import torch
 from torch import Tensor
 
-from fnnlib._validation import check_finite
-from fnnlib.control.flatness import _check_params, _flat_state_parts
-from fnnlib.systems.quadrotor import (
-    NOMINAL,
-    Quadrotor,
-    QuadrotorParams,
-    _inverse_euler_rate_matrix,
-    check_step,
-    constants,
-    matvec,
-    rk4,
-)
+from fnnlib.control.flatness import check_params, flat_state_parts
+from fnnlib.systems.integrator import check_step, rk4
+from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams, constants, vec3
+from fnnlib.systems.rotations import check_last, inverse_euler_rate_matrix, matvec
 
 __all__ = ["DFBC"]
 
@@ -70,29 +62,12 @@ Gain = Sequence[float]
 
 
 def _gain(value: Gain | float, name: str) -> tuple[float, float, float]:
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        items = [float(value)] * 3
-    else:
-        try:
-            items = [float(v) for v in value]  # type: ignore[union-attr]
-        except TypeError as err:
-            raise TypeError(f"{name} must be a float or 3 floats (a diagonal gain), got {value!r}") from err
-    if len(items) != 3:
-        raise ValueError(f"{name} must have 3 diagonal entries, got {len(items)}")
+    """A diagonal gain: one float for all three axes, or three floats; finite and non-negative."""
+    scalar = isinstance(value, (int, float)) and not isinstance(value, bool)
+    items = (float(value),) * 3 if scalar else vec3(value, name)  # type: ignore[arg-type]
     if not all(math.isfinite(v) and v >= 0 for v in items):
         raise ValueError(f"{name} must be finite and non-negative, got {tuple(items)}")
-    return (items[0], items[1], items[2])
-
-
-def _check(x: Tensor, n: int, name: str) -> Tensor:
-    if not isinstance(x, Tensor):
-        raise TypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
-    if not x.is_floating_point():
-        raise TypeError(f"{name} must be a floating-point tensor, got dtype {x.dtype}")
-    if x.ndim < 1 or x.shape[-1] != n:
-        raise ValueError(f"{name} must have shape (..., {n}), got shape {tuple(x.shape)}")
-    check_finite(x, name=name)
-    return x
+    return items
 
 
 def _lead(*pairs: tuple[str, torch.Size]) -> torch.Size:
@@ -110,7 +85,7 @@ class DFBC:
     ----------
     params : QuadrotorParams
         The controller's model (mass, inertia, allocation, ``g``);
-        :data:`NOMINAL` by default. Must have equal x/y drag; a controller
+        the paper's is :data:`NOMINAL`. Must have equal x/y drag; a controller
         model with drag or a force disturbance compensates them through the
         flat map of :mod:`fnnlib.control.flatness` (the paper's DFBC has none).
     Kp, Kv : float or 3 floats
@@ -127,17 +102,17 @@ class DFBC:
 
     def __init__(
         self,
-        params: QuadrotorParams = NOMINAL,
+        params: QuadrotorParams,
         *,
-        Kp: Gain | float = (2.0, 2.0, 1.4),
+        Kp: Gain | float,
+        K_Theta: Gain | float,
+        Kp_w: Gain | float,
+        Ki_w: Gain | float,
+        Kd_w: Gain | float,
+        tau_f: float,
         Kv: Gain | float | None = None,
-        K_Theta: Gain | float = (10.0, 10.0, 4.0),
-        Kp_w: Gain | float = (40.0, 40.0, 16.0),
-        Ki_w: Gain | float = (10.0, 10.0, 5.0),
-        Kd_w: Gain | float = (0.5, 0.5, 0.0),
-        tau_f: float = 0.05,
     ) -> None:
-        self.params = _check_params(params)
+        self.params = check_params(params)
         self.Kp = _gain(Kp, "Kp")
         self.Kv = _gain(Kv, "Kv") if Kv is not None else (4.0 * self.Kp[0], 4.0 * self.Kp[1], 4.0 * self.Kp[2])
         self.K_Theta = _gain(K_Theta, "K_Theta")
@@ -175,10 +150,10 @@ class DFBC:
         p_r, v_r, a_r, j_r = Psi_bar[..., 0:3], Psi_bar[..., 3:6], Psi_bar[..., 6:9], Psi_bar[..., 9:12]
         Kp, Kv, K_Theta = self._gains(x)[:3]
         a_des = a_r + Kp * (p_r - p) + Kv * (v_r - v)
-        Theta_des, omega_des, T = _flat_state_parts(v, a_des, j_r, self.params)
+        Theta_des, omega_des, T = flat_state_parts(v, a_des, j_r, self.params)
         e_Theta = Theta_des - Theta
         e_Theta = torch.atan2(torch.sin(e_Theta), torch.cos(e_Theta))  # wrap to (-pi, pi]
-        omega_cmd = matvec(_inverse_euler_rate_matrix(Theta), K_Theta * e_Theta)  # W^{-1} Theta'_des
+        omega_cmd = matvec(inverse_euler_rate_matrix(Theta, check=False), K_Theta * e_Theta)  # W^{-1} Theta'_des
         return omega_des + omega_cmd - omega, T
 
     def _control(self, x: Tensor, z: Tensor, Psi_bar: Tensor) -> tuple[Tensor, Tensor]:
@@ -212,9 +187,9 @@ class DFBC:
         z_dot : Tensor, shape (..., 6)
             ``[e_omega, (e_omega - z_F) / tau_f]``.
         """
-        _check(x, 12, "x")
-        _check(z, self.nz, "z")
-        _check(Psi_bar, 12, "Psi_bar")
+        check_last(x, 12, "x")
+        check_last(z, self.nz, "z")
+        check_last(Psi_bar, 12, "Psi_bar")
         lead = _lead(("x", x.shape[:-1]), ("z", z.shape[:-1]), ("Psi_bar", Psi_bar.shape[:-1]))
         u, z_dot = self._control(x, z, Psi_bar)
         return u.expand(*lead, 4), z_dot.expand(*lead, self.nz)
@@ -233,10 +208,10 @@ class DFBC:
         -------
         Tensor, shape (..., 18)
         """
-        _check(x, 12, "x")
+        check_last(x, 12, "x")
         if Psi_bar is None:
             return torch.cat([x, x.new_zeros(*x.shape[:-1], self.nz)], dim=-1)
-        _check(Psi_bar, 12, "Psi_bar")
+        check_last(Psi_bar, 12, "Psi_bar")
         lead = _lead(("x", x.shape[:-1]), ("Psi_bar", Psi_bar.shape[:-1]))
         e_w, _ = self._rate_error(x, Psi_bar)
         x = x.expand(*lead, 12)
@@ -248,15 +223,15 @@ class DFBC:
         x, z = x18[..., :12], x18[..., 12:]
         u, z_dot = self._control(x, z, Psi_bar)
         a_res = a_res_fn(x) if a_res_fn is not None else None
-        x_dot = plant._f(x, u, a_res)
+        x_dot = plant.rhs(x, u, a_res)
         lead = x_dot.shape[:-1]
         return torch.cat([x_dot, z_dot.expand(*lead, self.nz)], dim=-1), u
 
     def _check_loop(self, x18: Tensor, Psi_bar: Tensor, plant: Quadrotor, psi_name: str) -> torch.Size:
         if not isinstance(plant, Quadrotor):
             raise TypeError(f"plant must be a Quadrotor, got {type(plant).__name__}")
-        _check(x18, 12 + self.nz, "x18")
-        _check(Psi_bar, 12, psi_name)
+        check_last(x18, 12 + self.nz, "x18")
+        check_last(Psi_bar, 12, psi_name)
         if Psi_bar.dtype != x18.dtype:
             raise TypeError(f"x18 and {psi_name} must share a dtype, got {x18.dtype} and {Psi_bar.dtype}")
         lead_psi = Psi_bar.shape[:-2] if psi_name == "Psi_seq" else Psi_bar.shape[:-1]
@@ -289,21 +264,14 @@ class DFBC:
         x18: Tensor,
         Psi_bar: Tensor,
         plant: Quadrotor,
-        dt: float,
+        Ts: float,
         substeps: int,
         a_res_fn: AccelerationFn | None,
     ) -> Tensor:
-        return rk4(lambda y: self._closed_loop(y, Psi_bar, plant, a_res_fn)[0], x18, dt, substeps)
+        return rk4(lambda y: self._closed_loop(y, Psi_bar, plant, a_res_fn)[0], x18, Ts, substeps)
 
-    def closed_loop_step(
-        self,
-        x18: Tensor,
-        Psi_bar: Tensor,
-        plant: Quadrotor,
-        dt: float = 0.02,
-        substeps: int = 1,
-        a_res_fn: AccelerationFn | None = None,
-    ) -> Tensor:
+    def closed_loop_step(self, x18: Tensor, Psi_bar: Tensor, plant: Quadrotor, *, Ts: float, substeps: int = 1,
+                         a_res_fn: AccelerationFn | None = None) -> Tensor:
         """One RK4 step of the closed loop with ``Psi_bar`` held over the step.
 
         Parameters
@@ -311,7 +279,7 @@ class DFBC:
         x18 : Tensor, shape (..., 18)
         Psi_bar : Tensor, shape (..., 12)
         plant : Quadrotor
-        dt : float
+        Ts : float
             Step length, s.
         substeps : int
             Equal RK4 sub-steps.
@@ -322,19 +290,12 @@ class DFBC:
         -------
         Tensor, shape (broadcast(...), 18)
         """
-        dt, substeps = check_step(dt, substeps)
+        Ts, substeps = check_step(Ts, substeps)
         lead = self._check_loop(x18, Psi_bar, plant, "Psi_bar")
-        return self._loop_step(x18.expand(*lead, 18), Psi_bar, plant, dt, substeps, a_res_fn)
+        return self._loop_step(x18.expand(*lead, 18), Psi_bar, plant, Ts, substeps, a_res_fn)
 
-    def fly(
-        self,
-        x18_0: Tensor,
-        Psi_seq: Tensor,
-        plant: Quadrotor,
-        dt: float = 0.02,
-        substeps: int = 1,
-        a_res_fn: AccelerationFn | None = None,
-    ) -> tuple[Tensor, Tensor]:
+    def fly(self, x18_0: Tensor, Psi_seq: Tensor, plant: Quadrotor, *, Ts: float, substeps: int = 1,
+            a_res_fn: AccelerationFn | None = None) -> tuple[Tensor, Tensor]:
         """Fly a command sequence in closed loop (RK4, command held over each step).
 
         Parameters
@@ -342,10 +303,10 @@ class DFBC:
         x18_0 : Tensor, shape (..., 18)
             Initial closed-loop state (see :meth:`initial_closed_loop_state`).
         Psi_seq : Tensor, shape (..., T, 12)
-            ``Psi_seq[..., k, :]`` is held over ``[k dt, (k+1) dt)``; leading
+            ``Psi_seq[..., k, :]`` is held over ``[k Ts, (k+1) Ts)``; leading
             dims broadcast against ``x18_0``'s.
         plant : Quadrotor
-        dt, substeps, a_res_fn
+        Ts, substeps, a_res_fn
             As in :meth:`closed_loop_step`.
 
         Returns
@@ -355,7 +316,7 @@ class DFBC:
         U : Tensor, shape (..., T, 4)
             Thrusts applied at the start of each step (unclipped).
         """
-        dt, substeps = check_step(dt, substeps)
+        Ts, substeps = check_step(Ts, substeps)
         if isinstance(Psi_seq, Tensor) and Psi_seq.ndim < 2:
             raise ValueError(f"Psi_seq must have shape (..., T, 12), got shape {tuple(Psi_seq.shape)}")
         lead = self._check_loop(x18_0, Psi_seq, plant, "Psi_seq")
@@ -372,7 +333,7 @@ class DFBC:
                     first.append(u)
                 return y_dot
 
-            y = rk4(rhs, y, dt, substeps)
+            y = rk4(rhs, y, Ts, substeps)
             states.append(y)
             inputs.append(first[0])
         X = torch.stack(states, dim=-2)

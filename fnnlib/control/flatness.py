@@ -44,20 +44,15 @@ import torch
 from torch import Tensor
 from torch.func import jvp as _torch_jvp
 
-from fnnlib._validation import check_finite
-from fnnlib.systems.quadrotor import (
-    NOMINAL,
-    Quadrotor,
-    QuadrotorParams,
-    _rotation_matrix,
-    constants,
-    rmatvec,
-)
+from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams, constants
+from fnnlib.systems.rotations import check_last, rmatvec, rotation_matrix
 
 __all__ = [
     "attitude_from_thrust",
     "body_rates",
+    "check_params",
     "flat_reference",
+    "flat_state_parts",
     "flat_to_input",
     "flat_to_state",
     "jvp",
@@ -88,14 +83,10 @@ def _vectors(names: tuple[str, ...], values: tuple[Tensor, ...], n: int = 3) -> 
     for name, value in zip(names, values, strict=True):
         if not isinstance(value, Tensor):
             raise TypeError(f"{name} must be a torch.Tensor of shape (..., {n}), got {type(value).__name__}")
-        if not value.is_floating_point():
-            raise TypeError(f"{name} must be a floating-point tensor, got dtype {value.dtype}")
-        if value.ndim < 1 or value.shape[-1] != n:
-            raise ValueError(f"{name} must have shape (..., {n}), got shape {tuple(value.shape)}")
+        check_last(value, n, name)
         if dtype is not None and value.dtype != dtype:
             raise TypeError(f"{names[0]} and {name} must share a dtype, got {dtype} and {value.dtype}")
         dtype = value.dtype
-        check_finite(value, name=name)
     try:
         lead = torch.broadcast_shapes(*(v.shape[:-1] for v in values))
     except RuntimeError as err:
@@ -104,7 +95,8 @@ def _vectors(names: tuple[str, ...], values: tuple[Tensor, ...], n: int = 3) -> 
     return tuple(v.expand(*lead, v.shape[-1]) for v in values)
 
 
-def _check_params(params: QuadrotorParams) -> QuadrotorParams:
+def check_params(params: QuadrotorParams) -> QuadrotorParams:
+    """Refuse anything but a :class:`QuadrotorParams` with equal x/y drag (the explicit flat map needs it)."""
     if not isinstance(params, QuadrotorParams):
         raise TypeError(f"params must be a QuadrotorParams, got {type(params).__name__}")
     if params.drag[0] != params.drag[1]:
@@ -155,7 +147,7 @@ def attitude_from_thrust(h: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     phi = torch.asin(torch.clamp(-z_B[..., 1], -1.0, 1.0))
     theta = torch.atan2(z_B[..., 0], z_B[..., 2])
     Theta = torch.stack([phi, theta, torch.zeros_like(phi)], dim=-1)
-    return Theta, _rotation_matrix(Theta), z_B, h_norm
+    return Theta, rotation_matrix(Theta, check=False), z_B, h_norm
 
 
 def body_rates(Theta: Tensor, R: Tensor, z_B: Tensor, h_norm: Tensor, h_dot: Tensor) -> Tensor:
@@ -175,7 +167,7 @@ def body_rates(Theta: Tensor, R: Tensor, z_B: Tensor, h_norm: Tensor, h_dot: Ten
     return torch.stack([w_x, w_y, w_z], dim=-1)
 
 
-def _flat_state_parts(v: Tensor, a: Tensor, j: Tensor, params: QuadrotorParams) -> tuple[Tensor, Tensor, Tensor]:
+def flat_state_parts(v: Tensor, a: Tensor, j: Tensor, params: QuadrotorParams) -> tuple[Tensor, Tensor, Tensor]:
     """(Theta, omega, T) from (v, a, j); unchecked."""
     h = thrust_vector(v, a, params)
     h_dot = -j - params.drag[0] * a if params.drag[0] != 0.0 else -j
@@ -207,7 +199,7 @@ def split_flat(Psi_bar: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     return p, v, a, j
 
 
-def flat_to_state(p: Tensor, v: Tensor, a: Tensor, j: Tensor, *, params: QuadrotorParams = NOMINAL) -> Tensor:
+def flat_to_state(p: Tensor, v: Tensor, a: Tensor, j: Tensor, *, params: QuadrotorParams) -> Tensor:
     """State of Eq. (27) `quadrotor_model` along a zero-yaw flat trajectory.
 
     Parameters
@@ -224,16 +216,16 @@ def flat_to_state(p: Tensor, v: Tensor, a: Tensor, j: Tensor, *, params: Quadrot
     Tensor, shape (..., 12)
         ``x = [p, v, Theta, omega]``.
     """
-    params = _check_params(params)
+    params = check_params(params)
     p, v, a, j = _vectors(("p", "v", "a", "j"), (p, v, a, j))
     _check_thrust(thrust_vector(v, a, params))
-    Theta, omega, _ = _flat_state_parts(v, a, j, params)
+    Theta, omega, _ = flat_state_parts(v, a, j, params)
     return torch.cat([p, v, Theta, omega], dim=-1)
 
 
 def _flat_input(v: Tensor, a: Tensor, j: Tensor, s: Tensor, params: QuadrotorParams) -> Tensor:
     def omega_map(v_: Tensor, a_: Tensor, j_: Tensor) -> tuple[Tensor, Tensor]:
-        _, omega_, T_ = _flat_state_parts(v_, a_, j_, params)
+        _, omega_, T_ = flat_state_parts(v_, a_, j_, params)
         return omega_, T_
 
     (omega, T), (omega_dot, _) = jvp(omega_map, (v, a, j), (a, j, s))
@@ -249,7 +241,7 @@ def flat_to_input(
     j: Tensor,
     s: Tensor | None = None,
     *,
-    params: QuadrotorParams = NOMINAL,
+    params: QuadrotorParams,
 ) -> Tensor:
     """Motor thrusts that make Eq. (27) `quadrotor_model` follow a zero-yaw flat trajectory.
 
@@ -267,7 +259,7 @@ def flat_to_input(
     Tensor, shape (..., 4)
         ``u = C^{-1} [T, J omega' + omega x J omega]``.
     """
-    params = _check_params(params)
+    params = check_params(params)
     if s is None:
         s = torch.zeros_like(torch.as_tensor(a))
     p, v, a, j, s = _vectors(("p", "v", "a", "j", "s"), (p, v, a, j, s))
@@ -276,7 +268,7 @@ def flat_to_input(
 
 
 def flat_reference(
-    Psi_bar: Tensor, s: Tensor | None = None, *, params: QuadrotorParams = NOMINAL
+    Psi_bar: Tensor, s: Tensor | None = None, *, params: QuadrotorParams
 ) -> tuple[Tensor, Tensor]:
     """Reference state and input from a command ``Psi_bar = [p, v, a, j]`` (e.g. for MPC, App. A.5).
 
@@ -297,7 +289,7 @@ def flat_reference(
 
 
 def state_to_flat(
-    x: Tensor, u: Tensor, u_dot: Tensor | None = None, *, params: QuadrotorParams = NOMINAL
+    x: Tensor, u: Tensor, u_dot: Tensor | None = None, *, params: QuadrotorParams
 ) -> Tensor:
     """Flat outputs seen by the model: the inverse of :func:`flat_to_state` / :func:`flat_to_input`.
 
@@ -327,7 +319,7 @@ def state_to_flat(
     x, u, u_dot = (t.expand(*lead, t.shape[-1]) for t in (x, u, u_dot))
 
     def acceleration(x_: Tensor, u_: Tensor) -> Tensor:
-        return quad._f(x_, u_)[..., 3:6]
+        return quad.rhs(x_, u_)[..., 3:6]
 
-    a, j = jvp(acceleration, (x, u), (quad._f(x, u), u_dot))
+    a, j = jvp(acceleration, (x, u), (quad.rhs(x, u), u_dot))
     return torch.cat([x[..., 0:6], a, j], dim=-1)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,10 +21,10 @@ import torch
 from torch import Tensor
 
 from fnnlib.control.dfbc import DFBC
-from fnnlib.control.trajectories import random_min_snap_flights
+from fnnlib.control.min_snap import random_min_snap_flights
 from fnnlib.data.bottle import DataError
 from fnnlib.io import atomic_write
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
+from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
 
 __all__ = ["Flights", "load_flights", "make_flights", "save_flights", "single_step_labels"]
 
@@ -42,14 +43,14 @@ class Flights:
         Commands ``[p, v, a, j]``, each held over one step.
     u : Tensor, shape (K, T, 4)
         Thrusts applied at the start of each step.
-    dt : float
+    Ts : float
         Step, s.
     """
 
     x: Tensor
     Psi: Tensor
     u: Tensor
-    dt: float
+    Ts: float
 
     def __post_init__(self) -> None:
         K, T1, n = self.x.shape
@@ -69,27 +70,35 @@ class Flights:
         return int(self.x.shape[1] - 1)
 
 
-def make_flights(n_flights: int, n_nodes: int, *, dt: float = 0.02, seed: int = 0,
-                 truth: QuadrotorParams = NOMINAL, controller: DFBC | None = None, n_waypoints: int = 3,
-                 substeps: int = 4, max_speed: float = 10.0, progress: bool = False) -> Flights:
+def make_flights(n_flights: int, n_nodes: int, *, Ts: float, seed: int, truth: QuadrotorParams, controller: DFBC,
+                 n_waypoints: int, box: Sequence[Sequence[float]], max_speed: float, substeps: int,
+                 progress: bool = False) -> Flights:
     """Fly ``n_flights`` random minimum-snap commands of ``n_nodes`` nodes with the DFBC on ``truth``.
 
     All flights advance as one batch. Each starts at rest on its first
     waypoint with the controller states at zero. The truth is integrated with
-    RK4 and ``substeps`` sub-steps per ``dt`` (finer than the learner's model).
+    RK4 and ``substeps`` sub-steps per ``Ts`` (finer than the learner's model).
+    The waypoints (``n_waypoints``, ``box``, ``max_speed``) are drawn by
+    :func:`~fnnlib.control.min_snap.random_min_snap_flights`; the release's
+    ``n_waypoints``, ``box``, ``max_speed`` and ``substeps`` are
+    :data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`, its training vehicle
+    :data:`~fnnlib.systems.quadrotor.TRAINING_TRUTH`.
     """
     if int(n_flights) < 1 or int(n_nodes) < 2:
         raise ValueError(f"need n_flights >= 1 and n_nodes >= 2, got {n_flights}, {n_nodes}")
-    flights = random_min_snap_flights(int(n_flights), int(n_nodes), dt, seed, n_waypoints=int(n_waypoints),
-                                      max_speed=max_speed, progress=progress)
+    if not isinstance(truth, QuadrotorParams):
+        raise TypeError(f"truth must be a QuadrotorParams, got {type(truth).__name__}")
+    if not isinstance(controller, DFBC):
+        raise TypeError(f"controller must be a DFBC, got {type(controller).__name__}")
+    flights = random_min_snap_flights(int(n_flights), int(n_nodes), Ts=Ts, seed=seed, n_waypoints=int(n_waypoints),
+                                      box=box, max_speed=max_speed, progress=progress)
     Psi = torch.as_tensor(flights.psi, dtype=torch.float64)
-    ctrl = controller if controller is not None else DFBC(NOMINAL)
     x0 = torch.zeros(Psi.shape[0], 12, dtype=torch.float64)
     x0[:, :3] = Psi[:, 0, :3]
-    x18_0 = ctrl.initial_closed_loop_state(x0)
+    x18_0 = controller.initial_closed_loop_state(x0)
     with torch.no_grad():
-        X, U = ctrl.fly(x18_0, Psi, Quadrotor(truth), dt=dt, substeps=substeps)
-    return Flights(x=X, Psi=Psi, u=U, dt=float(dt))
+        X, U = controller.fly(x18_0, Psi, Quadrotor(truth), Ts=Ts, substeps=substeps)
+    return Flights(x=X, Psi=Psi, u=U, Ts=float(Ts))
 
 
 def single_step_labels(flights: Flights, model: Quadrotor) -> tuple[Tensor, Tensor]:
@@ -100,7 +109,7 @@ def single_step_labels(flights: Flights, model: Quadrotor) -> tuple[Tensor, Tens
     labels (M, 3), M = K T.
     """
     x = flights.x[:, :-1, :12]
-    a_fd = torch.diff(flights.x[..., 3:6], dim=1) / flights.dt
+    a_fd = torch.diff(flights.x[..., 3:6], dim=1) / flights.Ts
     a_model = model.f(x, flights.u)[..., 3:6]
     return x.reshape(-1, 12), (a_fd - a_model).reshape(-1, 3)
 
@@ -116,7 +125,7 @@ def _digest(arrays: dict[str, np.ndarray]) -> str:
 def save_flights(path: str | os.PathLike[str], flights: Flights, meta: dict | None = None) -> Path:
     """Save to ``.npz`` with the SHA-256 of the arrays inside (written atomically)."""
     arrays = {k: getattr(flights, k).numpy() for k in _FIELDS}
-    arrays["dt"] = np.asarray(flights.dt)
+    arrays["dt"] = np.asarray(flights.Ts)  # the file format keeps its key "dt"
     header = {"sha256": _digest(arrays), "meta": meta or {}}
     path = Path(path)
     with atomic_write(path) as fh:
@@ -137,5 +146,5 @@ def load_flights(path: str | os.PathLike[str]) -> tuple[Flights, dict]:
         raise DataError(f"flight data {path} is corrupt or not an fnnlib flight file: {exc}") from exc
     if _digest(arrays) != header.get("sha256"):
         raise DataError(f"flight data {path} fails its checksum")
-    flights = Flights(*(torch.as_tensor(arrays[k]) for k in _FIELDS), dt=float(arrays["dt"]))
+    flights = Flights(*(torch.as_tensor(arrays[k]) for k in _FIELDS), Ts=float(arrays["dt"]))
     return flights, dict(header.get("meta") or {})

@@ -27,7 +27,7 @@ class NeuralFeedback(nn.Module):
         One of :data:`fnnlib.models.ACTIVATIONS`.
     """
 
-    def __init__(self, n_state: int, hidden: Sequence[int] = (50, 50), activation: str = "relu") -> None:
+    def __init__(self, n_state: int, hidden: Sequence[int], activation: str) -> None:
         super().__init__()
         self.n_state = int(n_state)
         self.hidden = tuple(int(h) for h in hidden)

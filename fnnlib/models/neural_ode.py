@@ -17,7 +17,7 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
 }
 
 
-def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str = "relu") -> nn.Sequential:
+def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str) -> nn.Sequential:
     """A multilayer perceptron ``n_in -> hidden... -> n_out`` with the named activation.
 
     ``hidden=(50, 50)`` gives three linear layers 2-50-50-2 for the spiral.
@@ -55,8 +55,7 @@ class NeuralODE(nn.Module):
         External input dimension m (0 for autonomous systems).
     """
 
-    def __init__(self, n_state: int, hidden: Sequence[int] = (50, 50), activation: str = "relu",
-                 n_input: int = 0) -> None:
+    def __init__(self, n_state: int, hidden: Sequence[int], activation: str, n_input: int = 0) -> None:
         super().__init__()
         self.n_state = int(n_state)
         self.n_input = int(n_input)
@@ -83,6 +82,11 @@ class NeuralODE(nn.Module):
             raise ValueError("model was built with n_input=0 but an input u was given")
         return self.net(x)
 
-    def forward(self, t: Tensor | float, x: Tensor) -> Tensor:
-        """``f(t, x)`` for torchdiffeq; autonomous models only."""
-        return self.vector_field(x)
+    @property
+    def n(self) -> int:
+        """The state dimension (the same number as ``n_state``; ``n`` is the name the observers use)."""
+        return self.n_state
+
+    def forward(self, t: Tensor | float, x: Tensor, u: Tensor | None = None) -> Tensor:
+        """``f(t, x)`` for torchdiffeq, or ``f(t, x, u)`` for a model with inputs (``n_input > 0``)."""
+        return self.vector_field(x, u)

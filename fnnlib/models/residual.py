@@ -41,15 +41,16 @@ class AeroResidual(nn.Module):
     Parameters
     ----------
     hidden : sequence of int
-        Hidden widths, default ``(36, 36)``.
+        Hidden widths (the paper's: ``(36, 36)``, in
+        :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`).
     activation : str
-        One of :data:`fnnlib.models.ACTIVATIONS`, default ``"tanh"``.
+        One of :data:`fnnlib.models.ACTIVATIONS` (the paper's: ``"tanh"``).
     """
 
     n_in = 6
     n_out = 3
 
-    def __init__(self, hidden: Sequence[int] = (36, 36), activation: str = "tanh") -> None:
+    def __init__(self, hidden: Sequence[int], activation: str) -> None:
         super().__init__()
         self.hidden = tuple(int(h) for h in hidden)
         self.activation = str(activation)
@@ -91,7 +92,7 @@ class AdaptiveResidual(nn.Module):
 
     .. math:: \dot{\hat\chi} = \Gamma\,\Xi^\top(t)\,\tilde x(t),
 
-    integrated with an explicit Euler step of length ``dt`` by :meth:`adapt`.
+    integrated with an explicit Euler step of length ``Ts`` by :meth:`adapt`.
     Only the velocity rows of :math:`\Xi` are nonzero (the residual enters
     :math:`\dot v`), so only the velocity part of :math:`\tilde x` matters:
     :math:`\Xi^\top\tilde x = \mathrm{vec}(\tilde x_v\,\phi^\top)`.
@@ -102,10 +103,10 @@ class AdaptiveResidual(nn.Module):
         The offline-trained network; copied, never modified.
     Gamma : float
         Adaptation gain (a positive multiple of the identity); the authors'
-        release uses 8.0.
+        release uses :data:`~fnnlib.quadrotor_presets.PAPER_GAMMA` = 8.0.
     """
 
-    def __init__(self, base: AeroResidual, Gamma: float = 8.0) -> None:
+    def __init__(self, base: AeroResidual, Gamma: float) -> None:
         super().__init__()
         Gamma = float(Gamma)
         if not (Gamma > 0 and torch.isfinite(torch.tensor(Gamma))):
@@ -129,8 +130,8 @@ class AdaptiveResidual(nn.Module):
         # f_neural = Xi(x) chi_hat   (Eq. 29)
         return self.features(x) @ self.chi_hat.T + self.b
 
-    def adapt(self, x: Tensor, x_tilde_v: Tensor, dt: float) -> None:
-        r"""One Euler step of Eq. (30): :math:`\hat\chi \mathrel{+}= dt\,\Gamma\,\tilde x_v\phi(x)^\top`.
+    def adapt(self, x: Tensor, x_tilde_v: Tensor, Ts: float) -> None:
+        r"""One Euler step of Eq. (30): :math:`\hat\chi \mathrel{+}= T_s\,\Gamma\,\tilde x_v\phi(x)^\top`.
 
         ``x`` (12,) is the state where :math:`\Xi` is evaluated, ``x_tilde_v``
         (3,) the velocity part of the observation error.
@@ -142,7 +143,7 @@ class AdaptiveResidual(nn.Module):
         with torch.no_grad():
             phi = self.features(x.to(self.chi_hat.dtype))
             # chi_hat' = Gamma Xi^T x_tilde   (Eq. 30)
-            self.chi_hat.add_(torch.outer(x_tilde_v.to(self.chi_hat.dtype), phi), alpha=float(dt) * self.Gamma)
+            self.chi_hat.add_(torch.outer(x_tilde_v.to(self.chi_hat.dtype), phi), alpha=float(Ts) * self.Gamma)
 
     def reset(self) -> None:
         """Back to the offline weights."""

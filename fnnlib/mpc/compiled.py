@@ -2,7 +2,8 @@ r"""Compiled (numba) kernels for the per-step work of the Sec. 5.2 MPC: Eq. (27)
 
 The torch code (:class:`~fnnlib.systems.quadrotor.Quadrotor`, the models of
 :mod:`fnnlib.mpc.models` and :func:`~fnnlib.mpc.linearize.linearize`) is the
-reference implementation; this module is its twin for the one place where
+reference implementation; this module is its declared reference twin (the
+:class:`~fnnlib.mpc.backends.NumbaBackend` of the flight loop) for the one place where
 per-op overhead, not arithmetic, sets the cost: the MPC loop, which at every
 0.02 s step evaluates the model along a 10-step plan, linearizes it there and
 simulates the vehicle, all on batches of 1 to 170 rows. Eager torch spends
@@ -13,7 +14,7 @@ What is computed, for a plant ``params`` and a residual network
 :class:`~fnnlib.models.AeroResidual` and :class:`~fnnlib.models.AdaptiveResidual`):
 
 * :meth:`CompiledQuadrotor.f`: :math:`\dot x = f(x, u) + [0, f_{neural}, 0, 0]`, Eq. (27);
-* :meth:`CompiledQuadrotor.step`: :math:`\Phi(x, u)`, classical RK4 over ``dt``;
+* :meth:`CompiledQuadrotor.step`: :math:`\Phi(x, u)`, classical RK4 over ``Ts``;
 * :meth:`CompiledQuadrotor.step_jacobian`: :math:`\Phi` and its exact Jacobians
   :math:`A = \partial\Phi/\partial x`, :math:`B = \partial\Phi/\partial u` by forward-mode
   differentiation through the RK4 stages, with the analytic Jacobian of Eq. (27)
@@ -37,7 +38,8 @@ from torch import Tensor, nn
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
 from fnnlib.mpc.linearize import Linearization, affine_model
 from fnnlib.mpc.models import PredictionModel
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, check_step, constants
+from fnnlib.systems.integrator import check_step
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, constants
 
 __all__ = ["CompiledModel", "CompiledQuadrotor", "residual_layers", "warm_up"]
 
@@ -197,12 +199,12 @@ def _f_batch(X, U, P, Ws, bs, has_res, H, G, out):  # pragma: no cover - compile
 
 
 @nb.njit(**_JIT)
-def _rk4_batch(X, U, dt, substeps, P, Ws, bs, has_res, H, G, out, rate):  # pragma: no cover - compiled
-    """One RK4 step of length dt (``substeps`` equal sub-steps) per row, as :func:`fnnlib.systems.quadrotor.rk4`.
+def _rk4_batch(X, U, Ts, substeps, P, Ws, bs, has_res, H, G, out, rate):  # pragma: no cover - compiled
+    """One RK4 step of length Ts (``substeps`` equal sub-steps) per row, as :func:`fnnlib.systems.integrator.rk4`.
 
     ``rate`` receives the first stage, f(x, u) at the start of the step.
     """
-    h = dt / substeps
+    h = Ts / substeps
     Jm = np.empty((12, 16))
     k1, k2, k3, k4 = np.empty(12), np.empty(12), np.empty(12), np.empty(12)
     y, z = np.empty(12), np.empty(12)
@@ -244,9 +246,9 @@ def _stage(z, Z, u, P, Ws, bs, has_res, H, G, k, K, Jm):  # pragma: no cover - c
 
 
 @nb.njit(**_JIT)
-def _rk4_jac_batch(X, U, dt, substeps, P, Ws, bs, has_res, H, G, out, A, B):  # pragma: no cover - compiled
+def _rk4_jac_batch(X, U, Ts, substeps, P, Ws, bs, has_res, H, G, out, A, B):  # pragma: no cover - compiled
     """RK4 step per row and its exact Jacobians, forward mode: the tangent of (x, u) carried through every stage."""
-    h = dt / substeps
+    h = Ts / substeps
     Jm = np.empty((12, 16))
     k1, k2, k3, k4 = np.empty(12), np.empty(12), np.empty(12), np.empty(12)
     K1, K2, K3, K4 = np.empty((12, 16)), np.empty((12, 16)), np.empty((12, 16)), np.empty((12, 16))
@@ -342,7 +344,7 @@ class CompiledQuadrotor:
     r"""Eq. (27) of a :class:`~fnnlib.systems.quadrotor.Quadrotor` plus an optional residual network, compiled.
 
     The numba twin of ``plant.f(x, u, a_res=residual(x))`` and of its RK4 step
-    ``plant.step(x, u, dt, substeps, a_res_fn=residual)``, for float64 numpy
+    ``plant.step(x, u, Ts, substeps, a_res_fn=residual)``, for float64 numpy
     batches, with exact step Jacobians. The residual's weights are read at
     every call through views of its tensors, so an :class:`~fnnlib.models.AdaptiveResidual`
     adapting online is seen as it is now (build a new one after replacing the
@@ -392,34 +394,34 @@ class CompiledQuadrotor:
         _f_batch(X, U, self.P, Ws, bs, has_res, self._H, self._G, out)
         return out[0] if single else out
 
-    def step(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, dt: float = 0.02, substeps: int = 1) -> np.ndarray:
-        r""":math:`\Phi(x, u)`: one RK4 step of length ``dt`` in ``substeps`` sub-steps, the input held."""
-        return self.rate_and_step(x, u, dt, substeps)[1]
+    def step(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, Ts: float, substeps: int = 1) -> np.ndarray:
+        r""":math:`\Phi(x, u)`: one RK4 step of length ``Ts`` in ``substeps`` sub-steps, the input held."""
+        return self.rate_and_step(x, u, Ts, substeps)[1]
 
-    def rate_and_step(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, dt: float = 0.02,
+    def rate_and_step(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, Ts: float,
                       substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         r"""``(f(x, u), Phi(x, u))`` in one pass: the change rate is the RK4 step's first stage."""
         X, U, single = self._inputs(x, u)
-        dt, substeps = _check_step(dt, substeps)
+        Ts, substeps = _check_step(Ts, substeps)
         Ws, bs, has_res = self._net
         out, rate = np.empty_like(X), np.empty_like(X)
-        _rk4_batch(X, U, dt, substeps, self.P, Ws, bs, has_res, self._H, self._G, out, rate)
+        _rk4_batch(X, U, Ts, substeps, self.P, Ws, bs, has_res, self._H, self._G, out, rate)
         return (rate[0], out[0]) if single else (rate, out)
 
-    def step_jacobian(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, dt: float = 0.02,
+    def step_jacobian(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor, Ts: float,
                       substeps: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r""":math:`\Phi(x, u)` (B, 12) with :math:`A = \partial\Phi/\partial x` (B, 12, 12) and
         :math:`B = \partial\Phi/\partial u` (B, 12, 4), exact (forward mode through the RK4 stages)."""
         X, U, _ = self._inputs(x, u)
-        return self._step_jacobian(X, U, *_check_step(dt, substeps))
+        return self._step_jacobian(X, U, *_check_step(Ts, substeps))
 
-    def _step_jacobian(self, X: np.ndarray, U: np.ndarray, dt: float,
+    def _step_jacobian(self, X: np.ndarray, U: np.ndarray, Ts: float,
                        substeps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         Ws, bs, has_res = self._net
         out = np.empty_like(X)
         A = np.empty((X.shape[0], 12, 12))
         B = np.empty((X.shape[0], 12, 4))
-        _rk4_jac_batch(X, U, dt, substeps, self.P, Ws, bs, has_res, self._H, self._G, out, A, B)
+        _rk4_jac_batch(X, U, Ts, substeps, self.P, Ws, bs, has_res, self._H, self._G, out, A, B)
         return out, A, B
 
 
@@ -444,7 +446,7 @@ class CompiledModel:
             raise TypeError(f"model must be a PredictionModel, got {type(model).__name__}")
         self.model = model
         self.dynamics = CompiledQuadrotor(model.plant, model.residual)  # type: ignore[arg-type]
-        self.dt, self.substeps = float(model.dt), int(model.substeps)
+        self.Ts, self.substeps = float(model.Ts), int(model.substeps)
 
     def f(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor) -> np.ndarray:
         """The model's change rate (no feedback), as ``model.f``."""
@@ -452,11 +454,11 @@ class CompiledModel:
 
     def phi(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor) -> np.ndarray:
         r""":math:`\Phi(x, u)`, as ``model.phi``."""
-        return self.dynamics.step(x, u, self.dt, self.substeps)
+        return self.dynamics.step(x, u, self.Ts, self.substeps)
 
     def f_and_phi(self, x: np.ndarray | Tensor, u: np.ndarray | Tensor) -> tuple[np.ndarray, np.ndarray]:
         r"""``(model.f(x, u), model.phi(x, u))`` in one pass."""
-        return self.dynamics.rate_and_step(x, u, self.dt, self.substeps)
+        return self.dynamics.rate_and_step(x, u, self.Ts, self.substeps)
 
     def linearize(self, x_bar: np.ndarray | Tensor, u_bar: np.ndarray | Tensor) -> Linearization:
         """Affine model of ``model.step`` along the plan, horizon steps ``k = 0 .. N-1`` (see the class docstring).
@@ -464,7 +466,7 @@ class CompiledModel:
         Raises ``ValueError`` where it is not finite, as :func:`~fnnlib.mpc.linearize.linearize` does.
         """
         X, U, _ = CompiledQuadrotor._inputs(x_bar, u_bar)
-        x_next, A, B = self.dynamics._step_jacobian(X, U, self.dt, self.substeps)
+        x_next, A, B = self.dynamics._step_jacobian(X, U, self.Ts, self.substeps)
         terms = self.model.feedback_terms()
         if terms is not None:
             G = terms[0].numpy()
@@ -474,6 +476,9 @@ class CompiledModel:
             A += G
             x_next += np.einsum("kij,kj->ki", G, e)
         return affine_model(A, B, x_next, X, U)
+
+
+_WARM_UP_TS = 0.01  # any step: numba compiles per argument type, not value
 
 
 def warm_up(*residuals: nn.Module | None) -> float:
@@ -493,11 +498,11 @@ def warm_up(*residuals: nn.Module | None) -> float:
     for residual in (None, *residuals):
         cq = CompiledQuadrotor(plant, residual)
         cq.f(x, u)
-        cq.rate_and_step(x, u)
-        cq.step_jacobian(x, u)
+        cq.rate_and_step(x, u, _WARM_UP_TS)
+        cq.step_jacobian(x, u, _WARM_UP_TS)
     return time.perf_counter() - tic
 
 
-def _check_step(dt: float, substeps: int) -> tuple[float, int]:
-    """:func:`~fnnlib.systems.quadrotor.check_step`, taking numpy scalars too."""
-    return check_step(float(dt) if isinstance(dt, np.floating) else dt, substeps)
+def _check_step(Ts: float, substeps: int) -> tuple[float, int]:
+    """:func:`~fnnlib.systems.integrator.check_step`, taking numpy scalars too."""
+    return check_step(float(Ts) if isinstance(Ts, np.floating) else Ts, substeps)

@@ -3,6 +3,7 @@ r"""The closed-loop flight test of Sec. 5.2: linearized MPC (Eq. (28)) with a pr
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -12,24 +13,27 @@ from tqdm.auto import tqdm
 
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.control.flatness import flat_reference
-from fnnlib.control.trajectories import lissajous
-from fnnlib.mpc.linearize import Linearization, linearize
-from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
+from fnnlib.control.lissajous import lissajous
+from fnnlib.mpc.backends import FlightBackend, check_backend_name, make_backend
+from fnnlib.mpc.linearize import Linearization
+from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC, is_diverged
 from fnnlib.mpc.models import PredictionModel
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
+from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
 
 __all__ = ["FlightResult", "fly", "lissajous_reference", "tracking_rmse"]
 
 
-def lissajous_reference(steps: int, N: int, *, dt: float = 0.02, params: QuadrotorParams = NOMINAL,
-                        **lissajous_params: float) -> tuple[Tensor, Tensor]:
+def lissajous_reference(steps: int, N: int, *, Ts: float, params: QuadrotorParams,
+                        curve: Mapping[str, float]) -> tuple[Tensor, Tensor]:
     """The flight-test reference (App. A.5.5) on the control grid, by differential flatness (zero yaw).
 
-    Returns ``x_r`` (steps + N + 1, 12) and ``u_r`` (steps + N, 4), float64, for
-    ``t = 0, dt, ...``; the extra ``N`` rows feed the last horizons.
+    ``params`` is the vehicle the reference is computed for (the paper's: the nominal model), ``curve``
+    the parameters of :func:`~fnnlib.control.lissajous.lissajous` (the paper's:
+    :data:`~fnnlib.quadrotor_presets.PAPER_LISSAJOUS`). Returns ``x_r`` (steps + N + 1, 12) and
+    ``u_r`` (steps + N, 4), float64, for ``t = 0, Ts, ...``; the extra ``N`` rows feed the last horizons.
     """
-    t = np.arange(int(steps) + int(N) + 1) * check_positive(dt, name="dt")
-    ref = lissajous(t, **lissajous_params)
+    t = np.arange(int(steps) + int(N) + 1) * check_positive(Ts, name="Ts")
+    ref = lissajous(t, **curve)
     as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64)  # noqa: E731
     Psi = torch.cat([as_t(ref.p), as_t(ref.v), as_t(ref.a), as_t(ref.j)], dim=-1)
     x_r, u_r = flat_reference(Psi, as_t(ref.s), params=params)
@@ -45,13 +49,16 @@ class FlightResult:
     the model's change rate at each measured state and applied input (Fig.
     S8), ``x_tilde`` (T, 12) the layer-0 observation error (NaN where the model
     has none), ``delta`` (T, 12) the model's one-step residual
-    :math:`(x_{t+1} - \\Phi(x_t, u_t)) / dt` without feedback (for Theorems 1-2).
+    :math:`(x_{t+1} - \\Phi(x_t, u_t)) / T_s` without feedback (for Theorems 1-2).
     ``t_linearize`` / ``t_solve`` (T,) are the seconds each step spent linearizing
     and solving; ``elapsed_s`` the wall time of the whole :func:`fly` call.
     ``n_reference_linearizations`` counts the steps after the first where the
     previous plan had left the model's domain (its linearization was not
     finite, as in a diverging flight) and the model was linearized along the
-    reference instead.
+    reference instead. ``fallback_reasons`` counts the MPC's fallbacks per
+    reason and ``n_reference_fallbacks`` those that flew the reference input
+    (see :meth:`~fnnlib.mpc.linearized.LinearizedMPC.solve`); :attr:`diverged`
+    marks a flight with too many fallbacks.
     """
 
     name: str
@@ -65,10 +72,22 @@ class FlightResult:
     t_linearize: np.ndarray
     t_solve: np.ndarray
     n_fallbacks: int
+    Ts: float
     statuses: list[str] = field(default_factory=list)
     n_reference_linearizations: int = 0
-    dt: float = 0.02
     elapsed_s: float = float("nan")
+    fallback_reasons: dict[str, int] = field(default_factory=dict)
+    n_reference_fallbacks: int = 0
+
+    @property
+    def fallback_share(self) -> float:
+        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`, issue 16)."""
+        return self.n_fallbacks / len(self.u)
+
+    @property
+    def diverged(self) -> bool:
+        """True when :attr:`fallback_share` exceeds :data:`~fnnlib.mpc.linearized.DIVERGED_FALLBACK_SHARE`."""
+        return is_diverged(self.n_fallbacks, len(self.u))
 
     @property
     def wall_time(self) -> float:
@@ -78,7 +97,7 @@ class FlightResult:
     @property
     def real_time_factor(self) -> float:
         """Flown time over the wall time of the whole loop (simulation and bookkeeping included)."""
-        return float(len(self.u) * self.dt / self.elapsed_s)
+        return float(len(self.u) * self.Ts / self.elapsed_s)
 
 
 def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
@@ -90,35 +109,36 @@ def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
 
 
 def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, x_r: Tensor, u_r: Tensor, *, steps: int,
-        x0: Tensor | None = None, dt: float = 0.02, substeps: int = 4, linearize_method: str = "central",
-        backend: str = "torch", progress: bool = False) -> FlightResult:
+        Ts: float, substeps: int, backend: str, linearize_method: str | None = None, x0: Tensor | None = None,
+        progress: bool = False) -> FlightResult:
     r"""Fly ``steps`` control steps of the MPC with ``model`` on the ``truth`` vehicle.
 
     At step ``t``: the model observes the measured state; the model is
     linearized along the previous plan shifted by one step (the reference at
     the first step), with the measured state as the first point; the QP of
     Eq. (28) is solved against the reference ``x_r[t+1 .. t+N]``,
-    ``u_r[t .. t+N-1]``; ``u_0`` is applied to the truth for ``dt`` (RK4 with
+    ``u_r[t .. t+N-1]``; ``u_0`` is applied to the truth for ``Ts`` (RK4 with
     ``substeps``); the model commits the plan.
 
     Parameters
     ----------
     x_r, u_r : Tensor, shapes (steps + N + 1, 12) and (steps + N, 4)
         Reference states and inputs on the control grid (from flatness).
+    Ts : float
+        Control step in s; must be the model's (the paper's: 0.02).
+    substeps : int
+        RK4 sub-steps of the truth per ``Ts`` (the paper run: 1).
+    backend : {"torch", "numba"}
+        Who does the numerics of each step (:mod:`fnnlib.mpc.backends`): the torch reference, or its
+        compiled twins with exact Jacobians (the paper run). The models' online hooks are torch either way.
+    linearize_method : str, optional
+        :func:`~fnnlib.mpc.linearize.linearize`'s method; needed by the torch backend only.
     x0 : Tensor, shape (12,), optional
         Initial state; default ``x_r[0]``.
-    linearize_method : str
-        :func:`~fnnlib.mpc.linearize.linearize`'s method on the torch backend.
-    backend : {"torch", "numba"}
-        Who does the numerics of each step (the model along the plan, its linearization, the truth's
-        step). ``"torch"``: the reference torch code. ``"numba"``: the compiled twins of
-        :mod:`fnnlib.mpc.compiled`, with exact Jacobians (``linearize_method`` is not used); the same
-        flight to ~1e-9 (tested), several times faster. The models' online hooks are torch either way.
     """
     t_start = time.perf_counter()
-    check_positive(dt, name="dt")
-    if backend not in ("torch", "numba"):
-        raise ValueError(f"backend must be 'torch' or 'numba', got {backend!r}")
+    check_positive(Ts, name="Ts")
+    check_backend_name(backend)
     steps, N = int(steps), int(mpc.N)
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
@@ -131,27 +151,19 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
     check_finite(u_r, name="u_r")
     x = (x_r[0] if x0 is None else torch.as_tensor(x0, dtype=torch.float64)).clone()
     check_finite(x, name="x0")
-    if backend == "numba":
-        from fnnlib.mpc.compiled import CompiledModel, CompiledQuadrotor
-
-        c_model, c_truth = CompiledModel(model), CompiledQuadrotor(truth)
-        if c_model.dt != float(dt):
-            raise ValueError(f"the model predicts over dt = {c_model.dt} but the loop steps dt = {dt}")
+    numerics: FlightBackend = make_backend(backend, model, truth, Ts=Ts, substeps=substeps, N=N,
+                                           linearize_method=linearize_method)
     model.reset()
     mpc.reset()
     fallbacks_before = int(mpc.n_fallbacks)
     u_lb, u_ub = np.asarray(mpc.u_lb, dtype=np.float64), np.asarray(mpc.u_ub, dtype=np.float64)
-    k_idx = torch.arange(N)
     X_r, U_r = x_r.numpy(), u_r.numpy()
     as_t = torch.from_numpy  # the loop works in numpy; the models' hooks see torch views
 
     def linearize_at(x_bar: np.ndarray, u_bar: np.ndarray) -> Linearization | None:
         """The model's affine form along (x_bar, u_bar), or None where it is not finite there."""
         try:
-            if backend == "numba":
-                return c_model.linearize(x_bar, u_bar)
-            return linearize(model.step, as_t(x_bar), as_t(u_bar), k_idx,  # type: ignore[arg-type]
-                             method=linearize_method)
+            return numerics.linearize(x_bar, u_bar)
         except ValueError:  # a NaN/inf point or output, refused by either linearization
             return None
 
@@ -190,21 +202,13 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         u = np.minimum(np.maximum(plan_u[0], u_lb), u_ub)  # solver tolerance
         plan_u[0] = u  # the models are told the input actually applied (commit's contract)
         with torch.no_grad():
-            # the model along the new plan, once: row 0 is (x, u), the rest feeds the cascade's commit
-            if backend == "numba":
-                rate_true, x_next = c_truth.rate_and_step(x, u, dt, substeps)
-                rates, phi_plan = c_model.f_and_phi(plan_x[:-1], plan_u)
-            else:
-                u_t = as_t(u)
-                rate_true_t = truth.f(x_t, u_t)
-                rate_true = rate_true_t.numpy()
-                x_next = truth.step(x_t, u_t, dt=dt, substeps=substeps, k1=rate_true_t).numpy()
-                rates_t = model.f(as_t(plan_x[:-1]), as_t(plan_u))
-                rates = rates_t.numpy()
-                phi_plan = model.phi(as_t(plan_x[:-1]), as_t(plan_u), k1=rates_t).numpy()
+            # the truth's step, then the model along the new plan, once: row 0 is (x, u), the rest feeds the
+            # cascade's commit
+            rate_true, x_next = numerics.truth_rate_and_step(x, u)
+            rates, phi_plan = numerics.model_rate_and_phi(plan_x[:-1], plan_u)
             xdot_true.append(rate_true)
             xdot_pred.append(model.xdot(x_t, as_t(u), f=as_t(rates[0])).numpy())
-            delta.append((x_next - phi_plan[0]) / dt)
+            delta.append((x_next - phi_plan[0]) / Ts)
         model.commit(as_t(plan_x), as_t(plan_u), as_t(phi_plan))
         if not np.isfinite(x_next).all():
             check_finite(as_t(x_next), name=f"truth state at step {t + 1}")
@@ -215,4 +219,5 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         name=model.name, x=np.stack(xs), u=np.stack(us), x_ref=X_r[:steps + 1].copy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
         delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
-        statuses=statuses, dt=float(dt), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference)
+        statuses=statuses, Ts=float(Ts), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference,
+        fallback_reasons=dict(mpc.fallback_reasons), n_reference_fallbacks=int(mpc.n_reference_fallbacks))

@@ -133,11 +133,11 @@ def linearize(
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    dt = dtype if dtype is not None else _infer_dtype(step, x_bar)
-    if not dt.is_floating_point:
-        raise ValueError(f"dtype must be a floating-point torch dtype, got {dt}")
-    x = _as_tensor(x_bar, dt, "x_bar (N, n)", 2)
-    u = _as_tensor(u_bar, dt, "u_bar (N, m)", 2)
+    float_dtype = dtype if dtype is not None else _infer_dtype(step, x_bar)
+    if not float_dtype.is_floating_point:
+        raise ValueError(f"dtype must be a floating-point torch dtype, got {float_dtype}")
+    x = _as_tensor(x_bar, float_dtype, "x_bar (N, n)", 2)
+    u = _as_tensor(u_bar, float_dtype, "u_bar (N, m)", 2)
     N, n = x.shape
     m = u.shape[1]
     if N < 1 or n < 1:

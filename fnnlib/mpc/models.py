@@ -31,7 +31,7 @@ from torch import Tensor, nn
 
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.models.residual import AdaptiveResidual
-from fnnlib.observers.gains import check_gain, decayed_gains
+from fnnlib.feedback import check_gain, decayed_gains
 from fnnlib.systems.quadrotor import Quadrotor
 
 __all__ = ["AdaptiveNNModel", "FeedbackCascadeModel", "PredictionModel", "paper_models"]
@@ -40,7 +40,7 @@ __all__ = ["AdaptiveNNModel", "FeedbackCascadeModel", "PredictionModel", "paper_
 class PredictionModel:
     r"""Nominal dynamics Eq. (27) plus an optional learned residual, discretised by RK4.
 
-    :math:`\Phi(x, u)`: one RK4 step of length ``dt`` (``substeps`` sub-steps) of
+    :math:`\Phi(x, u)`: one RK4 step of length ``Ts`` (``substeps`` sub-steps) of
     :math:`\dot x = f(x, u) + [0, f_{neural}(v, \Theta), 0, 0]`.
 
     Parameters
@@ -52,18 +52,18 @@ class PredictionModel:
     residual : callable or None
         ``residual(x) -> (..., 3)`` acceleration, e.g. an
         :class:`~fnnlib.models.AeroResidual`; ``None`` for the nominal model.
-    dt : float
+    Ts : float
         Control / prediction step (0.02 s in the paper).
     substeps : int
-        RK4 sub-steps per ``dt``.
+        RK4 sub-steps per ``Ts``.
     """
 
     def __init__(self, name: str, plant: Quadrotor, residual: Callable[[Tensor], Tensor] | None = None, *,
-                 dt: float = 0.02, substeps: int = 1) -> None:
+                 Ts: float, substeps: int = 1) -> None:
         self.name = str(name)
         self.plant = plant
         self.residual = residual
-        self.dt = check_positive(dt, name="dt")
+        self.Ts = check_positive(Ts, name="Ts")
         self.substeps = int(substeps)
         if isinstance(residual, nn.Module):
             for p in residual.parameters():
@@ -76,7 +76,7 @@ class PredictionModel:
 
     def phi(self, x: Tensor, u: Tensor, k1: Tensor | None = None) -> Tensor:
         r""":math:`\Phi(x, u)`, the RK4 step of :meth:`f` (no feedback); ``k1 = f(x, u)`` if already computed."""
-        return self.plant.step(x, u, dt=self.dt, substeps=self.substeps, a_res_fn=self.residual, k1=k1)
+        return self.plant.step(x, u, Ts=self.Ts, substeps=self.substeps, a_res_fn=self.residual, k1=k1)
 
     def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
         """The discrete model for horizon steps ``k`` (LongTensor, batch); here the same for every ``k``."""
@@ -87,9 +87,9 @@ class PredictionModel:
         return self.f(x, u) if f is None else f
 
     def feedback_terms(self) -> tuple[Tensor, Tensor] | None:
-        r"""The affine correction inside the horizon, if any: the pair ``(dt * L_k, x_hat)``, shapes (N, 12, 12), (N, 12).
+        r"""The affine correction inside the horizon, if any: the pair ``(Ts * L_k, x_hat)``, shapes (N, 12, 12), (N, 12).
 
-        :meth:`step` at horizon step ``k`` is :meth:`phi` plus ``dt L_k (x - x_hat[k])``; the compiled
+        :meth:`step` at horizon step ``k`` is :meth:`phi` plus ``Ts L_k (x - x_hat[k])``; the compiled
         linearization (:mod:`fnnlib.mpc.compiled`) adds it in closed form. ``None``: no correction.
         """
         return None
@@ -119,24 +119,35 @@ class AdaptiveNNModel(PredictionModel):
 
     The adaptive-network baseline (Cheng et al. 2019, App. A.5.4): the update
     has the form of Eq. (30) with the error signal taken as the one-step
-    acceleration prediction error :math:`\tilde a_t = (v_{t+1} - \hat v_{t+1}) / dt`, where
+    acceleration prediction error :math:`\tilde a_t = (v_{t+1} - \hat v_{t+1}) / Ts`, where
     :math:`\hat v_{t+1}` is the model's prediction from :math:`(x_t, u_t)` (there is no
     observer to supply :math:`\tilde x`).
+
+    **The gain's convention** (issue 16). Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
+    stepped by explicit Euler over :math:`T_s` with the error above, so each step is
+    :math:`\hat\chi \mathrel{+}= T_s \Gamma\, \tilde a_t \phi^\top = \Gamma\,(v_{t+1} - \hat v_{t+1})\,\phi^\top`
+    (measurement minus prediction; :meth:`AdaptiveResidual.adapt`). The authors' release steps
+    :math:`T_s \Gamma_{rel}\, e\, \phi^\top` with :math:`e` the velocity error taken with the opposite sign
+    convention, i.e. 1/50 of this update at the same number (:math:`T_s` = 0.02). A release gain converts as
+    :math:`\Gamma = T_s \Gamma_{rel}` (the sign absorbed by the error's definition): the paper's
+    :math:`\Gamma = 8` is :math:`\Gamma \approx 0.16` here, and :math:`\Gamma = 8` in this convention is 50 times
+    the release's adaptation (it runs away). Choose :math:`\Gamma` on validation flights,
+    :func:`fnnlib.mpc.tuning.select_gain_on_validation`, over a grid that brackets 0.16.
     """
 
-    def __init__(self, name: str, plant: Quadrotor, residual: AdaptiveResidual, *, dt: float = 0.02,
+    def __init__(self, name: str, plant: Quadrotor, residual: AdaptiveResidual, *, Ts: float,
                  substeps: int = 1) -> None:
         if not isinstance(residual, AdaptiveResidual):
             raise TypeError(f"AdaptiveNNModel needs an AdaptiveResidual, got {type(residual).__name__}")
-        super().__init__(name, plant, residual, dt=dt, substeps=substeps)
+        super().__init__(name, plant, residual, Ts=Ts, substeps=substeps)
         self._last: tuple[Tensor, Tensor] | None = None  # (x_t, predicted x_{t+1})
 
     def observe(self, x_meas: Tensor) -> None:
         check_finite(x_meas, name="x_meas")
         if self._last is not None:
             x_prev, x_pred = self._last
-            a_tilde = (x_meas[3:6] - x_pred[3:6]) / self.dt
-            self.residual.adapt(x_prev, a_tilde, self.dt)  # type: ignore[union-attr]
+            a_tilde = (x_meas[3:6] - x_pred[3:6]) / self.Ts
+            self.residual.adapt(x_prev, a_tilde, self.Ts)  # type: ignore[union-attr]
 
     def commit(self, plan_x: Tensor, plan_u: Tensor, phi_plan: Tensor | None = None) -> None:
         with torch.no_grad():
@@ -183,16 +194,21 @@ class FeedbackCascadeModel(PredictionModel):
         Horizon length (number of cascade layers).
     name : str, optional
         Defaults to ``"FB-" + base.name``.
+
+    Attributes
+    ----------
+    L_stack : Tensor, shape (N, 12, 12)
+        The decayed gains of Eq. (11), ``L_stack[k] = L_k = L e^{-beta k}`` (``L`` is the base gain).
     """
 
     def __init__(self, base: PredictionModel, L: float | Tensor, beta: float, N: int, *, name: str | None = None,
                  adaptive: bool = False) -> None:
-        super().__init__(name or f"FB-{base.name}", base.plant, base.residual, dt=base.dt, substeps=base.substeps)
+        super().__init__(name or f"FB-{base.name}", base.plant, base.residual, Ts=base.Ts, substeps=base.substeps)
         self.base = base
-        # positive definite and stable at Ts = dt, as Theorem 1 needs
-        L_mat = check_gain(L, 12, self.dt)
-        self.L = torch.stack(decayed_gains(L_mat, int(N), beta))  # (N, 12, 12)
-        self._dt_L = self.dt * self.L
+        # positive definite and stable at the model's Ts, as Theorem 1 needs
+        L_mat = check_gain(L, 12, self.Ts)
+        self.L_stack = torch.stack(decayed_gains(L_mat, int(N), beta))  # L_k = L e^{-beta k}, (N, 12, 12)
+        self._Ts_L_stack = self.Ts * self.L_stack
         self.N = int(N)
         self.beta = float(beta)
         if adaptive and not isinstance(base.residual, AdaptiveResidual):
@@ -204,24 +220,24 @@ class FeedbackCascadeModel(PredictionModel):
     def _correction(self, x: Tensor, k: Tensor) -> Tensor:
         if self.x_hat is None:
             return torch.zeros_like(x)
-        L_k = self.L.to(x.dtype)[k]  # (..., 12, 12)
+        L_k = self.L_stack.to(x.dtype)[k]  # (..., 12, 12)
         # L_k (x - x_hat^(k))   (Eq. 7)
         return (L_k @ (x - self.x_hat.to(x.dtype)[k]).unsqueeze(-1)).squeeze(-1)
 
     def step(self, x: Tensor, u: Tensor, k: Tensor) -> Tensor:
-        return self.phi(x, u) + self.dt * self._correction(x, k)
+        return self.phi(x, u) + self.Ts * self._correction(x, k)
 
     def feedback_terms(self) -> tuple[Tensor, Tensor] | None:
         if self.x_hat is None:
             return None
-        return self._dt_L, self.x_hat
+        return self._Ts_L_stack, self.x_hat
 
     def xdot(self, x: Tensor, u: Tensor, f: Tensor | None = None) -> Tensor:
         rate = self.f(x, u) if f is None else f
         if self.x_hat is None:
             return rate
         # layer 0's correction L_0 (x - x_hat^(0))   (Eq. 7)
-        return rate + (x - self.x_hat[0].to(x.dtype)) @ self.L[0].to(x.dtype).T
+        return rate + (x - self.x_hat[0].to(x.dtype)) @ self.L_stack[0].to(x.dtype).T
 
     def observe(self, x_meas: Tensor) -> None:
         check_finite(x_meas, name="x_meas")
@@ -230,7 +246,7 @@ class FeedbackCascadeModel(PredictionModel):
         self._x_tilde = (x_meas - self.x_hat[0]).detach().clone()
         if self.adaptive:
             # chi_hat' = Gamma Xi^T x_tilde   (Eq. 30), velocity rows
-            self.residual.adapt(x_meas, self._x_tilde[3:6], self.dt)  # type: ignore[union-attr]
+            self.residual.adapt(x_meas, self._x_tilde[3:6], self.Ts)  # type: ignore[union-attr]
 
     def commit(self, plan_x: Tensor, plan_u: Tensor, phi_plan: Tensor | None = None) -> None:
         if plan_x.shape != (self.N + 1, 12) or plan_u.shape != (self.N, 4):
@@ -240,14 +256,14 @@ class FeedbackCascadeModel(PredictionModel):
             X, U = plan_x[:-1], plan_u
             if self.x_hat is None:  # start every layer on the plan: zero correction
                 self.x_hat = X.clone()
-            Lk = self.L.to(X.dtype)
+            Lk = self.L_stack.to(X.dtype)
             # x_hat <- x_hat + [Phi(X, u) - X] + Ts L_k (X - x_hat)   (Eq. 8, RK4 form)
             fb = (Lk @ (X - self.x_hat).unsqueeze(-1)).squeeze(-1)
             if phi_plan is None:
                 phi_plan = self.phi(X, U)
             elif phi_plan.shape != X.shape:
                 raise ValueError(f"phi_plan must have shape {tuple(X.shape)}, got {tuple(phi_plan.shape)}")
-            self.x_hat = self.x_hat + (phi_plan - X) + self.dt * fb
+            self.x_hat = self.x_hat + (phi_plan - X) + self.Ts * fb
             check_finite(self.x_hat, name="x_hat")
 
     def reset(self) -> None:
@@ -261,19 +277,17 @@ class FeedbackCascadeModel(PredictionModel):
         return self._x_tilde
 
 
-def paper_models(residual: nn.Module, mlp: nn.Module, *, L: float | Tensor = 3.0, beta: float = 0.1, N: int = 10,
-                 Gamma: float = 8.0, dt: float = 0.02, substeps: int = 1,
-                 plant: Quadrotor | None = None) -> list[PredictionModel]:
+def paper_models(residual: nn.Module, mlp: nn.Module, *, plant: Quadrotor, L: float | Tensor, beta: float, N: int,
+                 Gamma: float, Ts: float, substeps: int = 1) -> list[PredictionModel]:
     """The seven prediction models of App. A.5.4 (see the module docstring), in the paper's order.
 
     ``residual`` is the neural ODE's :class:`~fnnlib.models.AeroResidual` (trained with App. A.1),
     ``mlp`` the single-step one. AdapNN and AdapFNN adapt the last layer of a copy of ``residual``
-    (the same network as Neural and FNN, so the comparison isolates the online part).
+    (the same network as Neural and FNN, so the comparison isolates the online part). ``plant`` is the
+    models' own vehicle (the paper's: ``Quadrotor(NOMINAL)``); the paper's ``L``, ``beta``, ``N``, ``Gamma``
+    and ``Ts`` are in :mod:`fnnlib.quadrotor_presets`.
     """
-    from fnnlib.systems.quadrotor import NOMINAL
-
-    plant = plant if plant is not None else Quadrotor(NOMINAL)
-    kw = {"dt": dt, "substeps": substeps}
+    kw = {"Ts": Ts, "substeps": substeps}
     nomi = PredictionModel("Nomi", plant, None, **kw)
     neural = PredictionModel("Neural", plant, residual, **kw)
     return [

@@ -27,7 +27,10 @@ import torch
 from torch import Tensor
 
 from fnnlib._scan import linear_recurrence
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.feedback.decay import check_N
+from fnnlib.feedback.layer import eval_field, shift_inputs
+from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
 
@@ -97,7 +100,7 @@ def constant_gain_filter(A: Tensor, B: Tensor, C: Tensor, L: Tensor, u: Tensor, 
     return prior + (y - prior @ C.T) @ M.T  # z_{k|k} = z_{k|k-1} + M (y_k - C z_{k|k-1})
 
 
-def split_estimate(f: VectorField, z: Tensor, y: Tensor) -> DisturbanceEstimate:
+def split_estimate(f: VectorField, z: Tensor, y: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
     """Split filtered augmented states ``z`` (..., T, 2n) into the estimate, in ``y``'s dtype.
 
     The change rate is the observer's own model, :math:`\\hat f_k = f_{neural}(y_k) + \\hat d_{k|k}`.
@@ -105,12 +108,13 @@ def split_estimate(f: VectorField, z: Tensor, y: Tensor) -> DisturbanceEstimate:
     n = y.shape[-1]
     x_hat, d_hat = z[..., :n].to(y.dtype), z[..., n:].to(y.dtype)
     with torch.no_grad():
-        f_hat = eval_field(f, y) + d_hat
+        f_hat = eval_field(f, y, u) + d_hat
     return DisturbanceEstimate(x_hat, d_hat, f_hat)
 
 
 @torch.no_grad()
-def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float, N: int) -> Tensor:
+def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float, N: int,
+                      u: Tensor | None = None) -> Tensor:
     r"""N Euler steps of the corrected model from every start, the disturbance held frozen.
 
     :math:`z_{j+1} = z_j + T_s\,(f_{neural}(z_j) + \hat d_k)`, :math:`z_0 = \hat x_k`,
@@ -120,6 +124,8 @@ def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float,
     ----------
     x_start, d_hat : Tensor, shape (..., T, n)
         Start states and the disturbance estimate at each start.
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model; step ``j`` from start ``k`` uses ``u_{k+j}`` (the last one held).
 
     Returns
     -------
@@ -128,9 +134,64 @@ def rollout_corrected(f: VectorField, x_start: Tensor, d_hat: Tensor, Ts: float,
     """
     if x_start.shape != d_hat.shape:
         raise ValueError(f"x_start {tuple(x_start.shape)} and d_hat {tuple(d_hat.shape)} differ in shape")
-    if int(N) != N or int(N) < 1:
-        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
     z = x_start
-    for _ in range(int(N)):
-        z = z + Ts * (eval_field(f, z) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j) + d_hat)
+    for j in range(check_N(N)):
+        z = z + Ts * (eval_field(f, z, shift_inputs(u, j)) + d_hat)  # x_{j+1} = x_j + Ts (f(x_j, u_j) + d_hat)
     return z
+
+
+class AugmentedObserver:
+    """What the Luenberger and Kalman observers share: the augmented plant, :meth:`observe` and :meth:`predict`.
+
+    Subclasses implement :meth:`estimate`, the filtered state, disturbance and change rate.
+
+    Parameters
+    ----------
+    f : callable
+        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
+    Ts : float
+        Sampling step.
+    n : int
+        State dimension.
+
+    Attributes
+    ----------
+    A, B, C : Tensor
+        Augmented plant of :func:`augmented_matrices`, (2n, 2n), (2n, n), (n, 2n).
+    """
+
+    def __init__(self, f: VectorField, Ts: float, n: int):
+        self.f = f
+        self.Ts = check_positive(Ts, name="Ts")
+        self.n = int(n)
+        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def inputs(self, x: Tensor, u_ext: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """The checked measurements ``y`` (..., T, n) and the known input :math:`u_k = f_{neural}(y_k)`, as in Eq. (7).
+
+        For a controlled model, ``u_ext`` (..., T, m) are its inputs: :math:`u_k = f_{neural}(y_k, u^{ext}_k)`.
+        """
+        x = as_trajectory(x, self.n)
+        with torch.no_grad():
+            u = eval_field(self.f, x, u_ext)
+        return x, u
+
+    def constant_gain_estimate(self, x: Tensor, u: Tensor, L: Tensor,
+                               u_ext: Tensor | None = None) -> DisturbanceEstimate:
+        """:func:`constant_gain_filter` with the predictor-form gain ``L`` (2n, n), split into the estimate."""
+        return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x, u_ext)
+
+    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n).
+
+        ``u`` (..., T, m): inputs of a controlled model.
+        """
+        return self.estimate(x, u).as_estimate()
+
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
+        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
+        est = self.estimate(x, u)
+        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N, u)

@@ -1,6 +1,6 @@
 """The interface every observer shares, and the metrics the S11 comparison computes for each.
 
-An observer turns measurements into an :class:`~fnnlib.observers.linear.Estimate`
+An observer turns measurements into an :class:`~fnnlib.feedback.types.Estimate`
 (state and change rate) and predicts N steps ahead from every sample, so a
 comparison is a loop over objects: :class:`~fnnlib.observers.LinearFeedback`
 (Eqs. (7)-(8), cascade of Sec. 3.3), :class:`~fnnlib.observers.LuenbergerObserver`,
@@ -16,7 +16,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 from torch import Tensor
 
 from fnnlib.metrics import error_norm, rmse
-from fnnlib.observers.linear import Estimate
+from fnnlib.feedback.types import Estimate
 
 
 @runtime_checkable

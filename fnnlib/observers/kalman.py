@@ -28,16 +28,11 @@ import torch
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from torch import Tensor
 
-from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.observers.augmented import (
-    DisturbanceEstimate,
-    augmented_matrices,
-    constant_gain_filter,
-    rollout_corrected,
-    split_estimate,
-)
-from fnnlib.observers.gains import gain_matrix
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
+from fnnlib._validation import as_trajectory
+from fnnlib.feedback.gains import gain_matrix
+from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.types import VectorField
+from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate, split_estimate
 
 
 class SteadyState(NamedTuple):
@@ -102,39 +97,31 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
                        "and Q positive definite on the unstable modes?")
 
 
-class _KalmanBase:
-    """Shared set-up: the augmented plant, Q, R, P0, and the prediction."""
+class _KalmanBase(AugmentedObserver):
+    """Shared set-up of the two Kalman filters: Q, R, P0 and the filterpy filter."""
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None):
-        self.f = f
-        self.Ts = check_positive(Ts, name="Ts")
-        self.n = int(n)
-        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None):
+        super().__init__(f, Ts, n)
         m = 2 * self.n
+        if C is not None:  # partial measurements y = C x: the augmented output matrix is [C 0]
+            C = torch.as_tensor(C, dtype=torch.float64)
+            if C.ndim != 2 or C.shape[1] != self.n or not bool(torch.isfinite(C).all()):
+                raise ValueError(f"C must be a finite (p, {self.n}) matrix, got shape {tuple(C.shape)}")
+            self.C = torch.cat([C, torch.zeros(C.shape[0], self.n, dtype=torch.float64)], 1)
+        self.p = self.C.shape[0]
         self.Q = as_covariance(Q, m, name="Q")
-        self.R = as_covariance(R, self.n, name="R", definite=True)
-        if P0 is None:  # first measurement's noise on x; a disturbance of order 10 (rate units) on d
-            P0 = torch.block_diag(self.R, 100.0 * torch.eye(self.n, dtype=torch.float64))
+        self.R = as_covariance(R, self.p, name="R", definite=True)
+        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
+            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
+            P0 = torch.block_diag(x_part, 100.0 * torch.eye(self.n, dtype=torch.float64))
         self.P0 = as_covariance(P0, m, name="P0")
 
     def _new(self, cls, *args):
         """A filterpy filter with this plant's matrices (numpy), started at P0."""
-        kf = cls(*args, dim_x=2 * self.n, dim_z=self.n)
+        kf = cls(*args, dim_x=2 * self.n, dim_z=self.p)
         kf.F, kf.H = self.A.numpy().copy(), self.C.numpy().copy()
         kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
         return kf
-
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def observe(self, x: Tensor) -> Estimate:
-        """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n)."""
-        return self.estimate(x).as_estimate()
-
-    def predict(self, x: Tensor, N: int) -> Tensor:
-        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
-        est = self.estimate(x)
-        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
 
 
 class KalmanObserver(_KalmanBase):
@@ -142,12 +129,8 @@ class KalmanObserver(_KalmanBase):
 
     Parameters
     ----------
-    f : callable
-        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
-    Ts : float
-        Sampling step.
-    n : int
-        State dimension.
+    f, Ts, n
+        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
     Q : float, Tensor (2n,) or (2n, 2n)
         Process noise covariance of :math:`z = [x; d]`.
     R : float, Tensor (n,) or (n, n)
@@ -162,7 +145,7 @@ class KalmanObserver(_KalmanBase):
     """
 
     def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False):
-        super().__init__(f, Ts, n, Q, R, P0=P0)
+        super().__init__(f, Ts, n, Q, R, P0=P0)  # full-state measurements: f is evaluated at y (Eq. (7))
         self.steady_state = bool(steady_state)
         self.stationary = steady_state_gain(self.A, self.C, self.Q, self.R)
 
@@ -182,14 +165,11 @@ class KalmanObserver(_KalmanBase):
             kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
         return K
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x = as_trajectory(x, self.n)
-        with torch.no_grad():
-            u = eval_field(self.f, x)  # u_k = f_neural(y_k), as in Eq. (7)
+    def estimate(self, x: Tensor, u_ext: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``)."""
+        x, u = self.inputs(x, u_ext)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
-            L = torch.as_tensor(self.stationary.L)
-            return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x)
+            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext)
         ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time
@@ -198,7 +178,7 @@ class KalmanObserver(_KalmanBase):
             means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
             z[i] = means
         z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
-        return split_estimate(self.f, z, x)
+        return split_estimate(self.f, z, x, u_ext)
 
     def __repr__(self) -> str:
         return f"KalmanObserver(n={self.n}, Ts={self.Ts}, steady_state={self.steady_state})"
@@ -229,7 +209,11 @@ class ExtendedKalmanObserver(_KalmanBase):
     update is linear (:math:`H = C`). The change rate is the model's own,
     :math:`\hat f_k = f_{neural}(\hat x_{k|k}) + \hat d_{k|k}`.
 
-    Parameters are those of :class:`KalmanObserver` (no ``steady_state``).
+    Parameters are those of :class:`KalmanObserver` (no ``steady_state``), and ``C`` (p, n): measure
+    only :math:`y = C x` (default: every state; then ``R`` is (p, p) and the default ``P0`` puts unit
+    variance on the state). The model is evaluated at the estimate, so partial measurements need no
+    full state (the :class:`~fnnlib.feedback.measured.MeasuredFeedback` of the same ``C`` is its
+    constant-gain counterpart).
     filterpy advances one sample per call, so :meth:`estimate` loops over
     time and over the leading batch axes in Python.
     """
@@ -247,21 +231,24 @@ class ExtendedKalmanObserver(_KalmanBase):
         x_next = x + Ts * (out[0].detach().double().numpy() + d)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}) + d_{k|k})
         return np.concatenate([x_next, d])[:, None], F
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x = as_trajectory(x, self.n)
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n); autonomous models only."""
+        if u is not None:
+            raise NotImplementedError("the EKF takes autonomous models only; use KalmanObserver for inputs")
+        x = as_trajectory(x, self.p, name="y")
         ys = x.reshape(-1, *x.shape[-2:]).double().numpy()
         C = self.C.numpy()
+        C_pinv = np.linalg.pinv(C[:, : self.n])  # the least-squares state of a measurement
         z = np.empty((*ys.shape[:2], 2 * self.n))
         for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
             ekf = self._new(_LearnedModelEKF, lambda s: self._step(s, x.dtype))
-            ekf.x = np.concatenate([y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [y_0; 0]
+            ekf.x = np.concatenate([C_pinv @ y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [C^+ y_0; 0]
             for k in range(y.shape[0]):
                 if k:
                     ekf.predict()  # z = Phi(z); P = F P F' + Q
                 ekf.update(y[k][:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s)  # K, z += K (y - C z)
                 z[i, k] = ekf.x[:, 0]
-        z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
+        z = torch.as_tensor(z).reshape(*x.shape[:-2], x.shape[-2], 2 * self.n)
         n = self.n
         x_hat, d_hat = z[..., :n].to(x.dtype), z[..., n:].to(x.dtype)
         with torch.no_grad():

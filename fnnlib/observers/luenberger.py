@@ -21,16 +21,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.observers.augmented import (
-    DisturbanceEstimate,
-    augmented_matrices,
-    constant_gain_filter,
-    rollout_corrected,
-    split_estimate,
-)
-from fnnlib.observers.gains import gain_matrix
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
+from fnnlib.feedback.gains import gain_matrix
+from fnnlib.feedback.types import VectorField
+from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate
 
 
 def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: Sequence[complex], *,
@@ -97,7 +90,7 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
     return torch.as_tensor(L, dtype=torch.float64)
 
 
-class LuenbergerObserver:
+class LuenbergerObserver(AugmentedObserver):
     r"""Luenberger observer on the learned model with a constant-disturbance state.
 
     The model and gain are those of :mod:`fnnlib.observers.augmented` and
@@ -108,12 +101,8 @@ class LuenbergerObserver:
 
     Parameters
     ----------
-    f : callable
-        The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
-    Ts : float
-        Sampling step.
-    n : int
-        State dimension.
+    f, Ts, n
+        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
     poles : sequence of 2n complex, optional
         Discrete poles of :math:`A - LC`, placed by :func:`place_observer_gain`.
     L : Tensor, shape (2n, n), optional
@@ -131,10 +120,7 @@ class LuenbergerObserver:
 
     def __init__(self, f: VectorField, Ts: float, n: int, poles: Sequence[complex] | None = None, *,
                  L: Tensor | None = None, allow_unstable: bool = False):
-        self.f = f
-        self.Ts = check_positive(Ts, name="Ts")
-        self.n = int(n)
-        self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
+        super().__init__(f, Ts, n)
         if (poles is None) == (L is None):
             raise ValueError("give exactly one of poles (to place) or L (a ready observer gain)")
         if poles is not None:
@@ -149,22 +135,9 @@ class LuenbergerObserver:
                                  "pass allow_unstable=True to use it anyway")
         self.poles = [complex(z) for z in (poles if poles is not None else self.error_poles())]
 
-    def estimate(self, x: Tensor) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n)."""
-        x = as_trajectory(x, self.n)
-        with torch.no_grad():
-            u = eval_field(self.f, x)  # u_k = f_neural(y_k), as in Eq. (7)
-        z = constant_gain_filter(self.A, self.B, self.C, self.L, u, x)
-        return split_estimate(self.f, z, x)
-
-    def observe(self, x: Tensor) -> Estimate:
-        """``x_hat`` (:math:`\\hat x_{k|k}`), ``f_hat`` (:math:`f_{neural}(y_k) + \\hat d_{k|k}`), (..., T, n)."""
-        return self.estimate(x).as_estimate()
-
-    def predict(self, x: Tensor, N: int) -> Tensor:
-        """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
-        est = self.estimate(x)
-        return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N)
+    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u``)."""
+        return self.constant_gain_estimate(*self.inputs(x, u), self.L, u)
 
     def error_poles(self) -> np.ndarray:
         """Eigenvalues of :math:`A - LC` (complex, shape (2n,))."""

@@ -10,22 +10,13 @@ its layers as anti-diagonal wavefronts (T + N - 1 sequential steps, not T * N).
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-
 import torch
 from torch import Tensor
 
 from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.observers.linear import Estimate, VectorField, eval_field
-
-Feedback = Callable[[Tensor], Tensor]
-
-
-def _check_N(N: int) -> int:
-    if int(N) != N or int(N) < 1:
-        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
-    return int(N)
+from fnnlib.feedback.decay import check_beta, check_N, decay_factors
+from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
 
 def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: float) -> Estimate:
@@ -71,21 +62,22 @@ class NeuralFeedbackObserver:
         :class:`~fnnlib.models.NeuralFeedback`.
     Ts : float
         Sampling step of the measurements (also the prediction step).
-    n : int
-        State dimension.
+    n : int, optional
+        State dimension; by default ``f.n`` (a :class:`~fnnlib.models.NeuralODE` or a system has it).
     beta : float
         Decay of the feedback along the cascade, the analogue of Eq. (11): layer ``i`` uses
         :math:`e^{-\beta i} h_{neural}`. 0 (the default) keeps the learned feedback unchanged.
     """
 
-    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int, *, beta: float = 0.0):
+    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int | None = None, *, beta: float = 0.0):
         self.f = f
         self.h = h
         self.Ts = check_positive(Ts, name="Ts")
+        n = n if n is not None else getattr(f, "n", None)
+        if n is None:
+            raise ValueError("pass the state dimension n (f has no `n` attribute to take it from)")
         self.n = int(n)
-        self.beta = float(beta)
-        if not (math.isfinite(self.beta) and self.beta >= 0):
-            raise ValueError(f"decay rate beta must be finite and >= 0, got {beta!r}")
+        self.beta = check_beta(beta)
 
     @torch.no_grad()
     def observe(self, x: Tensor) -> Estimate:
@@ -103,12 +95,12 @@ class NeuralFeedbackObserver:
         needs layer ``i-1`` at time ``k`` and itself at ``k-1``, so every cell with ``i + k = w``
         is computed at once: T + N - 1 batched steps. Row k of the result predicts ``x(t_{k+N})``.
         """
-        N = _check_N(N)
+        N = check_N(N)
         x = as_trajectory(x, self.n)
         lead, (T, n) = x.shape[:-2], x.shape[-2:]
         xs = x.reshape(-1, T, n)
         B = xs.shape[0]
-        decay = torch.exp(-self.beta * torch.arange(N, dtype=x.dtype))[:, None, None]  # (N, 1, 1)
+        decay = decay_factors(self.beta, N)[0].to(x.dtype)[:, None, None]  # (N, 1, 1): e^{-beta i}   (Eq. 11)
         z_in = xs.new_zeros(N, B, n)  # z_in[i]: layer i's input at its current time w - i
         x_hat = xs.new_zeros(N, B, n)  # x_hat[i]: layer i's estimate at its current time
         out = torch.empty_like(xs)
@@ -134,8 +126,9 @@ class NeuralFeedbackObserver:
     @torch.no_grad()
     def predict_loop(self, x: Tensor, N: int) -> Tensor:
         """Reference for :meth:`predict`: a plain loop over start times and depths; ``x`` (T, n)."""
-        N = _check_N(N)
+        N = check_N(N)
         x = as_trajectory(x, self.n)
+        decay = decay_factors(self.beta, N)[0].tolist()
         if x.ndim != 2:
             raise ValueError(f"the loop reference takes one trajectory of shape (T, n), got {tuple(x.shape)}")
         x_hat: list[Tensor] = []
@@ -145,7 +138,7 @@ class NeuralFeedbackObserver:
             for i in range(N):
                 if k == 0:
                     x_hat.append(z.clone())
-                f_hat = self.f(0.0, z[None])[0] + math.exp(-self.beta * i) * self.h((z - x_hat[i])[None])[0]
+                f_hat = self.f(0.0, z[None])[0] + decay[i] * self.h((z - x_hat[i])[None])[0]
                 x_hat[i] = x_hat[i] + self.Ts * f_hat
                 z = z + self.Ts * f_hat
             out[k] = z

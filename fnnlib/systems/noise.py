@@ -6,8 +6,11 @@ import torch
 from torch import Tensor
 
 
-def add_measurement_noise(x: Tensor, std: float, generator: torch.Generator | None = None) -> Tensor:
+def add_measurement_noise(x: Tensor, std: float, generator: torch.Generator | None = None, *,
+                          draws: int | None = None) -> Tensor:
     """Return ``x + std * w`` with ``w`` standard normal, same shape and dtype as ``x``.
+
+    With ``draws``, that many noisy copies stacked on a new leading axis, shape (draws, ..., T, n).
 
     Parameters
     ----------
@@ -17,11 +20,16 @@ def add_measurement_noise(x: Tensor, std: float, generator: torch.Generator | No
         Noise standard deviation per component (>= 0).
     generator : torch.Generator, optional
         Source of randomness; pass one for reproducible noise.
+    draws : int, optional
+        Number of independent noisy copies.
     """
     std = float(std)
     if not std >= 0.0 or std == float("inf"):
         raise ValueError(f"noise std must be finite and >= 0, got {std!r}")
+    if draws is not None and (int(draws) != draws or int(draws) < 1):
+        raise ValueError(f"number of noise draws must be an integer >= 1, got {draws!r}")
+    shape = x.shape if draws is None else (int(draws), *x.shape)
     if std == 0.0:
-        return x.clone()
-    w = torch.randn(x.shape, generator=generator, dtype=x.dtype)
+        return x.expand(shape).clone()
+    w = torch.randn(shape, generator=generator, dtype=x.dtype)
     return x + std * w

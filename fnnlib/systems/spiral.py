@@ -28,9 +28,9 @@ class Spiral(DynamicalSystem):
         Bias :math:`\varepsilon`.
     """
 
-    omega: float = 2.0
-    eta: float = 0.1
-    eps: float = 0.0
+    omega: float
+    eta: float
+    eps: float
     n: ClassVar[int] = 2
 
     @property

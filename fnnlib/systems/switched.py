@@ -66,12 +66,20 @@ class SwitchedSystem(DynamicalSystem):
         out = torch.stack([s(t, x) for s in self.systems])  # (systems, batch, n)
         return out.gather(0, idx.view(1, -1, 1).expand(1, *x.shape)).squeeze(0)
 
-    def rate(self, x: Tensor, t: Tensor | float = 0.0) -> Tensor:
-        """The true change rate along a trajectory ``x`` (..., T, n) sampled at times ``t`` (T,) (or one time)."""
+    def rate(self, *args: Tensor | float) -> Tensor:
+        """The true change rate along a trajectory ``x`` (..., T, n) sampled at times ``t`` (T,) (or one time).
+
+        ``rate(t, x)`` (the order of ``__call__``) or ``rate(x)`` (t = 0).
+        """
+        if len(args) not in (1, 2):
+            raise TypeError(f"rate takes (x) or (t, x); got {len(args)} arguments")
+        t, x = (0.0, args[0]) if len(args) == 1 else args
+        if isinstance(t, Tensor) and isinstance(x, Tensor) and t.ndim > x.ndim:
+            raise TypeError("rate takes (t, x) in the order of __call__(t, x); got a trajectory as t")
         x = as_trajectory(x, self.n)
         t = torch.as_tensor(t, dtype=torch.float64)
         if t.ndim == 0:
-            return super().rate(x, t)
+            return super().rate(t, x)
         if t.shape != x.shape[-2:-1]:
             raise ValueError(f"times t must have shape ({x.shape[-2]},) to match x {tuple(x.shape)}, "
                              f"got {tuple(t.shape)}")

@@ -1,9 +1,16 @@
 """Training neural ODEs and neural feedback parts, and saving them."""
 
 from fnnlib.training.external import adjoint_gradient, train_with_inputs
-from fnnlib.training.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from fnnlib.training.feedback import feedback_loss, train_neural_feedback
-from fnnlib.training.neural_ode import TrainHistory, sample_segments, train_neural_ode
+from fnnlib.training.checkpoint import CheckpointError, load_checkpoint, register_model, save_checkpoint
+from fnnlib.training.feedback import (
+    PAPER_FEEDBACK_RECIPE,
+    FeedbackRecipe,
+    feedback_loss,
+    randomized_cases,
+    train_neural_feedback,
+)
+from fnnlib.training.neural_ode import PAPER_BOTTLE_RECIPE, PAPER_SPIRAL_RECIPE, QUICK_RECIPE, ODERecipe, TrainHistory, sample_segments, train_neural_ode
 
 __all__ = ["CheckpointError", "adjoint_gradient", "train_with_inputs", "TrainHistory", "feedback_loss", "load_checkpoint", "sample_segments", "save_checkpoint",
-           "train_neural_feedback", "train_neural_ode"]
+           "train_neural_feedback", "train_neural_ode", "FeedbackRecipe", "ODERecipe", "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE",
+           "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model"]

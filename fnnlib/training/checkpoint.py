@@ -33,15 +33,35 @@ def _digest(state: Mapping[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
+def register_model(cls: type[nn.Module]) -> type[nn.Module]:
+    """Make your own module class checkpointable (usable as a class decorator).
+
+    The class needs a ``config`` property returning its constructor keyword arguments as plain values,
+    so that ``cls(**model.config)`` rebuilds it; :func:`load_checkpoint` then finds it by its name in
+    :data:`fnnlib.models.MODELS`. Register the class before loading a checkpoint of it.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, nn.Module)):
+        raise TypeError(f"register_model takes an nn.Module subclass, got {cls!r}")
+    if not isinstance(getattr(cls, "config", None), property):
+        raise TypeError(f"{cls.__name__} needs a `config` property (its constructor arguments as plain values)")
+    known = MODELS.get(cls.__name__)
+    if known is not None and known is not cls:
+        raise ValueError(f"another model class is already registered as {cls.__name__!r}")
+    MODELS[cls.__name__] = cls
+    return cls
+
+
 def save_checkpoint(path: str | os.PathLike[str], model: nn.Module, meta: Mapping[str, Any] | None = None) -> Path:
     """Save ``model`` (a class in ``fnnlib.models.MODELS``) with its config and a checksum.
 
     ``meta`` holds plain values only (numbers, strings, lists, dicts): training
-    settings, the seed, the final loss. Writes atomically.
+    settings, the seed, the final loss. Writes atomically. Your own module class
+    is saved once registered with :func:`register_model`.
     """
     kind = type(model).__name__
-    if kind not in MODELS:
-        raise TypeError(f"cannot checkpoint a {kind}; known models: {sorted(MODELS)}")
+    if MODELS.get(kind) is not type(model):
+        raise TypeError(f"cannot checkpoint a {kind}: register its class first with "
+                        f"fnnlib.register_model({kind}) (it needs a `config` property); known models: {sorted(MODELS)}")
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     payload = {"format": FORMAT, "version": VERSION, "kind": kind, "config": model.config,
                "state_dict": state, "sha256": _digest(state), "meta": dict(meta or {})}

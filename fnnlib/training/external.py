@@ -122,7 +122,7 @@ def _check_W(W: Tensor | Sequence[float] | None, n: int, like: Tensor) -> Tensor
     return W
 
 
-def _check_params(params: Iterable[Tensor]) -> list[Tensor]:
+def _trainable_params(params: Iterable[Tensor]) -> list[Tensor]:
     params = [p for p in params if p.requires_grad]
     if not params:
         raise ValueError("no trainable parameters (none with requires_grad=True)")
@@ -251,7 +251,7 @@ def adjoint_gradient(step: Step, params: Iterable[Tensor], x1: Tensor, I: Tensor
     x : Tensor, shape (B, T+1, n)
         The rollout.
     """
-    params = _check_params(params)
+    params = _trainable_params(params)
     B, T, n, _ = _check_pair(x_r, I)
     if x1.shape != (B, n):
         raise ValueError(f"x1 must have shape (B, n) = ({B}, {n}), got {tuple(x1.shape)}")
@@ -361,12 +361,12 @@ def train_with_inputs(
     step: Step,
     trajectories: tuple[Tensor, Tensor],
     *,
-    segment_length: int = 100,
-    batch_size: int | None = 1,
-    epochs: int = 50,
-    lr: float = 1e-3,
+    segment_length: int,
+    batch_size: int | None,
+    epochs: int,
+    lr: float,
+    seed: int,
     W: Tensor | Sequence[float] | None = None,
-    seed: int = 0,
     progress: bool = True,
     callback: Callable[[int, InputTrainHistory], bool | None] | None = None,
 ) -> InputTrainHistory:
@@ -395,7 +395,7 @@ def train_with_inputs(
         Steps per segment ``s``, ``1 <= s <= T`` (the paper splits 200-node
         trajectories into two segments of 100).
     batch_size : int or None
-        Segments per Adam update, ``1 <= batch_size <= M``. The default 1
+        Segments per Adam update, ``1 <= batch_size <= M``. 1
         is Alg. 3 read literally (one update per segment); ``None`` takes all
         ``M`` segments in one batch (one update per epoch).
     epochs : int
@@ -427,7 +427,7 @@ def train_with_inputs(
         raise TypeError(f"step must be callable as step(x, I), got {type(step).__name__}")
     if not isinstance(trajectories, (tuple, list)) or len(trajectories) != 2:
         raise TypeError("trajectories must be a pair (x_r of shape (K, T+1, n), I of shape (K, T, m))")
-    params = _check_params(model.parameters())
+    params = _trainable_params(model.parameters())
     x_r, I = trajectories
     _, T, n, _ = _check_pair(x_r, I)
     if int(epochs) < 1:

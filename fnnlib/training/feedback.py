@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
@@ -10,7 +12,70 @@ from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
 from fnnlib.observers.neural import feedback_rollout
-from fnnlib.training.neural_ode import OPTIMIZERS, TrainHistory
+from fnnlib.training.neural_ode import OPTIMIZERS, Recipe, TrainHistory
+
+
+@dataclass(frozen=True)
+class FeedbackRecipe(Recipe):
+    """How the neural feedback is trained by Alg. 1 (App. A.3.3); no defaults.
+
+    Attributes
+    ----------
+    iterations, batch_size : int
+        Descent steps; samples per mini-batch, drawn from all cases.
+    lr : float
+        Learning rate.
+    optimizer : str
+        A key of :data:`~fnnlib.training.neural_ode.OPTIMIZERS`.
+    refresh_every : int
+        Iterations between two rollouts of the current ``h`` (1: Alg. 1 literally).
+    """
+
+    iterations: int
+    batch_size: int
+    lr: float
+    optimizer: str
+    refresh_every: int
+
+
+#: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,
+#: the rollout refreshed every iteration as Alg. 1 writes it.
+PAPER_FEEDBACK_RECIPE = FeedbackRecipe(iterations=2000, batch_size=100, lr=0.01, optimizer="rmsprop", refresh_every=1)
+
+
+def randomized_cases(make_system, low: Sequence[float], high: Sequence[float], n_case: int, x0: Tensor,
+                     t: Tensor) -> tuple[Tensor, Tensor]:
+    r"""The randomized cases of Alg. 1: ``n_case`` systems with parameters spread evenly from ``low`` to ``high``.
+
+    Case ``i`` has parameters ``low + i (high - low) / (n_case - 1)`` (all parameters move together, as the
+    paper's 20 spiral cases do: :math:`\omega` {0.8:0.12:3.08}, :math:`\eta` {0.04:0.005:0.135},
+    :math:`\varepsilon` {-24:2.4:21.6}), and is simulated from ``x0`` over ``t``.
+
+    Parameters
+    ----------
+    make_system : callable
+        ``make_system(*params)`` -> a :class:`~fnnlib.systems.DynamicalSystem`, e.g. ``fnnlib.Spiral``.
+    low, high : sequence of float
+        The parameter range, one entry per parameter.
+    n_case : int
+        Number of cases (>= 2).
+    x0 : Tensor, shape (n,)
+    t : Tensor, shape (T,)
+
+    Returns
+    -------
+    (X, params)
+        ``X`` (n_case, T, n) float64, the input of :func:`train_neural_feedback`; ``params`` (n_case, P).
+    """
+    low, high = torch.as_tensor(low, dtype=torch.float64), torch.as_tensor(high, dtype=torch.float64)
+    if low.ndim != 1 or low.shape != high.shape:
+        raise ValueError(f"low and high must be 1-D of one length, got {tuple(low.shape)} and {tuple(high.shape)}")
+    if int(n_case) != n_case or int(n_case) < 2:
+        raise ValueError(f"n_case must be an integer >= 2, got {n_case!r}")
+    frac = torch.arange(int(n_case), dtype=torch.float64)[:, None] / (int(n_case) - 1)
+    params = low + frac * (high - low)
+    X = torch.stack([make_system(*p.tolist()).simulate(x0, t) for p in params])
+    return X, params
 
 
 def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float) -> Tensor:
@@ -29,13 +94,9 @@ def train_neural_feedback(
     h: nn.Module,
     t: Tensor,
     X: Tensor,
+    recipe: FeedbackRecipe,
     *,
-    iterations: int = 2000,
-    batch_size: int = 100,
-    lr: float = 0.01,
-    optimizer: str = "rmsprop",
-    refresh_every: int = 1,
-    seed: int = 0,
+    seed: int,
     progress: bool = True,
 ) -> TrainHistory:
     r"""Train the feedback ``h`` on randomized cases with the neural ODE ``f`` frozen (Alg. 1).
@@ -58,14 +119,20 @@ def train_neural_feedback(
         Uniform sample times (step ``Ts``).
     X : Tensor, shape (n_case, T, n)
         One trajectory per randomized case.
-    refresh_every : int
-        Iterations between two rollouts of the current ``h`` (1: Alg. 1 literally).
+    recipe : FeedbackRecipe
+        Every training setting, e.g. ``PAPER_FEEDBACK_RECIPE.replace(refresh_every=10)``.
+    seed, progress
+        As :func:`~fnnlib.training.neural_ode.train_neural_ode`.
 
     Returns
     -------
     TrainHistory
         The Eq. (12) loss per iteration and the wall time.
     """
+    if not isinstance(recipe, FeedbackRecipe):
+        raise TypeError(f"recipe must be a FeedbackRecipe (e.g. PAPER_FEEDBACK_RECIPE), got {type(recipe).__name__}")
+    iterations, batch_size, lr, optimizer = recipe.iterations, recipe.batch_size, recipe.lr, recipe.optimizer
+    refresh_every = recipe.refresh_every
     if not isinstance(X, Tensor) or X.ndim != 3:
         raise ValueError(f"X must have shape (n_case, T, n), got {tuple(getattr(X, 'shape', ()))}")
     X = as_trajectory(X, name="X")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import dataclasses
 from dataclasses import dataclass, field
 
 import torch
@@ -23,6 +24,79 @@ LOSSES = {
 #: fixed-step solvers need a step size; adaptive ones take tolerances
 FIXED_STEP_METHODS = {"euler", "midpoint", "rk4", "explicit_adams", "implicit_adams"}
 ADAPTIVE_METHODS = {"dopri5", "dopri8", "bosh3", "fehlberg2", "adaptive_heun", "tsit5"}
+
+
+class Recipe:
+    """What every training recipe (a frozen dataclass of settings) can do."""
+
+    def replace(self, **changes):
+        """A copy with some settings changed (e.g. a notebook's parameters over a preset)."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict:
+        """The settings as plain values (for checkpoint metadata); ``type(self)(**d)`` rebuilds it."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class ODERecipe(Recipe):
+    """How a neural ODE is trained on random segments (the torchdiffeq recipe, App. A.3.2); no defaults.
+
+    Attributes
+    ----------
+    iterations, batch_size, batch_time : int
+        Descent steps; segments per mini-batch; samples per segment.
+    lr : float
+        Learning rate.
+    optimizer : str
+        A key of :data:`OPTIMIZERS`.
+    loss : str
+        A key of :data:`LOSSES`.
+    method : str
+        torchdiffeq solver; fixed-step solvers step at the data interval.
+    adjoint : bool
+        Backpropagate with the adjoint method (``odeint_adjoint``) rather
+        than through the solver's operations.
+    rtol, atol : float
+        Adaptive solver tolerances (unused by fixed-step solvers).
+    adjoint_seminorm : bool
+        With the adjoint, measure the backward solve's step error on the
+        state and adjoint only, not on the parameter-gradient integral
+        (Kidger, Chen & Lyons 2021); same gradients up to the tolerance,
+        about 4x fewer backward steps here.
+    """
+
+    iterations: int
+    batch_size: int
+    batch_time: int
+    lr: float
+    optimizer: str
+    loss: str
+    method: str
+    adjoint: bool
+    rtol: float
+    atol: float
+    adjoint_seminorm: bool
+
+
+#: The spiral's recipe (App. A.3.2 and the authors' release): RMSprop at 1e-3 on the L1 loss, 400 iterations of
+#: 20 segments of 10 samples, dopri5 with the adjoint method (seminorm backward) at rtol 1e-5, atol 1e-6.
+PAPER_SPIRAL_RECIPE = ODERecipe(iterations=400, batch_size=20, batch_time=10, lr=1e-3, optimizer="rmsprop",
+                                loss="l1", method="dopri5", adjoint=True, rtol=1e-5, atol=1e-6,
+                                adjoint_seminorm=True)
+
+#: The thrown bottle's recipe (Sec. 5.1 and the authors' release): Adam at 1e-3 on the L1 loss, 1000 iterations of
+#: 20 segments of 10 samples, dopri5 with direct back-propagation at rtol 1e-7, atol 1e-9.
+PAPER_BOTTLE_RECIPE = ODERecipe(iterations=1000, batch_size=20, batch_time=10, lr=1e-3, optimizer="adam",
+                                loss="l1", method="dopri5", adjoint=False, rtol=1e-7, atol=1e-9,
+                                adjoint_seminorm=True)
+
+
+#: A first try on your own system, in seconds rather than minutes: fixed-step RK4 at the data interval,
+#: direct back-propagation (no adjoint), Adam at 1e-2 on the MSE, 200 iterations of 20 segments of 10 samples.
+#: Move to a paper recipe (dopri5, adjoint, more iterations) once this one works.
+QUICK_RECIPE = ODERecipe(iterations=200, batch_size=20, batch_time=10, lr=1e-2, optimizer="adam", loss="mse",
+                         method="rk4", adjoint=False, rtol=1e-7, atol=1e-9, adjoint_seminorm=False)
 
 
 @dataclass
@@ -49,7 +123,13 @@ def sample_segments(x: Tensor, batch_size: int, batch_time: int, generator: torc
     Tensor, shape (batch_time, batch_size, n): segments stacked along time,
     as torchdiffeq returns solutions.
     """
-    n_traj, T, _ = x.shape
+    traj, idx = segment_indices(x.shape[0], x.shape[1], batch_size, batch_time, generator)
+    return x[traj, idx]
+
+
+def segment_indices(n_traj: int, T: int, batch_size: int, batch_time: int,
+                    generator: torch.Generator) -> tuple[Tensor, Tensor]:
+    """The (trajectory, time) indices of :func:`sample_segments`, each (batch_time, batch_size)."""
     n_starts = T - batch_time + 1
     total = n_traj * n_starts
     if batch_size > total:
@@ -57,29 +137,39 @@ def sample_segments(x: Tensor, batch_size: int, batch_time: int, generator: torc
     pick = torch.randperm(total, generator=generator)[:batch_size]
     traj, start = pick // n_starts, pick % n_starts
     idx = start[None, :] + torch.arange(batch_time)[:, None]  # (batch_time, batch)
-    return x[traj[None, :].expand_as(idx), idx]
+    return traj[None, :].expand_as(idx), idx
+
+
+class HeldInputs(nn.Module):
+    """``model(t, x, u(t))`` as an autonomous field for the solver: the inputs of a segment held per sample.
+
+    ``u`` (batch_time, batch, m) holds the input from each sample time ``k Ts`` to the next (zero-order hold).
+    """
+
+    def __init__(self, model: nn.Module, u: Tensor, Ts: float):
+        super().__init__()
+        self.model, self.u, self.Ts = model, u, float(Ts)
+
+    def forward(self, t: Tensor | float, x: Tensor) -> Tensor:
+        k = min(max(int(float(t) / self.Ts + 1e-6), 0), self.u.shape[0] - 1)
+        return self.model(t, x, self.u[k])
 
 
 def train_neural_ode(
     model: nn.Module,
     t: Tensor,
     x: Tensor,
+    recipe: ODERecipe,
     *,
-    iterations: int = 400,
-    batch_size: int = 20,
-    batch_time: int = 10,
-    lr: float = 1e-3,
-    optimizer: str = "rmsprop",
-    loss: str = "l1",
-    method: str = "dopri5",
-    adjoint: bool = True,
-    adjoint_seminorm: bool = True,
-    rtol: float = 1e-7,
-    atol: float = 1e-9,
-    seed: int = 0,
+    seed: int,
     progress: bool = True,
+    u: Tensor | None = None,
 ) -> TrainHistory:
-    """Fit ``model`` (a vector field ``f(t, x)``) to trajectories by ODE rollouts.
+    """Fit ``model`` (a vector field ``f(t, x)``, or ``f(t, x, u)`` with inputs) to trajectories by ODE rollouts.
+
+    For a first try use :data:`QUICK_RECIPE` (RK4, no adjoint, 200 iterations: seconds);
+    the paper's recipes (:data:`PAPER_SPIRAL_RECIPE`, dopri5 with the adjoint, 400 iterations)
+    take about a minute and a half.
 
     Each iteration draws ``batch_size`` random segments of ``batch_time``
     samples, integrates the model from each segment's first state over the
@@ -94,21 +184,25 @@ def train_neural_ode(
         Uniform sample times.
     x : Tensor, shape (T, n) or (n_traj, T, n)
         Training trajectories.
-    method : str
-        torchdiffeq solver; fixed-step solvers step at the data interval.
-    adjoint : bool
-        Backpropagate with the adjoint method (``odeint_adjoint``) rather
-        than through the solver's operations.
-    adjoint_seminorm : bool
-        With the adjoint, measure the backward solve's step error on the
-        state and adjoint only, not on the parameter-gradient integral
-        (Kidger, Chen & Lyons 2021); same gradients up to the tolerance,
-        about 4x fewer backward steps here.
+    recipe : ODERecipe
+        Every training setting, e.g. ``PAPER_SPIRAL_RECIPE.replace(iterations=...)``.
+    seed : int
+        Seed of the mini-batch draws.
+    progress : bool
+        Show a progress bar.
+    u : Tensor, shape like ``x`` with m columns, optional
+        Inputs of a controlled model, row k held over the step after sample k.
 
     Returns
     -------
     TrainHistory
     """
+    if not isinstance(recipe, ODERecipe):
+        raise TypeError(f"recipe must be an ODERecipe (e.g. PAPER_SPIRAL_RECIPE), got {type(recipe).__name__}")
+    r = recipe
+    iterations, batch_size, batch_time, lr, optimizer, loss = (r.iterations, r.batch_size, r.batch_time, r.lr,
+                                                               r.optimizer, r.loss)
+    method, adjoint, rtol, atol = r.method, r.adjoint, r.rtol, r.atol
     x = as_trajectory(x, name="x")
     if x.ndim == 2:
         x = x[None]
@@ -131,13 +225,18 @@ def train_neural_ode(
     check_positive(lr, name="lr")
 
     dtype = next(model.parameters()).dtype
-    x = x.to(dtype)
+    x = x.to(dtype)  # the data follow the model's precision (simulate returns float64)
+    if u is not None:
+        u = as_trajectory(u, name="u").to(dtype)
+        u = u[None] if u.ndim == 2 else u
+        if u.shape[:2] != x.shape[:2]:
+            raise ValueError(f"u must have shape {(*x.shape[:2], 'm')}, got {tuple(u.shape)}")
     t_seg = (torch.arange(int(batch_time), dtype=dtype) * Ts)
     options = {"step_size": Ts} if method in FIXED_STEP_METHODS else None
     kwargs: dict = {} if method in FIXED_STEP_METHODS else {"rtol": rtol, "atol": atol}
     if adjoint:
         solve = odeint_adjoint
-        if adjoint_seminorm and method not in FIXED_STEP_METHODS:
+        if r.adjoint_seminorm and method not in FIXED_STEP_METHODS:
             kwargs["adjoint_options"] = {"norm": "seminorm"}
     else:
         solve = odeint
@@ -149,9 +248,11 @@ def train_neural_ode(
     start = time.perf_counter()
     bar = tqdm(range(int(iterations)), desc="train neural ODE", disable=not progress, leave=False)
     for _ in bar:
-        seg = sample_segments(x, int(batch_size), int(batch_time), gen)  # (bt, B, n)
+        traj, idx = segment_indices(x.shape[0], x.shape[1], int(batch_size), int(batch_time), gen)
+        seg = x[traj, idx]  # (bt, B, n)
+        field = model if u is None else HeldInputs(model, u[traj, idx], Ts)
         opt.zero_grad()
-        pred = solve(model, seg[0], t_seg, method=method, options=options, **kwargs)
+        pred = solve(field, seg[0], t_seg, method=method, options=options, **kwargs)
         value = loss_fn(pred, seg)
         value.backward()
         opt.step()

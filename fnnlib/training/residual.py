@@ -6,17 +6,20 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import Flights
+from fnnlib.metrics import relative_rmse
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
-from fnnlib.systems.quadrotor import Quadrotor
+from fnnlib.systems.quadrotor import STATE_GROUPS, Quadrotor
 from fnnlib.training.external import InputTrainHistory, make_segments, rollout, train_with_inputs
 
-__all__ = ["EnsembleFit", "closed_loop_step", "predict_flights", "train_residual_ensemble", "train_single_step"]
+__all__ = ["EnsembleFit", "closed_loop_step", "convergence_checks", "predict_flights", "state_group_errors",
+           "train_residual_ensemble", "train_single_step"]
 
 #: Loss weights of App. A.1's quadratic loss: the 12 vehicle states count, the 6 controller states do not
 #: (as in the authors' release).
@@ -24,7 +27,7 @@ STATE_WEIGHTS = [1.0] * 12 + [0.0] * 6
 
 
 def closed_loop_step(residual: Callable[[Tensor], Tensor] | None, controller: DFBC, plant: Quadrotor, *,
-                     dt: float = 0.02, substeps: int = 1, members: int | None = None) -> Callable[[Tensor, Tensor], Tensor]:
+                     Ts: float, substeps: int = 1, members: int | None = None) -> Callable[[Tensor, Tensor], Tensor]:
     r"""The discrete closed loop :math:`[x, z]_{i+1} = \Phi^d([x, z]_i, \bar\Psi_i)` of App. A.5.2 with the residual.
 
     ``step(x, I)``: ``x`` (B, 18) closed-loop states, ``I`` (B, 12) commands. With ``members = E`` (an
@@ -32,11 +35,11 @@ def closed_loop_step(residual: Callable[[Tensor], Tensor] | None, controller: DF
     """
     def step(x: Tensor, I: Tensor) -> Tensor:
         if members is None:
-            return controller.closed_loop_step(x, I, plant, dt=dt, substeps=substeps, a_res_fn=residual)
+            return controller.closed_loop_step(x, I, plant, Ts=Ts, substeps=substeps, a_res_fn=residual)
         B = x.shape[0]
         xe = x.reshape(B, members, 18)
         Ie = I[:, None, :].expand(B, members, I.shape[-1])
-        return controller.closed_loop_step(xe, Ie, plant, dt=dt, substeps=substeps,
+        return controller.closed_loop_step(xe, Ie, plant, Ts=Ts, substeps=substeps,
                                            a_res_fn=residual).reshape(B, members * 18)
 
     return step
@@ -66,27 +69,28 @@ def _member_losses(step: Callable[[Tensor, Tensor], Tensor], x_r: Tensor, I: Ten
 
 
 def train_residual_ensemble(seeds: Sequence[int], train: Flights, *, controller: DFBC, plant: Quadrotor,
-                            hidden: Sequence[int] = (36, 36), activation: str = "tanh",
-                            segment_length: int = 20, batch_size: int | None = 80, epochs: int = 50,
-                            lr: float = 5e-3, val: Flights | None = None, dtype: torch.dtype = torch.float32,
-                            val_every: int = 10, substeps: int = 1, progress: bool = True) -> EnsembleFit:
+                            hidden: Sequence[int], activation: str, segment_length: int, batch_size: int | None,
+                            epochs: int, lr: float, val: Flights | None = None, val_every: int = 10,
+                            dtype: torch.dtype = torch.float32, substeps: int = 1,
+                            progress: bool = True) -> EnsembleFit:
     """Train one residual per seed (its random initialisation) with Alg. 3, all as one batch (Q1, Q6).
 
     Every member sees the same segment order (shuffled with ``seeds[0]``); they differ in their initial
     weights. Per-member training losses are recorded after every epoch, validation losses (full-length
     rollouts of the validation flights) before training, every ``val_every`` epochs and after the last.
+    The paper's recipe (``hidden`` to ``lr``) is :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`.
     """
     if not seeds:
         raise ValueError("need at least one seed")
-    if val is not None and val.dt != train.dt:
-        raise ValueError(f"validation flights have dt = {val.dt}, training flights dt = {train.dt}; they must match")
+    if val is not None and val.Ts != train.Ts:
+        raise ValueError(f"validation flights have Ts = {val.Ts}, training flights Ts = {train.Ts}; they must match")
     members = []
     for s in seeds:
         torch.manual_seed(int(s))
         members.append(AeroResidual(hidden, activation).to(dtype))
     E = len(members)
     ens = EnsembleResidual(members).to(dtype)
-    step = closed_loop_step(ens, controller, plant, dt=train.dt, substeps=substeps, members=E)
+    step = closed_loop_step(ens, controller, plant, Ts=train.Ts, substeps=substeps, members=E)
     tile = lambda X: X.to(dtype).repeat(1, 1, E)  # noqa: E731  (K, T, 18) -> (K, T, 18 E)
     x_r, I = tile(train.x), train.Psi.to(dtype)
     x_seg, I_seg = make_segments(x_r, I, segment_length)
@@ -114,16 +118,39 @@ def predict_flights(residual: Callable[[Tensor], Tensor] | None, flights: Flight
 
     Returns the predicted closed-loop states (K, T+1, 18).
     """
-    step = closed_loop_step(residual, controller, plant, dt=flights.dt, substeps=substeps)
+    step = closed_loop_step(residual, controller, plant, Ts=flights.Ts, substeps=substeps)
     return rollout(step, flights.x[:, 0].to(dtype), flights.Psi.to(dtype))
 
 
-def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int = 500, batch_size: int = 256,
-                      lr: float = 1e-3, seed: int = 0, progress: bool = False) -> list[float]:
+def state_group_errors(x_pred: Tensor, x_true: Tensor) -> dict[str, float]:
+    """Relative RMSE per state group ``p, v, Theta, omega`` (:data:`~fnnlib.systems.quadrotor.STATE_GROUPS`), Q2.
+
+    ``x_pred``, ``x_true`` (..., 12); each group's RMSE of the error norm over the RMS norm of its true values.
+    """
+    return {g: relative_rmse(x_pred[..., sl], x_true[..., sl]) for g, sl in STATE_GROUPS.items()}
+
+
+def convergence_checks(member_loss: np.ndarray, epochs: int) -> dict[str, bool]:
+    """Q1's rule on the per-member training losses ``member_loss`` (epochs + 1, E), row 0 before training.
+
+    Every member: final loss <= 10 % of the initial one, and the last 10 % of epochs change it by < 20 %;
+    and the members agree: the largest final loss is at most 2x the smallest.
+    """
+    final, first = member_loss[-1], member_loss[0]
+    tail = member_loss[int(np.floor(0.9 * epochs))]
+    return {
+        "every initialisation: final <= 10 % of initial loss": bool(np.all(final <= 0.1 * first)),
+        "every initialisation: last 10 % of epochs change the loss < 20 %": bool(np.all(np.abs(final - tail) <= 0.2 * tail)),
+        "initialisations agree: max/min final loss <= 2": bool(final.max() <= 2 * final.min()),
+    }
+
+
+def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int, batch_size: int, lr: float,
+                      seed: int, progress: bool = False) -> list[float]:
     """Fit a feed-forward residual to single-step labels by mean squared error (the MLP baseline).
 
     ``x`` (M, 12) states, ``labels`` (M, 3) accelerations; Adam, shuffled mini-batches. Returns the
-    per-epoch mean loss.
+    per-epoch mean loss. The recipe of the paper run is :data:`~fnnlib.quadrotor_presets.PAPER_MLP_RECIPE`.
     """
     if x.shape[0] != labels.shape[0] or labels.shape[-1] != 3 or x.shape[-1] != 12:
         raise ValueError(f"need x (M, 12) and labels (M, 3), got {tuple(x.shape)} and {tuple(labels.shape)}")

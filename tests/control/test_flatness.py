@@ -46,9 +46,9 @@ def test_round_trip_through_the_model(params: QuadrotorParams) -> None:
 
 def test_snap_is_the_angular_acceleration_feed_forward() -> None:
     p, v, a, j, s, _ = flat(T_GRID)
-    x = flat_to_state(p, v, a, j)
-    without = Quadrotor().f(x, flat_to_input(p, v, a, j))  # s = 0
-    with_s = Quadrotor().f(x, flat_to_input(p, v, a, j, s))
+    x = flat_to_state(p, v, a, j, params=NOMINAL)
+    without = Quadrotor(NOMINAL).f(x, flat_to_input(p, v, a, j, params=NOMINAL))  # s = 0
+    with_s = Quadrotor(NOMINAL).f(x, flat_to_input(p, v, a, j, s, params=NOMINAL))
     assert torch.allclose(without[:, :9], with_s[:, :9], atol=1e-12)  # thrust is the same
     assert float((without[:, 9:] - with_s[:, 9:]).abs().max()) > 1.0  # torque is not
 
@@ -68,31 +68,31 @@ def test_state_to_flat_inverts_the_flat_maps(params: QuadrotorParams) -> None:
 def test_hover_maps_to_rest_and_hover_thrust() -> None:
     zero = torch.zeros(3, dtype=F64)
     p = torch.tensor([1.0, 2.0, -3.0], dtype=F64)
-    x, u = flat_reference(torch.cat([p, zero, zero, zero]))
+    x, u = flat_reference(torch.cat([p, zero, zero, zero]), params=NOMINAL)
     assert torch.allclose(x, torch.cat([p, torch.zeros(9, dtype=F64)]), atol=1e-15)
-    assert torch.allclose(u, Quadrotor().hover_input(), atol=1e-14)
+    assert torch.allclose(u, Quadrotor(NOMINAL).hover_input(), atol=1e-14)
 
 
 def test_known_tilt() -> None:
     # accelerating north at g: z_B along (-g, 0, g), i.e. pitch 45 deg nose down, thrust sqrt(2) m g
     zero = torch.zeros(3, dtype=F64)
     a = torch.tensor([9.81, 0.0, 0.0], dtype=F64)
-    x = flat_to_state(zero, zero, a, zero)
+    x = flat_to_state(zero, zero, a, zero, params=NOMINAL)
     assert torch.allclose(x[6:9], torch.tensor([0.0, -torch.pi / 4, 0.0], dtype=F64), atol=1e-15)
-    u = flat_to_input(zero, zero, a, zero)
+    u = flat_to_input(zero, zero, a, zero, params=NOMINAL)
     assert torch.allclose(u.sum(), torch.tensor(2.0**0.5 * 0.83 * 9.81, dtype=F64), atol=1e-12)
 
 
 def test_batched_and_broadcast_and_float32() -> None:
     p, v, a, j, s, _ = flat(T_GRID[:5])
-    x = flat_to_state(p, v, a, j)
-    u = flat_to_input(p, v, a, j, s)
+    x = flat_to_state(p, v, a, j, params=NOMINAL)
+    u = flat_to_input(p, v, a, j, s, params=NOMINAL)
     for i in range(5):
-        assert torch.allclose(x[i], flat_to_state(p[i], v[i], a[i], j[i]), atol=1e-14)
-        assert torch.allclose(u[i], flat_to_input(p[i], v[i], a[i], j[i], s[i]), atol=1e-12)
-    assert flat_to_state(p[0], v, a[0], j[0]).shape == (5, 12)  # leading dims broadcast
-    x32 = flat_to_state(p.float(), v.float(), a.float(), j.float())
-    u32 = flat_to_input(p.float(), v.float(), a.float(), j.float(), s.float())
+        assert torch.allclose(x[i], flat_to_state(p[i], v[i], a[i], j[i], params=NOMINAL), atol=1e-14)
+        assert torch.allclose(u[i], flat_to_input(p[i], v[i], a[i], j[i], s[i], params=NOMINAL), atol=1e-12)
+    assert flat_to_state(p[0], v, a[0], j[0], params=NOMINAL).shape == (5, 12)  # leading dims broadcast
+    x32 = flat_to_state(p.float(), v.float(), a.float(), j.float(), params=NOMINAL)
+    u32 = flat_to_input(p.float(), v.float(), a.float(), j.float(), s.float(), params=NOMINAL)
     assert x32.dtype == u32.dtype == torch.float32
     assert torch.allclose(x32.double(), x, atol=1e-5) and torch.allclose(u32.double(), u, atol=1e-4)
 
@@ -100,25 +100,25 @@ def test_batched_and_broadcast_and_float32() -> None:
 def test_gradients_flow_through_the_input_map() -> None:
     p, v, a, j, s, _ = flat(T_GRID[:3])
     a = a.clone().requires_grad_(True)
-    assert torch.autograd.gradcheck(lambda a_: flat_to_input(p, v, a_, j, s), (a,))
+    assert torch.autograd.gradcheck(lambda a_: flat_to_input(p, v, a_, j, s, params=NOMINAL), (a,))
 
 
 def test_bad_inputs_are_refused() -> None:
     p, v, a, j, _, _ = flat(T_GRID[:4])
     with pytest.raises(ValueError, match=r"a must have shape \(\.\.\., 3\)"):
-        flat_to_state(p, v, a[:, :2], j)
+        flat_to_state(p, v, a[:, :2], j, params=NOMINAL)
     nan = a.clone()
     nan[2, 1] = float("nan")
     with pytest.raises(ValueError, match="NaN"):
-        flat_to_input(p, v, nan, j)
+        flat_to_input(p, v, nan, j, params=NOMINAL)
     with pytest.raises(ValueError, match="broadcast"):
-        flat_to_state(p, v[:3], a, j)
+        flat_to_state(p, v[:3], a, j, params=NOMINAL)
     free_fall = torch.tensor([0.0, 0.0, 9.81], dtype=F64).expand(4, 3)
     with pytest.raises(ValueError, match="free fall"):
-        flat_to_state(p, v, free_fall, j)
+        flat_to_state(p, v, free_fall, j, params=NOMINAL)
     with pytest.raises(ValueError, match="equal x/y drag"):
         flat_to_input(p, v, a, j, params=NOMINAL.replace(drag=(0.5, 0.6, 0.1)))
     with pytest.raises(ValueError, match=r"\(\.\.\., 12\)"):
         split_flat(torch.zeros(4, 9, dtype=F64))
     with pytest.raises(TypeError, match="dtype"):
-        flat_to_state(p, v.float(), a, j)
+        flat_to_state(p, v.float(), a, j, params=NOMINAL)

@@ -8,7 +8,7 @@ from fnnlib.training import load_checkpoint, save_checkpoint
 
 
 def test_architecture_is_the_papers():
-    h = NeuralFeedback(2)
+    h = NeuralFeedback(2, (50, 50), "relu")
     linears = [m for m in h.net if isinstance(m, torch.nn.Linear)]
     assert [(m.in_features, m.out_features) for m in linears] == [(2, 50), (50, 50), (50, 2)]
     assert sum(isinstance(m, torch.nn.ReLU) for m in h.net) == 2
@@ -26,4 +26,4 @@ def test_checkpoint_round_trip(tmp_path):
 
 def test_bad_input_dimension():
     with pytest.raises(ValueError, match="feedback expects 2"):
-        NeuralFeedback(2)(torch.zeros(4, 3))
+        NeuralFeedback(2, (50, 50), "relu")(torch.zeros(4, 3))

@@ -15,7 +15,7 @@ def _linear_sizes(net: nn.Module) -> list[tuple[int, int]]:
 
 
 def test_spiral_model_is_2_50_50_2():
-    model = NeuralODE(2, hidden=(50, 50))
+    model = NeuralODE(2, hidden=(50, 50), activation="relu")
     assert _linear_sizes(model) == [(2, 50), (50, 50), (50, 2)]
     acts = [m for m in model.net if not isinstance(m, nn.Linear)]
     assert len(acts) == 2 and all(isinstance(a, nn.ReLU) for a in acts)  # no activation after the output layer
@@ -26,7 +26,7 @@ def test_mlp_sizes_and_activation():
     net = mlp(6, 3, (36, 36, 36), "tanh")
     assert _linear_sizes(net) == [(6, 36), (36, 36), (36, 36), (36, 3)]
     assert sum(isinstance(m, nn.Tanh) for m in net) == 3
-    assert _linear_sizes(mlp(2, 2, ())) == [(2, 2)]  # no hidden layer: one linear map
+    assert _linear_sizes(mlp(2, 2, (), "relu")) == [(2, 2)]  # no hidden layer: one linear map
 
 
 @pytest.mark.parametrize("name", sorted(ACTIVATIONS))
@@ -43,11 +43,11 @@ def test_unknown_activation():
 @pytest.mark.parametrize("hidden", [(0,), (4, -1)])
 def test_bad_layer_sizes(hidden):
     with pytest.raises(ValueError, match="layer sizes must be >= 1"):
-        mlp(2, 2, hidden)
+        mlp(2, 2, hidden, "relu")
 
 
 def test_forward_shape_and_autonomy():
-    model = NeuralODE(2, (8,)).double()
+    model = NeuralODE(2, (8,), "relu").double()
     x = torch.randn(5, 2, dtype=torch.float64)
     out = model(0.0, x)
     assert out.shape == (5, 2)
@@ -56,11 +56,11 @@ def test_forward_shape_and_autonomy():
 
 def test_wrong_state_dimension():
     with pytest.raises(ValueError, match="x has state dimension 3, model expects 2"):
-        NeuralODE(2, (4,))(0.0, torch.zeros(1, 3))
+        NeuralODE(2, (4,), "relu")(0.0, torch.zeros(1, 3))
 
 
 def test_input_is_concatenated():
-    model = NeuralODE(3, (5,), n_input=2)
+    model = NeuralODE(3, (5,), "relu", n_input=2)
     assert _linear_sizes(model)[0] == (5, 5)
     out = model.vector_field(torch.zeros(4, 3), torch.ones(4, 2))
     assert out.shape == (4, 3)
@@ -68,23 +68,23 @@ def test_input_is_concatenated():
 
 def test_missing_input():
     with pytest.raises(ValueError, match=r"model expects an input u with 2 columns, got None"):
-        NeuralODE(3, (5,), n_input=2).vector_field(torch.zeros(4, 3))
+        NeuralODE(3, (5,), "relu", n_input=2).vector_field(torch.zeros(4, 3))
 
 
 def test_wrong_input_width():
     with pytest.raises(ValueError, match=r"model expects an input u with 2 columns, got \(4, 1\)"):
-        NeuralODE(3, (5,), n_input=2).vector_field(torch.zeros(4, 3), torch.zeros(4, 1))
+        NeuralODE(3, (5,), "relu", n_input=2).vector_field(torch.zeros(4, 3), torch.zeros(4, 1))
 
 
 def test_forward_refuses_a_model_with_inputs():
     # forward(t, x) is for autonomous models; a model with inputs needs vector_field(x, u)
     with pytest.raises(ValueError, match="expects an input u"):
-        NeuralODE(3, (5,), n_input=2)(0.0, torch.zeros(4, 3))
+        NeuralODE(3, (5,), "relu", n_input=2)(0.0, torch.zeros(4, 3))
 
 
 def test_unexpected_input():
     with pytest.raises(ValueError, match="built with n_input=0 but an input u was given"):
-        NeuralODE(2, (4,)).vector_field(torch.zeros(1, 2), torch.zeros(1, 1))
+        NeuralODE(2, (4,), "relu").vector_field(torch.zeros(1, 2), torch.zeros(1, 1))
 
 
 def test_config_round_trip():
@@ -97,3 +97,10 @@ def test_config_round_trip():
     clone.load_state_dict(model.state_dict())
     x, u = torch.randn(4, 3), torch.randn(4, 1)
     assert torch.equal(clone.vector_field(x, u), model.vector_field(x, u))
+
+
+def test_architecture_is_required():
+    with pytest.raises(TypeError):
+        NeuralODE(2)  # no silent paper architecture
+    with pytest.raises(TypeError):
+        mlp(2, 2, (4,))

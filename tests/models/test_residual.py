@@ -9,6 +9,7 @@ import torch
 
 from fnnlib.models import MODELS
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual, EnsembleResidual
+from fnnlib.quadrotor_presets import PAPER_GAMMA
 from fnnlib.training import load_checkpoint, save_checkpoint
 
 F64 = torch.float64
@@ -16,7 +17,7 @@ F64 = torch.float64
 
 def _net(seed: int = 0, **kw) -> AeroResidual:
     torch.manual_seed(seed)
-    return AeroResidual(**kw).double()
+    return AeroResidual(**{"hidden": (36, 36), "activation": "tanh", **kw}).double()
 
 
 def _states(n: int, seed: int = 1) -> torch.Tensor:
@@ -69,7 +70,7 @@ def test_rejects_a_state_that_is_not_12_dimensional():
     with pytest.raises(ValueError, match="12-dimensional"):
         net.features(torch.zeros(4, 13, dtype=F64))
     with pytest.raises(ValueError, match="hidden layer"):
-        AeroResidual(hidden=())
+        AeroResidual(hidden=(), activation="tanh")
 
 
 def test_config_and_checkpoint_round_trip(tmp_path):
@@ -99,18 +100,18 @@ def test_adaptive_starts_as_the_base_network():
 def test_adapt_is_one_euler_step_of_eq_30():
     base = _net()
     ad = AdaptiveResidual(base, Gamma=2.5)
-    x, x_tilde_v, dt = _states(1, seed=4)[0], torch.tensor([0.3, -1.2, 0.7], dtype=F64), 0.02
+    x, x_tilde_v, Ts = _states(1, seed=4)[0], torch.tensor([0.3, -1.2, 0.7], dtype=F64), 0.02
     chi_before, b_before = ad.chi_hat.clone(), ad.b.clone()
     front_before = [p.clone() for p in ad.front.parameters()]
     phi = base.features(x)
-    ad.adapt(x, x_tilde_v, dt)
-    # chi_hat += dt Gamma x_tilde_v phi(x)^T
-    torch.testing.assert_close(ad.chi_hat - chi_before, dt * 2.5 * torch.outer(x_tilde_v, phi), rtol=1e-12, atol=1e-15)
+    ad.adapt(x, x_tilde_v, Ts)
+    # chi_hat += Ts Gamma x_tilde_v phi(x)^T
+    torch.testing.assert_close(ad.chi_hat - chi_before, Ts * 2.5 * torch.outer(x_tilde_v, phi), rtol=1e-12, atol=1e-15)
     assert torch.equal(ad.b, b_before)
     assert all(torch.equal(p, q) for p, q in zip(ad.front.parameters(), front_before))
-    # the sign of Eq. (30): at the adaptation point the output moves along x_tilde_v, by dt Gamma |phi|^2 x_tilde_v
+    # the sign of Eq. (30): at the adaptation point the output moves along x_tilde_v, by Ts Gamma |phi|^2 x_tilde_v
     moved = ad(x) - base(x)
-    torch.testing.assert_close(moved, dt * 2.5 * phi.dot(phi) * x_tilde_v, rtol=1e-10, atol=1e-14)
+    torch.testing.assert_close(moved, Ts * 2.5 * phi.dot(phi) * x_tilde_v, rtol=1e-10, atol=1e-14)
     # elsewhere the network is the new chi_hat on the same features
     y = _states(5, seed=9)
     torch.testing.assert_close(ad(y), base.features(y) @ ad.chi_hat.T + base.last.bias, rtol=0, atol=1e-13)
@@ -118,7 +119,7 @@ def test_adapt_is_one_euler_step_of_eq_30():
 
 def test_zero_error_does_not_adapt_and_reset_restores():
     base = _net()
-    ad = AdaptiveResidual(base)
+    ad = AdaptiveResidual(base, Gamma=PAPER_GAMMA)
     x = _states(1)[0]
     ad.adapt(x, torch.zeros(3, dtype=F64), 0.02)
     assert torch.equal(ad.chi_hat, base.last.weight)
@@ -135,7 +136,7 @@ def test_adaptive_copies_the_base_and_never_modifies_it():
     base = _net()
     flags = [p.requires_grad for p in base.parameters()]
     params = [p.clone() for p in base.parameters()]
-    ad = AdaptiveResidual(base)
+    ad = AdaptiveResidual(base, Gamma=PAPER_GAMMA)
     x = _states(6)
     y0 = ad(x)
     ad.adapt(x[0], torch.ones(3, dtype=F64), 0.1)
@@ -159,7 +160,7 @@ def test_refuses_a_gain_that_is_not_positive(Gamma):
 
 
 def test_adapt_refuses_nan_and_wrong_shapes():
-    ad = AdaptiveResidual(_net())
+    ad = AdaptiveResidual(_net(), Gamma=PAPER_GAMMA)
     x = _states(1)[0]
     chi = ad.chi_hat.clone()
     with pytest.raises(ValueError, match="NaN"):

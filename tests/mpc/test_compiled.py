@@ -15,15 +15,16 @@ from fnnlib.mpc.compiled import CompiledModel, CompiledQuadrotor, residual_layer
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.mpc.linearize import linearize
 from fnnlib.mpc.models import paper_models
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64
-N, DT = 10, 0.02
+N, TS = 10, 0.02
 
 
 def _net(seed: int, hidden: tuple[int, ...] = (36, 36)) -> AeroResidual:
     torch.manual_seed(seed)
-    net = AeroResidual(hidden).double()
+    net = AeroResidual(hidden, "tanh").double()
     with torch.no_grad():  # larger weights than the default init, so the network matters
         for p in net.parameters():
             p.mul_(3.0)
@@ -73,14 +74,14 @@ def test_rate_and_step_equal_the_torch_reference(name):
     with torch.no_grad():
         f_ref = plant.f(Xt, Ut, a_res=None if residual is None else residual(Xt)).numpy()
         for substeps in (1, 3):
-            step_ref = plant.step(Xt, Ut, 0.02, substeps, a_res_fn=residual).numpy()
+            step_ref = plant.step(Xt, Ut, Ts=0.02, substeps=substeps, a_res_fn=residual).numpy()
             rate, step = cq.rate_and_step(X, U, 0.02, substeps)
             np.testing.assert_allclose(step, step_ref, rtol=0, atol=1e-13)
             np.testing.assert_allclose(rate, f_ref, rtol=0, atol=1e-12)
     np.testing.assert_allclose(cq.f(X, U), f_ref, rtol=0, atol=1e-12)
     # one row in, one row out; the input may be shared by all rows
-    np.testing.assert_array_equal(cq.step(X[4], U[4]), cq.step(X, U)[4])
-    np.testing.assert_array_equal(cq.step(X[:3], U[1]), cq.step(X[:3], np.tile(U[1], (3, 1))))
+    np.testing.assert_array_equal(cq.step(X[4], U[4], TS), cq.step(X, U, TS)[4])
+    np.testing.assert_array_equal(cq.step(X[:3], U[1], TS), cq.step(X[:3], np.tile(U[1], (3, 1)), TS))
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -93,7 +94,7 @@ def test_step_jacobians_equal_torch_autograd(name):
         np.testing.assert_allclose(x_next, cq.step(X, U, 0.02, substeps), rtol=0, atol=1e-14)
         for i in range(len(X)):
             JA, JB = torch.autograd.functional.jacobian(
-                lambda x, u: plant.step(x, u, 0.02, substeps, a_res_fn=residual), (torch.from_numpy(X[i]),
+                lambda x, u: plant.step(x, u, Ts=0.02, substeps=substeps, a_res_fn=residual), (torch.from_numpy(X[i]),
                                                                                    torch.from_numpy(U[i])))
             np.testing.assert_allclose(A[i], JA.numpy(), rtol=0, atol=1e-11)
             np.testing.assert_allclose(B[i], JB.numpy(), rtol=0, atol=1e-11)
@@ -107,9 +108,9 @@ def test_step_jacobians_anywhere_in_the_flight_envelope(angles, rates, u):
     plant, residual = _case("test vehicle + adaptive residual")
     cq = CompiledQuadrotor(plant, residual)
     x = np.r_[0.1, -0.2, 0.3, rates[:3], angles, rates[3:]]
-    _, A, B = cq.step_jacobian(x[None], np.asarray(u)[None])
+    _, A, B = cq.step_jacobian(x[None], np.asarray(u)[None], TS)
     JA, JB = torch.autograd.functional.jacobian(
-        lambda x_, u_: plant.step(x_, u_, 0.02, a_res_fn=residual), (torch.from_numpy(x), torch.as_tensor(u, dtype=F64)))
+        lambda x_, u_: plant.step(x_, u_, Ts=0.02, a_res_fn=residual), (torch.from_numpy(x), torch.as_tensor(u, dtype=F64)))
     scale = max(1.0, float(JA.abs().max()))
     np.testing.assert_allclose(A[0], JA.numpy(), rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(B[0], JB.numpy(), rtol=0, atol=1e-12 * scale)
@@ -119,24 +120,24 @@ def test_adaptation_is_seen_without_rebuilding():
     plant, residual = _case("test vehicle + adaptive residual")
     cq = CompiledQuadrotor(plant, residual)
     X, U = _points(5, 4)
-    before = cq.step(X, U)
+    before = cq.step(X, U, TS)
     residual.adapt(torch.from_numpy(X[0]), torch.tensor([0.5, -0.2, 0.1], dtype=F64), 0.02)
-    after = cq.step(X, U)
+    after = cq.step(X, U, TS)
     assert np.abs(after - before).max() > 1e-6
     with torch.no_grad():
-        ref = plant.step(torch.from_numpy(X), torch.from_numpy(U), 0.02, a_res_fn=residual).numpy()
+        ref = plant.step(torch.from_numpy(X), torch.from_numpy(U), Ts=0.02, a_res_fn=residual).numpy()
     np.testing.assert_allclose(after, ref, rtol=0, atol=1e-13)
     residual.reset()
-    np.testing.assert_allclose(cq.step(X, U), CompiledQuadrotor(plant, AdaptiveResidual(_net(1), 4.0)).step(X, U),
+    np.testing.assert_allclose(cq.step(X, U, TS), CompiledQuadrotor(plant, AdaptiveResidual(_net(1), 4.0)).step(X, U, TS),
                                rtol=0, atol=0)
 
 
 def test_refuses_what_it_cannot_compute():
     plant = Quadrotor(NOMINAL)
     with pytest.raises(TypeError, match="tanh"):
-        CompiledQuadrotor(plant, AeroResidual(activation="relu").double())
+        CompiledQuadrotor(plant, AeroResidual((36, 36), "relu").double())
     with pytest.raises(TypeError, match="float64"):
-        CompiledQuadrotor(plant, AeroResidual())  # float32
+        CompiledQuadrotor(plant, AeroResidual((36, 36), "tanh"))  # float32
     with pytest.raises(TypeError, match="AeroResidual or AdaptiveResidual"):
         residual_layers(nn.Linear(6, 3))
     with pytest.raises(TypeError, match="Quadrotor"):
@@ -144,30 +145,31 @@ def test_refuses_what_it_cannot_compute():
     cq = CompiledQuadrotor(plant)
     X, U = _points(6, 3)
     with pytest.raises(ValueError, match="shape"):
-        cq.step(X[:, :11], U)
+        cq.step(X[:, :11], U, TS)
     with pytest.raises(ValueError, match="same number of rows"):
-        cq.step(X, U[:2])
+        cq.step(X, U[:2], TS)
     X[1, 4] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        cq.step_jacobian(X, U)
-    with pytest.raises(ValueError, match="dt"):
-        cq.step(X[:1], U[:1], dt=-0.02)
+        cq.step_jacobian(X, U, TS)
+    with pytest.raises(ValueError, match="Ts"):
+        cq.step(X[:1], U[:1], Ts=-0.02)
 
 
 def _mid_flight_models(reference) -> list:
     """The seven models after a few steps of flight: cascades committed, adaptive layers moved."""
     x_r, u_r = reference
-    models = paper_models(_net(0), _net(5), N=N, dt=DT, Gamma=4.0)
-    mpc = OSQPMPC(N, np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3), np.ones(4), u_lb=np.zeros(4),
+    models = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
+                          Gamma=4.0)
+    mpc = OSQPMPC(N, np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3), np.ones(4), cost="as_written", u_lb=np.zeros(4),
                   u_ub=np.full(4, 6.0))
     for m in models:
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 7], u_r[:N + 6], steps=6, dt=DT, substeps=1, backend="numba")
+        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 7], u_r[:N + 6], steps=6, Ts=TS, substeps=1, backend="numba")
     return models
 
 
 @pytest.fixture(scope="module")
 def reference():
-    return lissajous_reference(40, N)
+    return lissajous_reference(40, N, Ts=TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
 
 
 def test_model_linearization_equals_autograd_of_model_step(reference):
@@ -199,10 +201,11 @@ def test_numba_flight_equals_the_torch_flight(reference):
     for name in ("Nomi", "FNN", "AdapFNN", "AdapNN"):
         runs = {}
         for backend in ("torch", "numba"):
-            m = {mm.name: mm for mm in paper_models(_net(0), _net(5), N=N, dt=DT, Gamma=4.0)}[name]
-            mpc = OSQPMPC(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+            m = {mm.name: mm for mm in paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
+                          Gamma=4.0)}[name]
+            mpc = OSQPMPC(N, Q, np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
             runs[backend] = fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps,
-                                dt=DT, substeps=1, linearize_method="reverse", backend=backend)
+                                Ts=TS, substeps=1, linearize_method="reverse", backend=backend)
         a, b = runs["torch"], runs["numba"]
         np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-8, err_msg=name)
         np.testing.assert_allclose(b.u, a.u, rtol=0, atol=1e-6, err_msg=name)
@@ -214,11 +217,13 @@ def test_numba_flight_equals_the_torch_flight(reference):
         assert np.isfinite(b.elapsed_s) and b.real_time_factor > 0
 
 
-def test_fly_refuses_an_unknown_backend_and_a_mismatched_dt(reference):
+def test_fly_refuses_an_unknown_backend_a_mismatched_Ts_and_a_torch_backend_without_method(reference):
     x_r, u_r = reference
-    m = paper_models(_net(0), _net(5), N=N, dt=DT)[0]
-    mpc = OSQPMPC(N, np.ones(12), np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+    m = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS, Gamma=4.0)[0]
+    mpc = OSQPMPC(N, np.ones(12), np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
     with pytest.raises(ValueError, match="backend"):
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, dt=DT, backend="jax")
-    with pytest.raises(ValueError, match="dt"):
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, dt=0.01, backend="numba")
+        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=TS, substeps=1, backend="jax")
+    with pytest.raises(ValueError, match="Ts"):
+        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=0.01, substeps=1, backend="numba")
+    with pytest.raises(ValueError, match="linearize_method"):
+        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=TS, substeps=1, backend="torch")

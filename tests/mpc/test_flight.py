@@ -8,32 +8,46 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib.control.trajectories import lissajous
 from fnnlib.control.flatness import flat_reference
+from fnnlib.control.lissajous import lissajous
 from fnnlib.mpc import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.flight import FlightResult, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64
-N, DT, STEPS = 10, 0.02, 15
+N, TS, STEPS = 10, 0.02, 15
+#: the loop settings these tests fly with unless they say otherwise: the torch reference, central
+#: differences, 4 RK4 sub-steps of the truth
+LOOP = {"Ts": TS, "substeps": 4, "backend": "torch", "linearize_method": "central"}
 HOVER_EACH = NOMINAL.mass * NOMINAL.g / 4
 
 
-def _mpc(cls: type = LinearizedMPC, **options: float) -> LinearizedMPC | OSQPMPC:
-    """Eq. (28) with App. A.5.3's weights and boxes.
+def _mpc(cls: type = LinearizedMPC, cost: str = "as_written", **options: float) -> LinearizedMPC | OSQPMPC:
+    """Eq. (28) with App. A.5.3's weights and boxes (as written unless ``cost`` says otherwise).
 
     Q = diag(100 x3, 50 x6, 1 x3), R = I, 0 <= u <= 4, |Theta| <= pi/2.
     """
     Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
     x_lb, x_ub = np.full(12, -np.inf), np.full(12, np.inf)
     x_lb[6:9], x_ub[6:9] = -np.pi / 2, np.pi / 2
-    return cls(N, Q, np.ones(4), u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub, **options)
+    return cls(N, Q, np.ones(4), cost=cost, u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub,
+               **options)
+
+
+def _fly(model, mpc, truth, x_r, u_r, **options):
+    """:func:`fly` with :data:`LOOP`, some settings changed."""
+    return fly(model, mpc, truth, x_r, u_r, **{**LOOP, **options})
+
+
+def _nominal_model() -> PredictionModel:
+    return PredictionModel("Nomi", Quadrotor(NOMINAL), Ts=TS)
 
 
 @pytest.fixture(scope="module")
 def reference() -> tuple[torch.Tensor, torch.Tensor]:
-    return lissajous_reference(STEPS, N)
+    return lissajous_reference(STEPS, N, Ts=TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
 
 
 # --------------------------------------------------------------------------- the reference
@@ -46,12 +60,13 @@ def test_reference_shapes_and_start(reference):
     # p(0) = [0, 0, h + r_z] = [0, 0, 1] for the paper's curve, v(0) = [r_x w_x, r_y w_y, 0]
     torch.testing.assert_close(x_r[0, :3], torch.tensor([0.0, 0.0, 1.0], dtype=F64), rtol=0, atol=1e-14)
     torch.testing.assert_close(x_r[0, 3:6], torch.tensor([math.pi, 2 * math.pi, 0.0], dtype=F64), rtol=0, atol=1e-12)
-    # every row on the control grid t = k dt
-    ref = lissajous(np.arange(STEPS + N + 1) * DT)
+    # every row on the control grid t = k Ts
+    ref = lissajous(np.arange(STEPS + N + 1) * TS, **PAPER_LISSAJOUS)
     torch.testing.assert_close(x_r[:, :3], torch.as_tensor(ref.p), rtol=0, atol=1e-14)
     torch.testing.assert_close(x_r[:, 3:6], torch.as_tensor(ref.v), rtol=0, atol=1e-12)
     # other parameters reach the curve
-    x_r2, _ = lissajous_reference(2, 3, h=-0.5, r_z=0.3, r_x=1.0, T_x=4.0)
+    x_r2, _ = lissajous_reference(2, 3, Ts=TS, params=NOMINAL,
+                                   curve={**PAPER_LISSAJOUS, "h": -0.5, "r_z": 0.3, "r_x": 1.0, "T_x": 4.0})
     torch.testing.assert_close(x_r2[0, :3], torch.tensor([0.0, 0.0, -0.2], dtype=F64), rtol=0, atol=1e-14)
     assert x_r2.shape == (6, 12)
 
@@ -59,18 +74,19 @@ def test_reference_shapes_and_start(reference):
 def test_reference_thrust(reference):
     _, u_r = reference
     # the collective thrust of flatness: sum_i u_i = m |g e3 - a|
-    a = torch.as_tensor(lissajous(np.arange(STEPS + N) * DT).a)
+    a = torch.as_tensor(lissajous(np.arange(STEPS + N) * TS, **PAPER_LISSAJOUS).a)
     T = NOMINAL.mass * torch.linalg.norm(torch.tensor([0.0, 0.0, NOMINAL.g], dtype=F64) - a, dim=-1)
     torch.testing.assert_close(u_r.sum(-1), T, rtol=1e-10, atol=1e-10)
     # hover-like on average: m g / 4 per motor, more where the curve accelerates (Jensen), under the 4 N box
     assert HOVER_EACH <= float(u_r.mean()) < 1.5 * HOVER_EACH
     assert float(u_r.min()) > 0 and float(u_r.max()) < 4.0
     # a slow Lissajous is a hover: m g / 4 within 1 %
-    _, u_slow = lissajous_reference(50, N, T_x=60.0, T_y=60.0, T_z=60.0)
+    slow = {**PAPER_LISSAJOUS, "T_x": 60.0, "T_y": 60.0, "T_z": 60.0}
+    _, u_slow = lissajous_reference(50, N, Ts=TS, params=NOMINAL, curve=slow)
     assert float(u_slow.mean()) == pytest.approx(HOVER_EACH, rel=1e-2)
     # the model's mass enters
     heavy = NOMINAL.replace(mass=1.33)
-    _, u_heavy = lissajous_reference(50, N, T_x=60.0, T_y=60.0, T_z=60.0, params=heavy)
+    _, u_heavy = lissajous_reference(50, N, Ts=TS, params=heavy, curve=slow)
     assert float(u_heavy.mean()) == pytest.approx(heavy.mass * heavy.g / 4, rel=1e-2)
 
 
@@ -88,7 +104,7 @@ def _check_shapes(res: FlightResult, steps: int) -> None:
 
 def test_nominal_model_on_the_nominal_vehicle(reference):
     x_r, u_r = reference
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), _mpc(), Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    res = _fly(_nominal_model(), _mpc(), Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
     _check_shapes(res, STEPS)
     assert res.name == "Nomi" and res.n_fallbacks == 0 and set(res.statuses) == {"optimal"}
     np.testing.assert_array_equal(res.x[0], x_r[0].numpy())
@@ -107,15 +123,15 @@ def test_feedback_model_on_the_test_vehicle_obeys_eq_25(reference):
     """In the loop, the recorded layer-0 error follows Eq. (25) with the recorded residual delta, exactly."""
     x_r, u_r = reference
     steps, L = 12, 3.0  # the thrust saturates at 4 N from step 7 on
-    model = FeedbackCascadeModel(PredictionModel("Nomi", Quadrotor(NOMINAL)), L, beta=0.1, N=N)
-    res = fly(model, _mpc(), Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps)
+    model = FeedbackCascadeModel(_nominal_model(), L, beta=0.1, N=N)
+    res = _fly(model, _mpc(), Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps)
     _check_shapes(res, steps)
     assert res.name == "FB-Nomi" and res.n_fallbacks == 0
     assert res.u.max() == 4.0  # the input box is active: the applied, clipped input is what the model is told
     assert np.isnan(res.x_tilde[0]).all() and np.isfinite(res.x_tilde[1:]).all()
-    np.testing.assert_allclose(res.x_tilde[1], DT * res.delta[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.x_tilde[1], TS * res.delta[0], rtol=0, atol=1e-12)
     for t in range(1, steps - 1):
-        np.testing.assert_allclose(res.x_tilde[t + 1], (1 - DT * L) * res.x_tilde[t] + DT * res.delta[t],
+        np.testing.assert_allclose(res.x_tilde[t + 1], (1 - TS * L) * res.x_tilde[t] + TS * res.delta[t],
                                    rtol=0, atol=1e-12)
     # the vehicle differs from the model, and the model's change rate includes the correction L x_tilde
     assert np.abs(res.delta).max() > 1.0
@@ -123,17 +139,17 @@ def test_feedback_model_on_the_test_vehicle_obeys_eq_25(reference):
 
 
 def test_linearizes_along_the_shifted_plan_from_the_measured_state(reference, monkeypatch):
-    import fnnlib.mpc.flight as flight
+    import fnnlib.mpc.backends as backends
 
     x_r, u_r = reference
     calls, plans = [], []
-    real_linearize = flight.linearize
+    real_linearize = backends.linearize
 
     def spy(step, x_bar, u_bar, k, **kw):
         calls.append((x_bar.clone(), u_bar.clone(), k.clone()))
         return real_linearize(step, x_bar, u_bar, k, **kw)
 
-    monkeypatch.setattr(flight, "linearize", spy)
+    monkeypatch.setattr(backends, "linearize", spy)
     mpc = _mpc()
     real_solve = mpc.solve
 
@@ -144,7 +160,7 @@ def test_linearizes_along_the_shifted_plan_from_the_measured_state(reference, mo
 
     mpc.solve = solve
     steps = 4
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1],
+    res = _fly(_nominal_model(), mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1],
               u_r[:steps + N], steps=steps)
     assert len(calls) == steps
     for t, (x_bar, u_bar, k) in enumerate(calls):
@@ -161,22 +177,22 @@ def test_linearizes_along_the_shifted_plan_from_the_measured_state(reference, mo
 
 def test_fly_refuses_a_reference_of_the_wrong_length(reference):
     x_r, u_r = reference
-    model = PredictionModel("Nomi", Quadrotor(NOMINAL))
+    model = _nominal_model()
     mpc = _mpc()
     with pytest.raises(ValueError, match="reference must be"):
-        fly(model, mpc, Quadrotor(NOMINAL), x_r[:-1], u_r, steps=STEPS)
+        _fly(model, mpc, Quadrotor(NOMINAL), x_r[:-1], u_r, steps=STEPS)
     with pytest.raises(ValueError, match="reference must be"):
-        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r[:-1], steps=STEPS)
+        _fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r[:-1], steps=STEPS)
     with pytest.raises(ValueError, match="reference must be"):
-        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS + 1)
+        _fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS + 1)
     with pytest.raises(ValueError, match="reference must be"):
-        fly(model, mpc, Quadrotor(NOMINAL), x_r[:, :9], u_r, steps=STEPS)
+        _fly(model, mpc, Quadrotor(NOMINAL), x_r[:, :9], u_r, steps=STEPS)
     with pytest.raises(ValueError, match="steps"):
-        fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=0)
+        _fly(model, mpc, Quadrotor(NOMINAL), x_r, u_r, steps=0)
     bad = x_r.clone()
     bad[3, 4] = float("nan")
     with pytest.raises(ValueError, match="x_r"):
-        fly(model, mpc, Quadrotor(NOMINAL), bad, u_r, steps=STEPS)
+        _fly(model, mpc, Quadrotor(NOMINAL), bad, u_r, steps=STEPS)
 
 
 # --------------------------------------------------------------------------- tracking_rmse
@@ -201,7 +217,7 @@ def test_tracking_rmse_by_hand():
 
 def _circle_reference(steps: int, radius: float = 1.0, period: float = 8.0) -> tuple[torch.Tensor, torch.Tensor]:
     """p(t) = [r sin(w t), r cos(w t) - r, -1] with analytic derivatives, through flatness (zero yaw)."""
-    t = torch.arange(steps + N + 1, dtype=F64) * DT
+    t = torch.arange(steps + N + 1, dtype=F64) * TS
     w = 2 * math.pi / period
     derivs = []
     for order in range(5):  # d^n/dt^n sin(w t) = w^n sin(w t + n pi/2)
@@ -210,7 +226,7 @@ def _circle_reference(steps: int, radius: float = 1.0, period: float = 8.0) -> t
                          torch.zeros_like(t)], dim=-1)
         derivs.append(p)
     derivs[0] = derivs[0] + torch.tensor([0.0, -radius, -1.0], dtype=F64)
-    x_r, u_r = flat_reference(torch.cat(derivs[:4], dim=-1), derivs[4])
+    x_r, u_r = flat_reference(torch.cat(derivs[:4], dim=-1), derivs[4], params=NOMINAL)
     return x_r, u_r[:-1]
 
 
@@ -226,13 +242,13 @@ def test_nominal_mpc_holds_hover_and_returns_to_it(mpc_cls):
     steps = 100
     x_r = torch.zeros(steps + N + 1, 12, dtype=F64)
     u_r = torch.full((steps + N, 4), HOVER_EACH, dtype=F64)
-    still = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
+    still = _fly(_nominal_model(), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
                 steps=steps)
     assert np.abs(still.x).max() < 1e-6
     np.testing.assert_allclose(still.u, HOVER_EACH, atol=1e-5)
     x0 = x_r[0].clone()
     x0[0], x0[2] = 0.5, 0.3
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
+    res = _fly(_nominal_model(), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
               steps=steps, x0=x0)
     assert res.n_fallbacks == 0
     dist = np.linalg.norm(res.x[:, :3], axis=1)
@@ -247,7 +263,7 @@ def test_nominal_mpc_tracks_a_slow_circle(mpc_cls):
     """A 1 m circle at 0.79 m/s (period 8 s) for 2 s, model = vehicle: position RMSE < 1 mm, max error < 2 mm."""
     steps = 100
     x_r, u_r = _circle_reference(steps)
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
+    res = _fly(_nominal_model(), _mpc(mpc_cls), Quadrotor(NOMINAL), x_r, u_r,
               steps=steps)
     assert res.n_fallbacks == 0
     rmse = tracking_rmse(res.x, res.x_ref)
@@ -261,7 +277,7 @@ def test_both_qp_implementations_fly_the_same_flight(reference):
     """The cvxpy problem and the direct OSQP one give the same applied inputs on the test vehicle."""
     x_r, u_r = reference
     tight = {"eps_abs": 1e-9, "eps_rel": 1e-9}
-    runs = [fly(FeedbackCascadeModel(PredictionModel("Nomi", Quadrotor(NOMINAL)), 3.0, beta=0.1, N=N),
+    runs = [_fly(FeedbackCascadeModel(_nominal_model(), 3.0, beta=0.1, N=N),
                 _mpc(cls, **tight), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS) for cls in (LinearizedMPC, OSQPMPC)]
     np.testing.assert_allclose(runs[0].u, runs[1].u, rtol=0, atol=1e-6)
     np.testing.assert_allclose(runs[0].x, runs[1].x, rtol=0, atol=1e-7)
@@ -272,10 +288,10 @@ def test_a_flight_does_not_depend_on_what_the_controller_flew_before(reference, 
     """fly() resets the controller, warm start included: the same flight twice gives the same bits."""
     x_r, u_r = reference
     mpc = _mpc(mpc_cls)
-    model = lambda: FeedbackCascadeModel(PredictionModel("Nomi", Quadrotor(NOMINAL)), 3.0, beta=0.1, N=N)  # noqa: E731
-    first = fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
-    fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
-    again = fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
+    model = lambda: FeedbackCascadeModel(_nominal_model(), 3.0, beta=0.1, N=N)  # noqa: E731
+    first = _fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
+    _fly(_nominal_model(), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    again = _fly(model(), mpc, Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS)
     np.testing.assert_array_equal(again.x, first.x)
     np.testing.assert_array_equal(again.u, first.u)
 
@@ -285,7 +301,7 @@ class _LeavesItsDomain(PredictionModel):
     domain where it is finite (a diverging flight's plan, a state at gimbal lock)."""
 
     def __init__(self, bad: set[int] | None = None, bad_from: int | None = None) -> None:
-        super().__init__("Nomi", Quadrotor(NOMINAL))
+        super().__init__("Nomi", Quadrotor(NOMINAL), Ts=TS)
         self.bad, self.bad_from, self.calls = bad or set(), bad_from, 0
 
     def step(self, x, u, k):
@@ -302,15 +318,15 @@ def test_a_plan_outside_the_models_domain_is_replaced_by_the_reference(reference
     x_r, u_r = reference
     # "forward" linearizes with one call of step: call 1 is step 0 (reference), call 2 step 1's plan (NaN),
     # call 3 step 1 again along the reference
-    run = fly(_LeavesItsDomain(bad={2}), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+    run = _fly(_LeavesItsDomain(bad={2}), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
               linearize_method="forward")
     assert run.n_reference_linearizations == 1 and run.n_fallbacks == 0
     assert np.isfinite(run.x).all() and np.isfinite(run.u).all()
-    clean = fly(_LeavesItsDomain(), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+    clean = _fly(_LeavesItsDomain(), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
                 linearize_method="forward")
     assert clean.n_reference_linearizations == 0
     assert 0 < np.abs(run.u[1] - clean.u[1]).max()  # step 1 did use another linearization point
     # nowhere to linearize: a clear error, not NaN in the QP
     with pytest.raises(ValueError, match="left the model's domain"):
-        fly(_LeavesItsDomain(bad_from=2), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
+        _fly(_LeavesItsDomain(bad_from=2), _mpc(OSQPMPC), Quadrotor(TEST_TRUTH), x_r, u_r, steps=STEPS,
             linearize_method="forward")

@@ -16,10 +16,10 @@ METHODS = ("reverse", "vmap")
 class CartModel(nn.Module):
     """RK4 of a 4-state nonlinear system with an MLP inside, plus a per-step correction depending on k."""
 
-    def __init__(self, dt: float = 0.1, dtype: torch.dtype = F64) -> None:
+    def __init__(self, Ts: float = 0.1, dtype: torch.dtype = F64) -> None:
         super().__init__()
         torch.manual_seed(3)
-        self.dt = dt
+        self.Ts = Ts
         self.mlp = nn.Sequential(nn.Linear(4, 16), nn.Tanh(), nn.Linear(16, 2)).to(dtype)
 
     def f(self, x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
@@ -30,7 +30,7 @@ class CartModel(nn.Module):
         return torch.stack([v, w, acc, alpha], -1)
 
     def forward(self, x: torch.Tensor, u: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
-        h = self.dt
+        h = self.Ts
         k1 = self.f(x, u)
         k2 = self.f(x + h / 2 * k1, u)
         k3 = self.f(x + h / 2 * k2, u)
@@ -156,10 +156,10 @@ def test_bad_inputs_raise_clear_errors() -> None:
 
 def test_sequential_qp_converges_to_a_dynamically_consistent_plan() -> None:
     """Re-linearising at the solution and re-solving converges: the plan then satisfies the nonlinear model."""
-    model = CartModel(dt=0.05)
+    model = CartModel(Ts=0.05)
     N = 10
-    mpc = LinearizedMPC(N, [10.0, 10.0, 1.0, 1.0], [0.1, 0.1], u_lb=[-3.0, -3.0], u_ub=[3.0, 3.0],
-                        eps_abs=1e-9, eps_rel=1e-9, solver_options={"polishing": True})
+    mpc = LinearizedMPC(N, [10.0, 10.0, 1.0, 1.0], [0.1, 0.1], cost="as_written", u_lb=[-3.0, -3.0],
+                        u_ub=[3.0, 3.0], eps_abs=1e-9, eps_rel=1e-9, solver_options={"polishing": True})
     x0 = np.array([0.5, 0.8, 0.0, 0.0])
     x_bar, u_bar = np.tile(x0, (N, 1)), np.zeros((N, 2))
     steps = []

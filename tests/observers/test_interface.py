@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from fnnlib import LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
+from fnnlib.feedback import Estimate
 from fnnlib.observers import (
-    Estimate,
     ExtendedKalmanObserver,
     KalmanObserver,
     LuenbergerObserver,

@@ -46,7 +46,7 @@ def test_steady_state_gain_equals_dlqe(case):
 
 
 def test_filterpy_gain_converges_to_the_stationary_gain():
-    kf = KalmanObserver(Spiral(), TS, 2, Q_AUG, R_AUG)
+    kf = KalmanObserver(Spiral(2.0, 0.1, 0.0), TS, 2, Q_AUG, R_AUG)
     K = kf.gain_history(400)
     err = np.abs(K - kf.stationary.K).max(axis=(1, 2)) / np.abs(kf.stationary.K).max()
     assert err[0] > 1e-2  # started away from it (P0 large on d)
@@ -116,4 +116,4 @@ def test_bad_covariances_are_refused(kwargs, match):
     P0 = args.pop("P0", None)
     for cls in (KalmanObserver, ExtendedKalmanObserver):
         with pytest.raises(ValueError, match=match):
-            cls(Spiral(), TS, 2, args["Q"], args["R"], P0=P0)
+            cls(Spiral(2.0, 0.1, 0.0), TS, 2, args["Q"], args["R"], P0=P0)

@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import DynamicalSystem, GainError, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
+from fnnlib import DynamicalSystem, GainError, GainWarning, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
 
 F64 = torch.float64
 
@@ -49,8 +49,8 @@ def test_observer_equations_by_hand():
 
 
 def test_zero_gain_is_open_loop_euler():
-    f = Spiral()
-    x = Spiral().simulate(torch.tensor([1.0, 0.0]), torch.linspace(0, 1, 11))
+    f = Spiral(2.0, 0.1, 0.0)
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([1.0, 0.0]), torch.linspace(0, 1, 11))
     est = LinearFeedback(f, 0.0, 0.1, 2).observe(x)
     xh = [x[0]]
     for k in range(10):
@@ -60,9 +60,9 @@ def test_zero_gain_is_open_loop_euler():
 
 
 def test_batched_observe_equals_per_trajectory():
-    x = Spiral().simulate(torch.randn(2, 3, 2, dtype=F64, generator=torch.Generator().manual_seed(0)),
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.randn(2, 3, 2, dtype=F64, generator=torch.Generator().manual_seed(0)),
                           torch.linspace(0, 2, 21))
-    obs = LinearFeedback(Spiral(eta=0.3), torch.tensor([3.0, 5.0]), 0.1, 2)
+    obs = LinearFeedback(Spiral(2.0, 0.3, 0.0), torch.tensor([3.0, 5.0]), 0.1, 2)
     est = obs.observe(x)
     assert est.x_hat.shape == est.f_hat.shape == (2, 3, 21, 2)
     for i in range(2):
@@ -104,7 +104,7 @@ class Disturbed(DynamicalSystem):
         return xp + (expAt @ (x0 - Q)[:, None]).squeeze(-1)
 
 
-A_TRUE = Spiral(omega=2.0, eta=0.1).A
+A_TRUE = Spiral(2.0, 0.1, 0.0).A
 X0 = torch.tensor([1.0, 0.0], dtype=F64)
 
 
@@ -209,7 +209,7 @@ def test_allow_unstable_lets_bad_gains_through_and_the_error_diverges(L):
 def test_zero_gain_is_accepted():
     M = check_gain(0.0, 2, 0.1)
     assert torch.equal(M, torch.zeros(2, 2, dtype=F64))
-    LinearFeedback(Spiral(), torch.zeros(2, 2), 0.1, 2)
+    LinearFeedback(Spiral(2.0, 0.1, 0.0), torch.zeros(2, 2), 0.1, 2)
 
 
 def test_check_gain_returns_matrix_forms():
@@ -228,14 +228,24 @@ def test_decayed_gains_follow_eq11():
 # --- bad inputs -------------------------------------------------------------------------------------------------
 
 def _obs(L=1.0, Ts=0.1, n=2, **kw):
-    return LinearFeedback(Spiral(), L, Ts, n, **kw)
+    return LinearFeedback(Spiral(2.0, 0.1, 0.0), L, Ts, n, **kw)
 
 
-@pytest.mark.parametrize("L", [-1.0, torch.tensor([1.0, 0.0]), torch.tensor([[1.0, 3.0], [3.0, 1.0]])],
-                         ids=["negative", "semidefinite", "indefinite"])
+@pytest.mark.parametrize("L", [-1.0, torch.tensor([[1.0, 3.0], [3.0, 1.0]])], ids=["negative", "indefinite"])
 def test_gain_not_positive_definite(L):
     with pytest.raises(GainError, match=r"not positive definite .*lambda_min\(L\) > 0"):
         _obs(L)
+
+
+def test_semidefinite_gain_is_accepted_with_a_warning_naming_the_uncorrected_state():
+    with pytest.warns(GainWarning, match=r"positive semidefinite: states \[1\] are not corrected"):
+        obs = _obs(torch.tensor([1.0, 0.0]))
+    torch.testing.assert_close(obs.L, torch.diag(torch.tensor([1.0, 0.0], dtype=torch.float64)))
+    with pytest.raises(GainError, match=r"not positive definite .*lambda_min\(L\) > 0"):
+        check_gain(torch.tensor([1.0, 0.0]), 2, 0.1, allow_semidefinite=False)
+    with pytest.raises(GainError, match=r"rho\(I - Ts L\) = 1\.5 >= 1"):  # the corrected state is still checked
+        with pytest.warns(GainWarning):
+            check_gain(torch.tensor([25.0, 0.0]), 2, 0.1)
 
 
 def test_gain_makes_discrete_dynamics_unstable():

@@ -32,7 +32,7 @@ def _eig_error(A, L, C, poles) -> float:
 ], ids=["repeated", "deadbeat_state", "distinct", "complex_pair"])
 def test_augmented_poles_equal_the_requested_ones(poles):
     A, _, C = augmented_matrices(2, TS)
-    obs = LuenbergerObserver(Spiral(), TS, 2, poles)
+    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, poles)
     assert obs.L.shape == (4, 2)
     assert _eig_error(A, obs.L, C, poles) < 1e-9
     assert _eig_error(A, obs.L, C, obs.error_poles()) < 1e-12
@@ -108,9 +108,9 @@ def test_observer_converges_on_its_own_model():
 
 
 def test_batched_estimate_equals_per_trajectory():
-    x = Spiral().simulate(torch.randn(3, 2, dtype=F64, generator=torch.Generator().manual_seed(1)),
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.randn(3, 2, dtype=F64, generator=torch.Generator().manual_seed(1)),
                           torch.arange(40, dtype=F64) * TS)
-    obs = LuenbergerObserver(Spiral(eta=0.3), TS, 2, [0.2, 0.2, 0.7, 0.7])
+    obs = LuenbergerObserver(Spiral(2.0, 0.3, 0.0), TS, 2, [0.2, 0.2, 0.7, 0.7])
     est = obs.estimate(x)
     for i in range(3):
         one = obs.estimate(x[i])
@@ -137,23 +137,23 @@ def test_unobservable_pair_is_refused():
 ], ids=["outside", "on_circle", "count", "not_conjugate", "repeated_3x", "nan"])
 def test_bad_poles_are_refused(poles, match):
     with pytest.raises(ValueError, match=match):
-        LuenbergerObserver(Spiral(), TS, 2, poles)
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, poles)
 
 
 def test_allow_unstable_places_poles_outside_the_disc():
-    obs = LuenbergerObserver(Spiral(), TS, 2, [0.5, 0.5, 0.8, 1.2], allow_unstable=True)
+    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, [0.5, 0.5, 0.8, 1.2], allow_unstable=True)
     assert float(np.abs(obs.error_poles()).max()) == pytest.approx(1.2)
 
 
 def test_gain_or_poles_exactly_one():
     with pytest.raises(ValueError, match="exactly one"):
-        LuenbergerObserver(Spiral(), TS, 2)
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2)
     with pytest.raises(ValueError, match="exactly one"):
-        LuenbergerObserver(Spiral(), TS, 2, [0.5, 0.5, 0.8, 0.8], L=linear_feedback_gain(20.0, TS, 2))
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, [0.5, 0.5, 0.8, 0.8], L=linear_feedback_gain(20.0, TS, 2))
 
 
 def test_bad_ready_gains_are_refused():
     with pytest.raises(ValueError, match="shape"):
-        LuenbergerObserver(Spiral(), TS, 2, L=torch.zeros(2, 2))
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, L=torch.zeros(2, 2))
     with pytest.raises(ValueError, match="unstable"):
-        LuenbergerObserver(Spiral(), TS, 2, L=linear_feedback_gain(250.0, TS, 2))  # pole 1 - Ts L = -1.5
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, L=linear_feedback_gain(250.0, TS, 2))  # pole 1 - Ts L = -1.5

@@ -5,7 +5,7 @@ import torch
 
 from fnnlib.models import NeuralFeedback, NeuralODE
 from fnnlib.observers import Observer, NeuralFeedbackObserver
-from fnnlib.prediction import rollout_predict
+from fnnlib.feedback import rollout_predict
 
 TS = 0.05
 

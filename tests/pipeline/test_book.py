@@ -46,19 +46,25 @@ def _executed_notebook(path: Path) -> None:
     """What papermill leaves: title, parameters, injected parameters, outputs (text, stderr, image)."""
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    out_dir = str(path.parent)  # absolute, as the runner injects it
+    nb.metadata["papermill"] = {"parameters": {"profile": "paper", "out_dir": out_dir,
+                                               "upstream_dirs": {"up": out_dir + "-up"}}}
     nb.cells = [
         nbformat.v4.new_markdown_cell("# Linear feedback on the spiral\n\n"
                                       "Reproduces Fig. 4 ($L_i = L e^{-\\beta i}$)."),
         nbformat.v4.new_code_cell('profile = "paper"\nout_dir = "."', metadata={"tags": ["parameters"]}),
-        nbformat.v4.new_code_cell('profile = "paper"\nout_dir = "/tmp/x"',
+        nbformat.v4.new_code_cell(f'profile = "paper"\nout_dir = "{out_dir}"\nupstream_dirs = {{"up": "{out_dir}-up"}}',
                                   metadata={"tags": ["injected-parameters"]}),
         nbformat.v4.new_markdown_cell("## Results"),
         nbformat.v4.new_code_cell("print(1)", execution_count=3, outputs=[
-            nbformat.v4.new_output("stream", name="stdout", text="1\n"),
+            nbformat.v4.new_output("stream", name="stdout", text=f"wrote {out_dir}/results.json\n"),
             nbformat.v4.new_output("stream", name="stderr", text="a warning\n"),
             nbformat.v4.new_output("display_data", data={"image/png": b64encode(_png()).decode(),
                                                          "text/plain": "<Figure>"}),
         ]),
+        nbformat.v4.new_code_cell("\n".join(f"x{i} = {i}" for i in range(20))),  # long: folded
+        nbformat.v4.new_code_cell("y = 1"),  # short, no figure: stays open
+        nbformat.v4.new_code_cell("\n".join(f"z{i} = {i}" for i in range(20)), metadata={"tags": ["show-input"]}),
     ]
     nbformat.write(nb, path)
 
@@ -110,13 +116,30 @@ def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, 
     assert (book / "_generated" / "alpha" / "figures" / "fig4c.png").is_file()
     scoreboard = (book / "_generated" / "scoreboard.md").read_text()
     assert "3 claims, 1 reproduced, 0 partly, 0 not reproduced, 2 not run." in scoreboard
+    assert (book / "_generated" / "verdicts.png").read_bytes()[:4] == b"\x89PNG"
+
+    copied = nbformat.read(book / "_generated" / "alpha" / "alpha.ipynb", as_version=4)
+    assert str(fake_outputs.root) not in nbformat.writes(copied)  # no path of the machine that ran it
+    assert copied.cells[2].source == ('profile = "paper"\nout_dir = "outputs/paper/alpha"\n'
+                                      'upstream_dirs = {"up": "outputs/paper/alpha-up"}')
+    assert copied.cells[4].outputs[0]["text"] == "wrote outputs/paper/alpha/results.json\n"
+    tags = [c.metadata.get("tags", []) for c in copied.cells]
+    assert "remove-cell" in tags[1] and "hide-input" not in tags[2]  # defaults gone, the run's values open
+    assert "hide-input" in tags[4] and "hide-input" in tags[5]  # draws a figure; longer than FOLD_LINES
+    assert tags[6] == [] and tags[7] == ["show-input"]  # short; the author keeps it open
 
     html = build_book(book, quiet=True)
     assert (html / "intro.html").is_file() and (html / "paper_vs_release.html").is_file()
     assert (html / "_generated" / "alpha" / "alpha.html").is_file()
     page = (html / "_generated" / "scoreboard.html").read_text()
     assert "sd-bg-success" in page and "reproduced" in page and "not run" in page
-    assert "alpha.html" in page and "fig4c.png" in page
+    assert "alpha.html" in page and "fig4c.png" in page and "verdicts.png" in page
+    assert (html / "_static" / "mathjax" / "tex-chtml.js").is_file()  # MathJax ships with the book
+    for built in html.rglob("*.html"):
+        text = built.read_text()
+        assert "cdn.jsdelivr" not in text and "unpkg.com" not in text, f"{built} names a web script"
+    alpha = (html / "_generated" / "alpha" / "alpha.html").read_text()
+    assert 'src="../../_static/mathjax/tex-chtml.js' in alpha and "a warning" not in alpha  # stderr dropped
 
     with (book / "intro.md").open("a") as fh:  # a broken link is a warning, hence an error
         fh.write("\nSee [nothing](missing-page.md).\n")

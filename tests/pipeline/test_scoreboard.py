@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from fnnbook.scoreboard import NOT_RUN, read_claims, render_scoreboard, score_rows
+from fnnbook.scoreboard import (NOT_RUN, headline_of, plot_verdicts, read_claims, render_scoreboard, score_rows,
+                               short_title, verdict_counts)
+from fnnlib.results import claim_result, headline_number
 
 CLAIMS = """# What the book must reproduce
 
@@ -58,6 +60,15 @@ def test_repository_claims_file_parses() -> None:
     assert ids[:2] == ["S1", "S2"] and "D1" in ids and "Q6" in ids and "B3" in ids
 
 
+def _row_lines(page: str, cid: str) -> tuple[str, str]:
+    """The summary line of a claim's row and the body folded under it."""
+    head = f"::::{{dropdown}} [{cid}]{{.sb-id}} "
+    start = page.index(head)
+    body_end = page.index("\n::::\n", start)
+    line_end = page.index("\n", start)
+    return page[start:line_end], page[line_end:body_end]
+
+
 def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
     results = {"spiral": {"task": "spiral", "profile": "smoke", "claims": [
         {"id": "S1", "verdict": "partly", "rule": "err < 0.1 and fit", "figure": "figures/fig4c.png",
@@ -68,24 +79,73 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
         ("S1", "partly", "spiral"), ("S2", NOT_RUN, "spiral"), ("B1", NOT_RUN, None)]
 
     page = render_scoreboard(rows, profile="smoke", pages={"spiral": "spiral/spiral.ipynb"},
-                             figures={"spiral": "spiral"})
+                             figures={"spiral": "spiral"}, summary_figure="verdicts.png")
     assert page.startswith("# Scoreboard\n")
     assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 2 not run." in page
+    assert "```{image} verdicts.png" in page  # the verdicts per section, under the counts
     assert ":::{warning}" in page  # not the paper profile
     lines = page.splitlines()
-    s1 = next(line for line in lines if line.startswith("| **S1** |"))
+
+    s1, s1_body = _row_lines(page, "S1")
     assert "{bdg-warning}`partly`" in s1
-    assert "`err = 0.0123; steps = 50; curve = [1, 2, 3, 4, ...] (n=6)`" in s1
-    assert "`✓ small error; ✗ fits`" in s1
-    assert "err < 0.1 and fit" in s1
-    assert "[spiral](spiral/spiral.ipynb) [figure](spiral/figures/fig4c.png)" in s1
-    s2 = next(line for line in lines if line.startswith("| **S2** |"))
-    assert "{bdg-secondary}`not run`" in s2 and "[spiral](spiral/spiral.ipynb)" in s2  # declared there
-    assert "| feedback beats \\| the ODE |" in s2  # escaped again inside the table
-    b1 = next(line for line in lines if line.startswith("| **B1** |"))
-    assert "{bdg-secondary}`not run`" in b1
+    assert "[the neural ODE fits]{.sb-claim}" in s1  # the claim in a few words
+    assert "[*paper, Fig. 4c:* the neural ODE fits]{.sb-paper}" in s1  # the paper's statement and figure
+    assert "[checks holding: **1 of 2**]{.sb-ours}" in s1  # no headline in the result: checks, not a guess
+    assert "[section](spiral/spiral.ipynb) {ref}`figure <claim-s1-figure>`" in s1
+    assert "| `err` | 0.0123 |" in s1_body and "| `steps` | 50 |" in s1_body
+    assert "| `curve` | \\[1, 2, 3, 4, ...\\] (n=6) |" in s1_body
+    assert "- ✓ `small error`" in s1_body and "- ✗ `fits`" in s1_body
+    assert "**Rule.** err \\< 0.1 and fit" in s1_body  # escaped: no inline HTML taken from a rule
+    assert "(claim-s1-figure)=\n```{image} spiral/figures/fig4c.png" in s1_body
+    assert "Guarantees" not in s1_body  # none reported
+
+    s2, s2_body = _row_lines(page, "S2")
+    assert "{bdg-secondary}`not run`" in s2 and "[section](spiral/spiral.ipynb)" in s2  # declared there
+    assert "feedback beats \\| the ODE" in s2  # escaped again inside the row
+    assert "No task has produced a result" in s2_body
+    b1, _ = _row_lines(page, "B1")
+    assert "{bdg-secondary}`not run`" in b1 and "[—]{.sb-where}" in b1
     assert "## Spiral (Sec. 3-4)" in lines and "## Beyond the paper" in lines
     assert render_scoreboard(rows, profile="paper", pages={}).count(":::{warning}") == 0
+
+
+def test_scoreboard_row_shows_headline_paper_and_guarantees_apart(claims_file: Path) -> None:
+    entry = claim_result("S1", checks={"fb below node in 4 of 5 seeds": True},
+                         guarantees={"frozen weights unchanged": True},
+                         numbers={"err_fb": [0.1, 0.12, 0.11]}, rule="r",
+                         headline=headline_number("N=50 error, feedback", [0.10, 0.12, 0.11], unit="m"),
+                         paper="4.56 cm vs 4.74 cm", title="feedback fits better")
+    rows = score_rows(read_claims(claims_file), {"spiral": {"claims": [entry]}})
+    s1, body = _row_lines(render_scoreboard(rows, profile="paper", pages={}), "S1")
+    assert "[feedback fits better]{.sb-claim}" in s1
+    assert "[N=50 error, feedback: **0.11 ± 0.01 m (n = 3 seeds)**]{.sb-ours}" in s1
+    assert "[*paper, Fig. 4c:* 4.56 cm vs 4.74 cm]{.sb-paper}" in s1
+    assert "{bdg-success}`reproduced`" in s1
+    checks_at, guarantees_at = body.index("**Checks**"), body.index("**Guarantees**")
+    assert body.index("`fb below node in 4 of 5 seeds`") < guarantees_at  # checks, then guarantees apart
+    assert body.index("`frozen weights unchanged`") > guarantees_at > checks_at
+
+
+def test_headline_of_a_single_value_has_no_spread() -> None:
+    name, text = headline_of({"headline": headline_number("RMSE", 0.0421, unit="cm")})
+    assert (name, text) == ("RMSE", "0.0421 cm")
+    assert headline_of({}) == ("", "")
+
+
+def test_short_title_keeps_the_first_clause() -> None:
+    assert short_title("Theorem 1: the error enters the ball") == "Theorem 1"
+    assert short_title("a b c d e f g h i j k", words=3) == "a b c …"
+    assert short_title("") == ""
+
+
+def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) -> None:
+    results = {"t": {"claims": [claim_result("S1", checks={"a": True}, numbers={}, rule="r")]}}
+    rows = score_rows(read_claims(claims_file), results)
+    assert verdict_counts(rows) == {
+        "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, NOT_RUN: 1},
+        "Beyond the paper": {"reproduced": 0, "partly": 0, "not reproduced": 0, NOT_RUN: 1}}
+    png = plot_verdicts(rows, tmp_path / "verdicts.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_self_check_flags_a_verdict_not_from_its_checks() -> None:

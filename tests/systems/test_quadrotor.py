@@ -1,25 +1,13 @@
-"""Eq. (27) `quadrotor_model`: equilibrium, drag, allocation, rotations, RK4 order, checks, batching."""
+"""Eq. (27) `quadrotor_model`: equilibrium, drag, the right-hand side, RK4 steps, checks, batching."""
 
 from __future__ import annotations
-
-import math
 
 import pytest
 import torch
 
-from fnnlib.systems.quadrotor import (
-    NOMINAL,
-    TEST_TRUTH,
-    TRAINING_TRUTH,
-    Quadrotor,
-    QuadrotorParams,
-    allocation_inverse,
-    allocation_matrix,
-    euler_from_rotation,
-    euler_rate_matrix,
-    inverse_euler_rate_matrix,
-    rotation_matrix,
-)
+from fnnlib.systems.allocation import allocation_matrix
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
+from fnnlib.systems.rotations import euler_rate_matrix, rotation_matrix
 
 F64 = torch.float64
 
@@ -31,14 +19,6 @@ def _state(seed: int = 0, n: int | None = None) -> torch.Tensor:
     x = torch.randn(*shape, generator=g, dtype=F64)
     x[..., 6:9] *= 0.4  # moderate Euler angles, far from gimbal lock
     return x
-
-
-def _hat(w: torch.Tensor) -> torch.Tensor:
-    wx, wy, wz = w.tolist()
-    return torch.tensor([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]], dtype=F64)
-
-
-# --------------------------------------------------------------------------- parameters
 
 
 def test_vehicles_hold_the_paper_and_release_values() -> None:
@@ -87,7 +67,7 @@ def test_hover_is_an_equilibrium_of_the_nominal_model() -> None:
 def test_drag_breaks_the_hover_of_the_training_vehicle() -> None:
     x = torch.zeros(12, dtype=F64)
     x[3:6] = torch.tensor([1.0, -2.0, 0.5])
-    u = Quadrotor().hover_input()
+    u = Quadrotor(NOMINAL).hover_input()
     nominal = Quadrotor(NOMINAL).f(x, u)
     truth = Quadrotor(TRAINING_TRUTH).f(x, u)
     assert torch.allclose(nominal[3:6], torch.zeros(3, dtype=F64), atol=1e-12)
@@ -117,7 +97,7 @@ def test_thrust_pushes_along_minus_body_z_and_the_disturbance_adds_f_over_m() ->
 def test_euler_rates_and_gyroscopic_term() -> None:
     x = _state(5)
     u = torch.tensor([1.0, 2.0, 3.0, 4.0], dtype=F64)
-    xdot = Quadrotor().f(x, u)
+    xdot = Quadrotor(NOMINAL).f(x, u)
     W = euler_rate_matrix(x[6:9])
     assert torch.allclose(xdot[6:9], W @ x[9:12], atol=1e-13)
     J = torch.diag(torch.tensor(NOMINAL.inertia, dtype=F64))
@@ -129,78 +109,12 @@ def test_euler_rates_and_gyroscopic_term() -> None:
 def test_residual_acceleration_enters_the_velocity_equation_only() -> None:
     x, u = _state(6), torch.tensor([1.0, 2.0, 3.0, 4.0], dtype=F64)
     a_res = torch.tensor([0.5, -1.0, 2.0], dtype=F64)
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     diff = quad.f(x, u, a_res) - quad.f(x, u)
     assert torch.allclose(diff, torch.cat([torch.zeros(3), a_res, torch.zeros(6)]).to(F64), atol=1e-13)
 
 
 # --------------------------------------------------------------------------- allocation
-
-
-def test_allocation_inverse_is_exact() -> None:
-    for params in (NOMINAL, NOMINAL.replace(arm=0.2, torque_coeff=0.02)):
-        C, C_inv = allocation_matrix(params), allocation_inverse(params)
-        assert torch.allclose(C @ C_inv, torch.eye(4, dtype=F64), atol=1e-12)
-        assert torch.allclose(C_inv @ C, torch.eye(4, dtype=F64), atol=1e-12)
-
-
-def test_allocation_torques_follow_the_motor_positions() -> None:
-    d = 0.15 / math.sqrt(2.0)
-    C = allocation_matrix(NOMINAL)
-    # raising the two motors with a '+' in tau_x (2 rear-left, 3 front-left) rolls right (+tau_x, FRD)
-    du = torch.tensor([0.0, 1.0, 1.0, 0.0], dtype=F64)
-    assert float((C @ du)[1]) > 0
-    # each motor at r_i (FRD) pushes -u_i e3: its torque is r_i x (-u_i e3)
-    r = torch.tensor([[d, d, 0.0], [-d, -d, 0.0], [d, -d, 0.0], [-d, d, 0.0]], dtype=F64)
-    e3 = torch.tensor([0.0, 0.0, 1.0], dtype=F64)
-    for i in range(4):
-        assert torch.allclose(C[1:3, i], torch.linalg.cross(r[i], -e3)[:2], atol=1e-15)
-    assert torch.allclose(C[3], torch.tensor([0.01, 0.01, -0.01, -0.01], dtype=F64))
-
-
-# --------------------------------------------------------------------------- rotations
-
-
-def test_rotation_matrix_is_a_proper_rotation() -> None:
-    Theta = _state(7, 50)[:, 6:9] * 3.0
-    R = rotation_matrix(Theta)
-    eye = torch.eye(3, dtype=F64).expand(50, 3, 3)
-    assert torch.allclose(R.transpose(-1, -2) @ R, eye, atol=1e-13)
-    assert torch.allclose(torch.linalg.det(R), torch.ones(50, dtype=F64), atol=1e-13)
-
-
-def test_rotation_matrix_known_cases() -> None:
-    e1 = torch.tensor([1.0, 0.0, 0.0], dtype=F64)
-    yaw90 = rotation_matrix(torch.tensor([0.0, 0.0, math.pi / 2], dtype=F64))
-    assert torch.allclose(yaw90 @ e1, torch.tensor([0.0, 1.0, 0.0], dtype=F64), atol=1e-15)  # nose east
-    pitch = rotation_matrix(torch.tensor([0.0, 0.3, 0.0], dtype=F64))
-    assert float((pitch @ e1)[2]) < 0  # positive pitch lifts the nose (z down)
-    # ZYX order: R = Rz Ry Rx
-    phi, theta, psi = 0.3, -0.5, 1.1
-    c, s = math.cos, math.sin
-    Rx = torch.tensor([[1, 0, 0], [0, c(phi), -s(phi)], [0, s(phi), c(phi)]], dtype=F64)
-    Ry = torch.tensor([[c(theta), 0, s(theta)], [0, 1, 0], [-s(theta), 0, c(theta)]], dtype=F64)
-    Rz = torch.tensor([[c(psi), -s(psi), 0], [s(psi), c(psi), 0], [0, 0, 1]], dtype=F64)
-    R = rotation_matrix(torch.tensor([phi, theta, psi], dtype=F64))
-    assert torch.allclose(R, Rz @ Ry @ Rx, atol=1e-15)
-    assert torch.allclose(euler_from_rotation(R), torch.tensor([phi, theta, psi], dtype=F64), atol=1e-14)
-
-
-def test_euler_rate_matrix_matches_finite_differences_along_a_rotation() -> None:
-    Theta0 = torch.tensor([0.4, -0.3, 0.7], dtype=F64)
-    omega = torch.tensor([1.2, -0.7, 0.5], dtype=F64)
-    R0 = rotation_matrix(Theta0)
-    h = 1e-5
-
-    def Theta(t: float) -> torch.Tensor:  # body rates omega held: R(t) = R0 exp(t [omega]x)
-        return euler_from_rotation(R0 @ torch.linalg.matrix_exp(t * _hat(omega)))
-
-    fd = (Theta(h) - Theta(-h)) / (2 * h)
-    # central difference: error ~ h^2 |Theta'''| / 6 ~ 1e-10
-    assert torch.allclose(euler_rate_matrix(Theta0) @ omega, fd, atol=1e-8)
-    assert torch.allclose(
-        inverse_euler_rate_matrix(Theta0) @ euler_rate_matrix(Theta0), torch.eye(3, dtype=F64), atol=1e-14
-    )
 
 
 # --------------------------------------------------------------------------- integration
@@ -210,8 +124,8 @@ def test_rk4_converges_at_fourth_order() -> None:
     quad = Quadrotor(TRAINING_TRUTH)
     x = torch.tensor([0.1, -0.2, 0.3, 1.0, -2.0, 0.5, 0.3, -0.2, 0.4, 1.5, -1.0, 0.8], dtype=F64)
     u = torch.tensor([1.5, 2.5, 2.0, 3.0], dtype=F64)
-    ref = quad.step(x, u, dt=0.1, substeps=256)
-    errs = [float((quad.step(x, u, dt=0.1, substeps=s) - ref).abs().max()) for s in (2, 4, 8)]
+    ref = quad.step(x, u, Ts=0.1, substeps=256)
+    errs = [float((quad.step(x, u, Ts=0.1, substeps=s) - ref).abs().max()) for s in (2, 4, 8)]
     # 4th order: halving the sub-step divides the error by ~2^4 = 16 (measured 14.5 and 15.3)
     for coarse, fine in zip(errs, errs[1:], strict=False):
         assert 8.0 < coarse / fine < 32.0
@@ -227,22 +141,22 @@ def test_step_uses_the_residual_at_every_stage() -> None:
         calls.append(1)
         return (F / NOMINAL.mass).expand(*y.shape[:-1], 3)
 
-    stepped = Quadrotor(NOMINAL).step(x, u, dt=0.05, substeps=3, a_res_fn=a_res_fn)
+    stepped = Quadrotor(NOMINAL).step(x, u, Ts=0.05, substeps=3, a_res_fn=a_res_fn)
     assert len(calls) == 4 * 3
-    assert torch.allclose(stepped, with_F.step(x, u, dt=0.05, substeps=3), atol=1e-14)
+    assert torch.allclose(stepped, with_F.step(x, u, Ts=0.05, substeps=3), atol=1e-14)
 
 
 def test_rollout_repeats_steps_and_hover_stays_put() -> None:
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     x0 = _state(9, 2)
     u_seq = torch.rand(2, 5, 4, dtype=F64, generator=torch.Generator().manual_seed(0)) + 1.5
-    X = quad.rollout(x0, u_seq, dt=0.02, substeps=2)
+    X = quad.rollout(x0, u_seq, Ts=0.02, substeps=2)
     assert X.shape == (2, 6, 12)
     x = x0
     for k in range(5):
-        x = quad.step(x, u_seq[:, k], dt=0.02, substeps=2)
+        x = quad.step(x, u_seq[:, k], Ts=0.02, substeps=2)
         assert torch.allclose(X[:, k + 1], x, atol=1e-14)
-    hover = quad.rollout(torch.zeros(12, dtype=F64), quad.hover_input().expand(50, 4), dt=0.02)
+    hover = quad.rollout(torch.zeros(12, dtype=F64), quad.hover_input().expand(50, 4), Ts=0.02)
     assert torch.allclose(hover, torch.zeros(51, 12, dtype=F64), atol=1e-12)
 
 
@@ -250,7 +164,7 @@ def test_rollout_repeats_steps_and_hover_stays_put() -> None:
 
 
 def test_bad_inputs_are_refused_before_any_work() -> None:
-    quad = Quadrotor()
+    quad = Quadrotor(NOMINAL)
     x, u = _state(10), quad.hover_input()
     bad = x.clone()
     bad[7] = float("nan")
@@ -259,15 +173,15 @@ def test_bad_inputs_are_refused_before_any_work() -> None:
     with pytest.raises(ValueError, match=r"\(\.\.\., 12\)"):
         quad.f(x[:11], u)
     with pytest.raises(ValueError, match=r"\(\.\.\., 4\)"):
-        quad.step(x, u[:3])
+        quad.step(x, u[:3], Ts=0.02)
     with pytest.raises(ValueError, match="broadcast"):
         quad.f(_state(10, 3), u.expand(2, 4))
-    with pytest.raises(ValueError, match="dt"):
-        quad.step(x, u, dt=0.0)
+    with pytest.raises(ValueError, match="Ts"):
+        quad.step(x, u, Ts=0.0)
     with pytest.raises(ValueError, match="substeps"):
-        quad.step(x, u, substeps=0)
+        quad.step(x, u, Ts=0.02, substeps=0)
     with pytest.raises(TypeError, match="substeps"):
-        quad.step(x, u, substeps=1.5)  # type: ignore[arg-type]
+        quad.step(x, u, Ts=0.02, substeps=1.5)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="floating-point"):
         quad.f(torch.zeros(12, dtype=torch.int64), u)
     with pytest.raises(TypeError, match="QuadrotorParams"):
@@ -278,10 +192,10 @@ def test_a_batch_equals_separate_calls() -> None:
     quad = Quadrotor(TEST_TRUTH)
     x = _state(11, 5)
     u = torch.rand(5, 4, dtype=F64, generator=torch.Generator().manual_seed(1)) * 3.0
-    batched_f, batched_step = quad.f(x, u), quad.step(x, u, dt=0.02, substeps=2)
+    batched_f, batched_step = quad.f(x, u), quad.step(x, u, Ts=0.02, substeps=2)
     for i in range(5):
         assert torch.allclose(batched_f[i], quad.f(x[i], u[i]), atol=1e-13)
-        assert torch.allclose(batched_step[i], quad.step(x[i], u[i], dt=0.02, substeps=2), atol=1e-13)
+        assert torch.allclose(batched_step[i], quad.step(x[i], u[i], Ts=0.02, substeps=2), atol=1e-13)
     # leading dims broadcast: one input for a (2, 5) batch of states
     assert quad.f(x.expand(2, 5, 12), u[0]).shape == (2, 5, 12)
 
@@ -293,23 +207,10 @@ def test_float32_and_gradients() -> None:
     assert f32.dtype == torch.float32
     assert torch.allclose(f32.double(), quad.f(x, u), rtol=1e-5, atol=1e-4)
     xg, ug = x[:2].clone().requires_grad_(True), u[:2].clone().requires_grad_(True)
-    assert torch.autograd.gradcheck(lambda a, b: quad.step(a, b, dt=0.02), (xg, ug))
+    assert torch.autograd.gradcheck(lambda a, b: quad.step(a, b, Ts=0.02), (xg, ug))
 
 
 # --------------------------------------------------------------------------- the few-op right-hand side
-
-
-def test_trilinear_rotation_equals_the_explicit_zyx_product():
-    """R from the (1, cos, sin) basis map equals Rz(psi) Ry(theta) Rx(phi) multiplied out by hand."""
-    torch.manual_seed(3)
-    Theta = (torch.rand(50, 3, dtype=torch.float64) - 0.5) * 6.0
-    phi, theta, psi = Theta.unbind(-1)
-    c, s = torch.cos, torch.sin
-    zero, one = torch.zeros_like(phi), torch.ones_like(phi)
-    Rx = torch.stack([one, zero, zero, zero, c(phi), -s(phi), zero, s(phi), c(phi)], -1).reshape(-1, 3, 3)
-    Ry = torch.stack([c(theta), zero, s(theta), zero, one, zero, -s(theta), zero, c(theta)], -1).reshape(-1, 3, 3)
-    Rz = torch.stack([c(psi), -s(psi), zero, s(psi), c(psi), zero, zero, zero, one], -1).reshape(-1, 3, 3)
-    torch.testing.assert_close(rotation_matrix(Theta), Rz @ Ry @ Rx, rtol=0, atol=1e-14)
 
 
 def test_rhs_attitude_rates_and_drag_equal_the_matrix_forms():
@@ -343,10 +244,10 @@ def test_rk4_with_a_given_first_stage_is_the_same_step():
     x = torch.randn(5, 12, dtype=torch.float64) * 0.3
     u = torch.full((5, 4), 3.0, dtype=torch.float64)
     for substeps in (1, 3):
-        plain = q.step(x, u, dt=0.02, substeps=substeps)
-        given = q.step(x, u, dt=0.02, substeps=substeps, k1=q.f(x, u))
+        plain = q.step(x, u, Ts=0.02, substeps=substeps)
+        given = q.step(x, u, Ts=0.02, substeps=substeps, k1=q.f(x, u))
         torch.testing.assert_close(given, plain, rtol=0, atol=0)
     # a wrong first stage changes the step (it is used), a wrong shape is refused
-    assert not torch.equal(q.step(x, u, k1=torch.zeros(5, 12, dtype=torch.float64)), q.step(x, u))
+    assert not torch.equal(q.step(x, u, Ts=0.02, k1=torch.zeros(5, 12, dtype=torch.float64)), q.step(x, u, Ts=0.02))
     with pytest.raises(ValueError, match="k1 must have shape"):
-        q.step(x, u, k1=torch.zeros(12, dtype=torch.float64))
+        q.step(x, u, Ts=0.02, k1=torch.zeros(12, dtype=torch.float64))

@@ -54,7 +54,7 @@ def test_rate_is_A_x_plus_b():
 
 def test_rate_keeps_float32():
     x = torch.ones(5, 2, dtype=torch.float32)
-    assert Spiral()(0.0, x).dtype == torch.float32
+    assert Spiral(2.0, 0.1, 0.0)(0.0, x).dtype == torch.float32
 
 
 def test_with_params_changes_a_copy():
@@ -66,24 +66,24 @@ def test_with_params_changes_a_copy():
 
 def test_with_params_rejects_unknown_names():
     with pytest.raises(TypeError, match=r"unknown spiral parameter\(s\) \['period'\]"):
-        Spiral().with_params(period=3.0)
+        Spiral(2.0, 0.1, 0.0).with_params(period=3.0)
 
 
 def test_simulate_rejects_wrong_state_dimension():
     with pytest.raises(ValueError, match="x0 has state dimension 3, expected 2"):
-        Spiral().simulate(torch.zeros(3), torch.linspace(0, 1, 5))
+        Spiral(2.0, 0.1, 0.0).simulate(torch.zeros(3), torch.linspace(0, 1, 5))
 
 
 def test_simulate_rejects_nan():
     with pytest.raises(ValueError, match="x0 holds a NaN value"):
-        Spiral().simulate(torch.tensor([float("nan"), 0.0]), torch.linspace(0, 1, 5))
+        Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([float("nan"), 0.0]), torch.linspace(0, 1, 5))
 
 
 def test_rate_rejects_bad_trajectory():
     with pytest.raises(ValueError, match="state dimension 3"):
-        Spiral().rate(torch.zeros(4, 3))
+        Spiral(2.0, 0.1, 0.0).rate(torch.zeros(4, 3))
     with pytest.raises(TypeError, match="must be a torch.Tensor"):
-        Spiral().rate([[0.0, 0.0]])
+        Spiral(2.0, 0.1, 0.0).rate([[0.0, 0.0]])
 
 
 # --- measurement noise -----------------------------------------------------------------------------------------
@@ -118,3 +118,8 @@ def test_noise_has_the_requested_std():
     # 2e5 samples: the std estimate's relative error is ~1/sqrt(4e5) = 0.16 %, the mean's ~0.3/450
     assert abs(float(noise.std()) / 0.3 - 1.0) < 0.01
     assert abs(float(noise.mean())) < 0.005
+
+
+def test_parameters_are_required():
+    with pytest.raises(TypeError):
+        Spiral()  # no silent nominal spiral

@@ -70,7 +70,7 @@ def test_state_is_continuous_and_rate_jumps_at_the_switch():
     x = sw.simulate(torch.tensor([9.0, 0.0], dtype=F64), t)
     steps = (x[1:] - x[:-1]).norm(dim=-1)
     assert float(steps.max()) < 0.01 * 60  # |x'| <= ~60 here: no jump in the state
-    rate = sw.rate(x, t)
+    rate = sw.rate(t, x)
     torch.testing.assert_close(rate[:50], A.rate(x[:50]), rtol=0, atol=1e-12)
     torch.testing.assert_close(rate[50:], B.rate(x[50:]), rtol=0, atol=1e-12)  # t = 0.5 is already B's
 
@@ -112,7 +112,7 @@ def test_systems_of_different_dimension():
         n = 3
 
     with pytest.raises(ValueError, match="share the state dimension"):
-        SwitchedSystem([A, ThreeD()], [1.0])
+        SwitchedSystem([A, ThreeD(2.0, 0.1, 0.0)], [1.0])
 
 
 def test_bad_simulate_and_rate_inputs():
@@ -124,6 +124,6 @@ def test_bad_simulate_and_rate_inputs():
     with pytest.raises(ValueError, match="x0 holds a NaN"):
         sw.simulate(torch.tensor([float("nan"), 0.0]), torch.linspace(0, 1, 5))
     with pytest.raises(ValueError, match=r"times t must have shape \(5,\)"):
-        sw.rate(torch.zeros(5, 2, dtype=F64), torch.zeros(4))
+        sw.rate(torch.zeros(4), torch.zeros(5, 2, dtype=F64))
     with pytest.raises(ValueError, match=r"per-row times must have shape \(3,\)"):
         sw(torch.zeros(2), torch.zeros(3, 2, dtype=F64))

@@ -35,7 +35,7 @@ def test_round_trip(saved):
 
 
 def test_round_trip_with_input_and_partial_expected_config(tmp_path):
-    model = NeuralODE(3, (4,), n_input=1)
+    model = NeuralODE(3, (4,), "relu", n_input=1)
     path = save_checkpoint(tmp_path / "m.pt", model)
     loaded, meta = load_checkpoint(path, expected_config={"n_state": 3})
     assert meta == {}
@@ -45,7 +45,7 @@ def test_round_trip_with_input_and_partial_expected_config(tmp_path):
 
 def test_round_trip_keeps_float64(tmp_path):
     # a float64 model must come back float64 with bit-identical weights, not rounded to float32
-    model = NeuralODE(3, (4,), n_input=1).double()
+    model = NeuralODE(3, (4,), "relu", n_input=1).double()
     path = save_checkpoint(tmp_path / "m.pt", model)
     loaded, _ = load_checkpoint(path)
     assert next(loaded.parameters()).dtype == torch.float64
@@ -131,6 +131,7 @@ def test_config_that_does_not_fit_the_weights(saved):
 
 
 def test_unknown_model_type_refuses_to_save(tmp_path):
-    with pytest.raises(TypeError, match=r"cannot checkpoint a Linear; known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
+    with pytest.raises(TypeError, match=r"cannot checkpoint a Linear: register its class first with "
+                                        r"fnnlib.register_model\(Linear\).*known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
         save_checkpoint(tmp_path / "lin.pt", nn.Linear(2, 2))
     assert not (tmp_path / "lin.pt").exists()

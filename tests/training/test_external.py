@@ -23,13 +23,13 @@ from fnnlib.training.external import (
 F64 = torch.float64
 
 
-def rk4(f, x: Tensor, I: Tensor, dt: float) -> Tensor:
+def rk4(f, x: Tensor, I: Tensor, Ts: float) -> Tensor:
     """One classical Runge-Kutta step of ``dx/dt = f(x, I)`` with ``I`` held over the step."""
     k1 = f(x, I)
-    k2 = f(x + 0.5 * dt * k1, I)
-    k3 = f(x + 0.5 * dt * k2, I)
-    k4 = f(x + dt * k3, I)
-    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    k2 = f(x + 0.5 * Ts * k1, I)
+    k3 = f(x + 0.5 * Ts * k2, I)
+    k4 = f(x + Ts * k3, I)
+    return x + Ts / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 class PendulumLoop(nn.Module):
@@ -84,15 +84,15 @@ def pendulum_problem():
     torch.manual_seed(1)
     model = PendulumLoop().double()
     truth = PendulumLoop().double()
-    dt, B, T = 0.05, 4, 25
-    t = torch.arange(T, dtype=F64) * dt
+    Ts, B, T = 0.05, 4, 25
+    t = torch.arange(T, dtype=F64) * Ts
     amp, freq = torch.rand(B, 1, dtype=F64) + 0.5, torch.rand(B, 1, dtype=F64) + 0.5
     I = (amp * torch.sin(freq * 2 * math.pi * t / 1.25))[..., None]  # (B, T, 1)
     x1 = 0.3 * torch.randn(B, 3, dtype=F64)
-    x_r = rollout(lambda x, u: rk4(truth, x, u, dt), x1, I) + 0.01 * torch.randn(B, T + 1, 3, dtype=F64)
+    x_r = rollout(lambda x, u: rk4(truth, x, u, Ts), x1, I) + 0.01 * torch.randn(B, T + 1, 3, dtype=F64)
     x_r[:, 0] = x1
     W = torch.tensor([1.0, 0.5, 0.0], dtype=F64)  # no weight on the controller state
-    return model, (lambda x, u: rk4(model, x, u, dt)), x_r, I, W
+    return model, (lambda x, u: rk4(model, x, u, Ts)), x_r, I, W
 
 
 def test_rollout_matches_step_by_step(pendulum_problem):
@@ -151,27 +151,27 @@ def test_unused_parameters_get_zero_gradients(pendulum_problem):
     assert torch.equal(grads[-1], torch.zeros(3, dtype=F64))
 
 
-def _integrator_data(n_traj: int, T: int, dt: float, seed: int) -> tuple[Tensor, Tensor]:
+def _integrator_data(n_traj: int, T: int, Ts: float, seed: int) -> tuple[Tensor, Tensor]:
     """Closed-loop trajectories of the double integrator with the known drag -0.8 v."""
     g = torch.Generator().manual_seed(seed)
     truth = DoubleIntegratorLoop(drag=0.8)
-    t = torch.arange(T, dtype=F64) * dt
+    t = torch.arange(T, dtype=F64) * Ts
     amp = 1.0 + torch.rand(n_traj, 1, 2, 2, generator=g, dtype=F64)
     freq = 0.3 + 0.7 * torch.rand(n_traj, 1, 2, 2, generator=g, dtype=F64)
     phase = 2 * math.pi * torch.rand(n_traj, 1, 2, 2, generator=g, dtype=F64)
     I = (amp * torch.sin(2 * math.pi * freq * t[None, :, None, None] + phase)).sum(-1)  # (K, T, 2)
     x1 = torch.zeros(n_traj, 6, dtype=F64)
     x1[:, :4] = torch.randn(n_traj, 4, generator=g, dtype=F64)
-    return rollout(lambda x, u: rk4(truth, x, u, dt), x1, I), I
+    return rollout(lambda x, u: rk4(truth, x, u, Ts), x1, I), I
 
 
 def test_training_recovers_a_known_drag():
-    dt = 0.05
-    x_r, I = _integrator_data(8, 60, dt, seed=0)
-    x_val, I_val = _integrator_data(3, 150, dt, seed=1)  # 2.5x longer, unseen references
+    Ts = 0.05
+    x_r, I = _integrator_data(8, 60, Ts, seed=0)
+    x_val, I_val = _integrator_data(3, 150, Ts, seed=1)  # 2.5x longer, unseen references
     torch.manual_seed(0)
     model = DoubleIntegratorLoop().double()
-    step = lambda x, u: rk4(model, x, u, dt)  # noqa: E731
+    step = lambda x, u: rk4(model, x, u, Ts)  # noqa: E731
     W = torch.tensor([1.0, 1, 1, 1, 0, 0], dtype=F64)
     before = evaluate_loss(step, x_val, I_val, W)
     h = train_with_inputs(model, step, (x_r, I), segment_length=20, batch_size=6, epochs=15, lr=3e-2, W=W,
@@ -275,7 +275,7 @@ def test_bad_inputs_are_refused_before_work(tiny, change, kw, message):
         I[0, 4, 1] = float("nan")
     elif change == "x_2d":
         x_r = x_r[0]
-    settings = dict(segment_length=5, batch_size=2, epochs=1, progress=False)
+    settings = dict(segment_length=5, batch_size=2, epochs=1, lr=1e-3, seed=0, progress=False)
     settings.update(kw)
     with pytest.raises(ValueError, match=message):
         train_with_inputs(model, step, (x_r, I), **settings)
@@ -291,8 +291,10 @@ def test_bad_step_model_and_trajectories_are_refused(tiny):
     with pytest.raises(ValueError, match=r"x1 must have shape \(B, n\) = \(2, 6\)"):
         adjoint_gradient(step, model.parameters(), x_r[:, 0, :4], I, x_r)
     with pytest.raises(TypeError, match="model must be an nn.Module"):
-        train_with_inputs(step, step, (x_r, I), segment_length=5, progress=False)
+        train_with_inputs(step, step, (x_r, I), segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
+                          progress=False)
     with pytest.raises(TypeError, match="trajectories must be a pair"):
-        train_with_inputs(model, step, x_r, segment_length=5, progress=False)
+        train_with_inputs(model, step, x_r, segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
+                          progress=False)
     with pytest.raises(ValueError, match=r"I must have shape \(B, T, m\)"):
         evaluate_loss(step, x_r, I[0])

@@ -8,7 +8,7 @@ import torch
 from fnnlib.models import NeuralFeedback, NeuralODE
 from fnnlib.observers import feedback_rollout
 from fnnlib.systems import Spiral
-from fnnlib.training import feedback_loss, train_neural_feedback
+from fnnlib.training import PAPER_FEEDBACK_RECIPE, FeedbackRecipe, feedback_loss, train_neural_feedback
 
 TS = 0.05
 
@@ -18,6 +18,11 @@ def _cases(n_case=3, T=40):
     X = torch.stack([Spiral(w, 0.1, e).exact_solution(torch.tensor([2.0, 0.0]), t)
                      for w, e in zip([1.5, 2.0, 2.5][:n_case], [-1.0, 0.0, 1.0][:n_case])])
     return t, X
+
+
+def _fit(f, h, t, X, progress=False, **settings):
+    """train_neural_feedback with the paper's recipe but for ``settings``."""
+    return train_neural_feedback(f, h, t, X, PAPER_FEEDBACK_RECIPE.replace(**settings), seed=0, progress=progress)
 
 
 def _nets(seed=0):
@@ -35,8 +40,7 @@ def test_one_step_lowers_the_full_batch_loss():
     with torch.no_grad():
         before = feedback_loss(h, *args).item()
     pool = X.shape[0] * (X.shape[1] - 1)
-    hist = train_neural_feedback(f, h, t, X, iterations=1, batch_size=pool, lr=1e-3, optimizer="adam",
-                                 progress=False)
+    hist = _fit(f, h, t, X, iterations=1, batch_size=pool, lr=1e-3, optimizer="adam")
     with torch.no_grad():
         after = feedback_loss(h, *args).item()
     assert hist.loss[0] == pytest.approx(before, rel=1e-12)
@@ -48,7 +52,7 @@ def test_training_leaves_f_bitwise_unchanged():
     f, h = _nets()
     f_state = copy.deepcopy(f.state_dict())
     flags = [p.requires_grad for p in f.parameters()]
-    hist = train_neural_feedback(f, h, t, X, iterations=60, batch_size=32, lr=0.01, refresh_every=5, progress=False)
+    hist = _fit(f, h, t, X, iterations=60, batch_size=32, lr=0.01, refresh_every=5)
     assert len(hist.loss) == 60 and hist.seconds > 0
     assert all(torch.equal(f_state[k], v) for k, v in f.state_dict().items())
     assert [p.requires_grad for p in f.parameters()] == flags  # restored after training
@@ -72,7 +76,7 @@ def test_same_seed_same_result():
     runs = []
     for _ in range(2):
         f, h = _nets()
-        runs.append(train_neural_feedback(f, h, t, X, iterations=5, batch_size=16, progress=False).loss)
+        runs.append(_fit(f, h, t, X, iterations=5, batch_size=16).loss)
     assert runs[0] == runs[1]
 
 
@@ -80,14 +84,25 @@ def test_bad_inputs():
     t, X = _cases()
     f, h = _nets()
     with pytest.raises(ValueError, match="n_case, T, n"):
-        train_neural_feedback(f, h, t, X[0], progress=False)
+        _fit(f, h, t, X[0])
     with pytest.raises(ValueError, match="points but X has"):
-        train_neural_feedback(f, h, t[:-1], X, progress=False)
+        _fit(f, h, t[:-1], X)
     with pytest.raises(ValueError, match="exceeds"):
-        train_neural_feedback(f, h, t, X, batch_size=10_000, progress=False)
+        _fit(f, h, t, X, batch_size=10_000)
     with pytest.raises(ValueError, match="unknown optimizer"):
-        train_neural_feedback(f, h, t, X, optimizer="sgd", progress=False)
+        _fit(f, h, t, X, optimizer="sgd")
     with pytest.raises(ValueError, match="refresh_every"):
-        train_neural_feedback(f, h, t, X, refresh_every=0, progress=False)
+        _fit(f, h, t, X, refresh_every=0)
     with pytest.raises(ValueError, match="share parameters"):
-        train_neural_feedback(f, f.net, t, X, progress=False)
+        _fit(f, f.net, t, X)
+
+
+def test_recipe_is_required_and_typed():
+    t, X = _cases()
+    f, h = _nets()
+    with pytest.raises(TypeError, match="recipe must be a FeedbackRecipe"):
+        train_neural_feedback(f, h, t, X, dict(iterations=1), seed=0)
+    with pytest.raises(TypeError):
+        train_neural_feedback(f, h, t, X, seed=0)  # no silent paper defaults
+    with pytest.raises(TypeError):
+        FeedbackRecipe(iterations=1)  # every setting is named

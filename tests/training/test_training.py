@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import NeuralODE, Spiral, seed_everything, train_neural_ode
+from fnnlib import PAPER_SPIRAL_RECIPE, NeuralODE, ODERecipe, Spiral, seed_everything, train_neural_ode
 from fnnlib.training import sample_segments
 
 F64 = torch.float64
@@ -14,7 +14,7 @@ F64 = torch.float64
 @pytest.fixture(scope="module")
 def data():
     t = torch.arange(41, dtype=F64) * 0.05
-    x = Spiral().exact_solution(torch.tensor([[2.0, 0.0], [0.0, -1.5]]), t)  # (2, 41, 2)
+    x = Spiral(2.0, 0.1, 0.0).exact_solution(torch.tensor([[2.0, 0.0], [0.0, -1.5]]), t)  # (2, 41, 2)
     return t, x
 
 
@@ -24,10 +24,11 @@ def _model(seed=0):
 
 
 def _train(model, t, x, **kw):
-    settings = dict(iterations=30, batch_size=8, batch_time=5, lr=1e-2, optimizer="adam", method="rk4",
-                    adjoint=False, seed=0, progress=False)
+    settings = dict(iterations=30, batch_size=8, batch_time=5, lr=1e-2, optimizer="adam", loss="l1", method="rk4",
+                    adjoint=False, rtol=1e-7, atol=1e-9, adjoint_seminorm=True)
     settings.update(kw)
-    return train_neural_ode(model, t, x, **settings)
+    seed = settings.pop("seed", 0)
+    return train_neural_ode(model, t, x, ODERecipe(**settings), seed=seed, progress=False)
 
 
 def _full_loss(model, t, x):
@@ -120,7 +121,18 @@ def test_adjoint_needs_a_module(data):
     t, x = data
     model = _model()
     with pytest.raises(TypeError, match="the adjoint method needs model to be an nn.Module"):
-        train_neural_ode(lambda t, y: model(t, y), t, x, adjoint=True, progress=False)
+        train_neural_ode(lambda t, y: model(t, y), t, x, PAPER_SPIRAL_RECIPE.replace(iterations=1), seed=0,
+                         progress=False)
+
+
+def test_recipe_is_required_and_typed(data):
+    t, x = data
+    with pytest.raises(TypeError, match="recipe must be an ODERecipe"):
+        train_neural_ode(_model(), t, x, dict(iterations=1), seed=0, progress=False)
+    with pytest.raises(TypeError):
+        train_neural_ode(_model(), t, x, seed=0)  # no silent paper defaults
+    with pytest.raises(TypeError):
+        ODERecipe(iterations=1)  # every setting is named
 
 
 # --- sample_segments ---------------------------------------------------------------------------------------------

@@ -1,0 +1,168 @@
+r"""The cascade of Sec. 3.3: N feedback networks in series, gain decay Eq. (11), one or many gains at once.
+
+Layer ``i`` (``i = 0 .. N-1``) is a feedback network (Eqs. (7)-(8)) with the
+decayed gain :math:`L_i = L e^{-\beta i}`. Its input sequence is the previous
+layer's one-step predictions :math:`z^{(i)}_k` (:math:`z^{(0)}_k = x(t_k)`, the
+measurements); it keeps its own estimate :math:`\hat x^{(i)}` over time and
+outputs :math:`z^{(i+1)}_k = z^{(i)}_k + T_s \hat f^{(i)}_k`, so :math:`z^{(N)}_k`
+predicts :math:`x(t_{k+N})`. Per layer, all start times are done at once: one
+batched network call and one linear scan (:func:`~fnnlib.feedback.layer.feedback_layer`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor
+
+from fnnlib._validation import as_trajectory, check_positive
+from fnnlib.feedback.decay import check_N, decay_factors, decayed_gains
+from fnnlib.feedback.gains import check_gain, gain_batch, gain_compact
+from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains, shift_inputs
+from fnnlib.feedback.types import VectorField
+
+
+def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float, *, diagonal: bool | None = None,
+                return_all: bool = False, u: Tensor | None = None) -> Tensor:
+    """The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
+
+    ``x`` (..., T, n); returns :math:`z^{(N)}` of the same shape, or with
+    ``return_all`` every depth stacked, (N+1, ..., T, n), depth 0 being ``x``.
+    With inputs ``u`` (..., T, m), layer ``i`` evaluates ``f(t, z, u)`` with row k's input
+    ``u_{k+i}`` (:func:`~fnnlib.feedback.layer.shift_inputs`). Differentiable: gradients flow to
+    the gains in ``L_stack``, to ``f``'s parameters and to ``x``.
+    """
+    z = x
+    depths = [z] if return_all else None
+    for i, L_i in enumerate(L_stack):
+        _, f_hat = feedback_layer(eval_field(f, z, shift_inputs(u, i)), z, L_i, Ts, diagonal=diagonal)
+        z = z + Ts * f_hat  # z^{(i+1)} = z^{(i)} + Ts * f_hat^{(i)}
+        if depths is not None:
+            depths.append(z)
+    return torch.stack(depths) if depths is not None else z
+
+
+def _checked(x: Tensor, Ts: float, N: int) -> tuple[Tensor, float, int]:
+    """The checks every cascade makes before any work: a finite, non-empty trajectory, Ts > 0, an integer N >= 1."""
+    N = check_N(N)
+    Ts = check_positive(Ts, name="Ts")
+    x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
+    if x.shape[-2] == 0 or x.shape[-1] == 0:
+        raise ValueError(f"x is an empty trajectory (shape {tuple(x.shape)}); give at least one sample of a "
+                         "state with at least one component")
+    return x, Ts, N
+
+
+@torch.no_grad()
+def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
+                    *, return_all: bool = False, allow_unstable: bool = False, u: Tensor | None = None) -> Tensor:
+    r"""N-step prediction by the cascaded feedback network (Sec. 3.3, Eq. (11)), from every start time.
+
+    With ``L = 0`` this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
+
+    Parameters
+    ----------
+    f : callable
+        Learned vector field ``f(t, x)``.
+    x : Tensor, shape (..., T, n)
+        Measured states, one row per sample time.
+    Ts : float
+        Sample step (also the prediction step).
+    N : int
+        Prediction steps (layers).
+    L : float, Tensor (n,) or (n, n)
+        Base feedback gain (layer 0's).
+    beta : float
+        Decay rate of Eq. (11); 0 keeps every layer at ``L``.
+    return_all : bool
+        Also return every intermediate depth.
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model ``f(t, x, u)``, one row per sample
+        (the input held over the step from that sample).
+
+    Returns
+    -------
+    Tensor
+        Shape (..., T, n): row k predicts the state at ``t_{k+N}``; with
+        ``return_all`` shape (N+1, ..., T, n), depth 0 being ``x`` itself.
+    """
+    x, Ts, N = _checked(x, Ts, N)
+    n = x.shape[-1]
+    L = check_gain(L, n, Ts, allow_unstable=allow_unstable, N=N, beta=beta)  # warns on strong noise amplification
+    L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
+    return run_cascade(f, x, L_stack, Ts, return_all=return_all, u=u)
+
+
+@torch.no_grad()
+def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Sequence[float] | Tensor,
+                  beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False) -> Tensor:
+    r"""The N-step cascade for a batch of (base gain, decay rate) pairs in one pass.
+
+    Batch element ``g`` runs :func:`cascade_predict` with gain ``L_g`` and
+    decay rate ``beta_g``: layer ``i`` uses :math:`L_g e^{-\beta_g i}`. Gains and
+    decay rates pair up by broadcasting (one of either, or as many of each).
+    The ablations of Sec. 3.4 and App. A.3 sweep gains and decay rates this way.
+
+    Parameters
+    ----------
+    f : callable
+        Learned vector field ``f(t, x)``.
+    x : Tensor, shape (..., T, n)
+        Measurements (any leading axes: levels, noise draws).
+    Ts : float
+        Sample step (also the prediction step).
+    N : int
+        Prediction steps (layers).
+    L : float, Tensor (G,) or Tensor (G, n)
+        Scalar or diagonal base gains.
+    beta : float or Tensor (G,)
+        Decay rates of Eq. (11).
+
+    Returns
+    -------
+    Tensor, shape (G, ..., T, n)
+        Row ``k`` predicts the state at ``t_{k+N}``.
+    """
+    x, Ts, N = _checked(x, Ts, N)
+    n = x.shape[-1]
+    L = gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)  # (G, n) base gains
+    decay = decay_factors(beta, N)  # (B, N)
+    G, B = L.shape[0], decay.shape[0]
+    if B != 1 and G != 1 and B != G:
+        raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
+    G = max(G, B)
+    L = L.expand(G, n)
+    L_stack = [lead_gains(L * decay[:, i].to(x.dtype)[:, None], x.ndim + 1) for i in range(N)]  # Eq. (11)
+    return run_cascade(f, x.expand(G, *x.shape), L_stack, Ts, diagonal=True)
+
+
+@torch.no_grad()
+def cascade_predict_loop(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
+                         *, allow_unstable: bool = False) -> Tensor:
+    """Reference implementation of :func:`cascade_predict`: loops over start times and depths.
+
+    The streaming form a real-time system would run: at each new measurement
+    ``x_k`` the N layers are evaluated one after another, each updating its
+    own estimate. Quadratic in Python calls (T * N network evaluations of one
+    state); kept for tests and benchmarks. ``x`` has shape (T, n).
+    """
+    x, Ts, N = _checked(x, Ts, N)
+    if x.ndim != 2:
+        raise ValueError(f"the loop reference takes one trajectory of shape (T, n), got {tuple(x.shape)}")
+    T, n = x.shape
+    L = check_gain(L, n, Ts, allow_unstable=allow_unstable)
+    L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
+    x_hat: list[Tensor] = []  # each layer's estimate, started at that layer's first input
+    out = torch.empty_like(x)
+    for k in range(T):
+        z = x[k]
+        for i in range(N):
+            if k == 0:
+                x_hat.append(z.clone())
+            e = z - x_hat[i]
+            f_hat = f(0.0, z[None])[0] + (L_stack[i] * e if L_stack[i].ndim == 1 else L_stack[i] @ e)  # Eq. (7)
+            x_hat[i] = x_hat[i] + Ts * f_hat  # Eq. (8)
+            z = z + Ts * f_hat
+        out[k] = z
+    return out

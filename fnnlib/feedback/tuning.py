@@ -1,0 +1,202 @@
+r"""The cascade of Sec. 3.3 made differentiable, and ``tune_gains``: L and beta learned from data (claim B1).
+
+The paper names the choice of the gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) its open
+problem. Here both are parameters of a module, :class:`CascadeGains`, whose parametrization keeps every
+gain admissible by construction:
+
+* diagonal: :math:`L = L_{max}\,\sigma(\ell)` elementwise (:math:`\sigma` the logistic function);
+* full: :math:`L = L_{max}\,P(I + P)^{-1}` with :math:`P = M M^T + \varepsilon I`, symmetric with
+  eigenvalues :math:`L_{max}\,p/(1+p) \in (0, L_{max})`;
+* :math:`\beta = \mathrm{softplus}(b)`.
+
+With :math:`L_{max} = 1/T_s` (the default) every eigenvalue of :math:`T_s L` lies in (0, 1), so
+:math:`L` is positive definite (Theorem 1) and :math:`\rho(I - T_s L) < 1` (Eq. (25)) for any raw
+parameters, and the error of Eq. (25) decays without oscillating. :func:`cascade_forward` runs the same
+layers as :func:`~fnnlib.feedback.cascade.cascade_predict` (one batched network call and one scan per
+layer) with gradients to the gains, to ``beta`` and to the model. :func:`tune_gains` descends the N-step
+prediction error through it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as TF
+
+from fnnlib._validation import check_positive
+from fnnlib.feedback.cascade import _checked, run_cascade
+from fnnlib.feedback.layer import check_inputs, check_model_dtype
+from fnnlib.feedback.types import VectorField
+
+
+def _inverse_softplus(y: float) -> float:
+    return y + math.log(-math.expm1(-y))
+
+
+class CascadeGains(nn.Module):
+    r"""Base gain :math:`L` and decay rate :math:`\beta` of Eq. (11) as trainable, always-admissible parameters.
+
+    Parameters
+    ----------
+    n : int
+        State dimension.
+    Ts : float
+        Sample step; sets the bound :math:`L_{max}` (default :math:`1/T_s`).
+    L0 : float or Tensor (n,)
+        Initial gain (diagonal; for ``full`` the initial gain is ``L0`` times I). Must lie in (0, L_max).
+    beta0 : float
+        Initial decay rate, > 0.
+    full : bool
+        A full symmetric positive-definite gain instead of a diagonal one.
+    L_max : float, optional
+        Upper bound of the gain's eigenvalues; at most :math:`2/T_s` (Eq. (25)).
+    eps : float
+        The :math:`\varepsilon` of the full parametrization.
+    """
+
+    def __init__(self, n: int, Ts: float, *, L0: float | Tensor, beta0: float, full: bool = False,
+                 L_max: float | None = None, eps: float = 1e-3):
+        super().__init__()
+        self.n, self.Ts, self.full, self.eps = int(n), check_positive(Ts, name="Ts"), bool(full), float(eps)
+        self.L_max = 1.0 / self.Ts if L_max is None else check_positive(L_max, name="L_max")
+        if self.L_max * self.Ts > 2.0:
+            raise ValueError(f"L_max = {self.L_max} allows rho(I - Ts L) >= 1 (Eq. (25)); it must be <= 2/Ts")
+        L0 = torch.as_tensor(L0, dtype=torch.float64).expand(self.n).clone()
+        if not bool(((L0 > 0) & (L0 < self.L_max)).all()):
+            raise ValueError(f"initial gain L0 must lie in (0, L_max = {self.L_max:.4g}), got {L0.tolist()}")
+        beta0 = float(beta0)
+        if not (beta0 > 0 and math.isfinite(beta0)):
+            raise ValueError(f"initial decay rate beta0 must be finite and > 0 (softplus), got {beta0!r}")
+        s = L0 / self.L_max  # the fraction of L_max
+        if self.full:  # P = M M^T + eps I with eigenvalue p = s / (1 - s) along each axis
+            p = (s / (1 - s)).clamp_min(2 * self.eps)
+            self.raw_L = nn.Parameter(torch.diag((p - self.eps).sqrt()))
+        else:
+            self.raw_L = nn.Parameter(torch.log(s / (1 - s)))  # logit
+        self.raw_beta = nn.Parameter(torch.tensor(_inverse_softplus(beta0), dtype=torch.float64))
+
+    def L(self) -> Tensor:
+        """The base gain: (n,) diagonal, or (n, n) symmetric for ``full``; float64."""
+        if not self.full:
+            return self.L_max * torch.sigmoid(self.raw_L)
+        eye = torch.eye(self.n, dtype=self.raw_L.dtype)
+        P = self.raw_L @ self.raw_L.T + self.eps * eye
+        G = self.L_max * torch.linalg.solve(eye + P, P)  # L_max P (I + P)^{-1} (P and (I+P)^{-1} commute)
+        return 0.5 * (G + G.T)
+
+    def beta(self) -> Tensor:
+        """The decay rate, softplus of its raw parameter (float64 scalar)."""
+        return TF.softplus(self.raw_beta)
+
+    def L_stack(self, N: int, dtype: torch.dtype) -> list[Tensor]:
+        r"""Eq. (11) with gradients: :math:`L_i = L e^{-\beta i}`, ``i = 0 .. N-1``, in ``dtype``."""
+        L, beta = self.L(), self.beta()
+        return [(L * torch.exp(-beta * i)).to(dtype) for i in range(int(N))]
+
+    def values(self) -> dict:
+        """The current ``L`` (list) and ``beta`` (float) as plain values."""
+        with torch.no_grad():
+            return {"L": self.L().tolist(), "beta": float(self.beta())}
+
+
+def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: CascadeGains, *, u: Tensor | None = None,
+                    return_all: bool = False) -> Tensor:
+    r"""The N-step cascade of Sec. 3.3 with the gains of ``gains``, differentiable in ``gains``, ``f`` and ``x``.
+
+    The layers and their order of operations are those of
+    :func:`~fnnlib.feedback.cascade.cascade_predict` (same math; ``cascade_predict`` runs without a
+    graph and checks a fixed gain instead). ``x`` (..., T, n), ``u`` (..., T, m) optional;
+    returns (..., T, n), row k predicting :math:`x(t_{k+N})`.
+    """
+    x, Ts, N = _checked(x, Ts, N)
+    if x.shape[-1] != gains.n:
+        raise ValueError(f"x has state dimension {x.shape[-1]} but the gains are for n = {gains.n}")
+    check_model_dtype(f, x)
+    if u is not None:
+        check_inputs(u, x)
+    return run_cascade(f, x, gains.L_stack(N, x.dtype), Ts, diagonal=not gains.full, return_all=return_all, u=u)
+
+
+@dataclass
+class TunedGains:
+    """What :func:`tune_gains` found: the gains module, plain values and the loss per iteration."""
+
+    gains: CascadeGains
+    L: list
+    beta: float
+    loss: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
+    r"""Mean squared N-step error :math:`\|z^{(N)}_k - y_{k+N}\|^2` over every start with a sample N steps later."""
+    return (z[..., : y.shape[-2] - N, :] - y[..., N:, :]).pow(2).sum(-1).mean()
+
+
+def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tensor, beta0: float,
+               iterations: int, lr: float, u: Tensor | None = None, full: bool = False, L_max: float | None = None,
+               train_model: bool = False) -> TunedGains:
+    r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
+
+    Gradient descent (Adam, full batch) on the N-step prediction error of the cascade,
+    :func:`prediction_loss` of :func:`cascade_forward` against the measured samples ``y`` N steps later.
+    The targets are measurements, noisy like the inputs: with noise independent of the state, the
+    expected loss is the error against the truth plus a constant, so minimising it trades the
+    correction the feedback brings against the noise it amplifies (:func:`~fnnlib.feedback.gains.noise_amplification`).
+    Tune on data kept apart from the data you evaluate on: ``y`` is the tuning set only.
+
+    Parameters
+    ----------
+    f : callable
+        The learned field ``f(t, x)`` (or ``f(t, x, u)`` with ``u``); frozen unless ``train_model``.
+    y : Tensor, shape (T, n) or (B, T, n)
+        Tuning measurements, in ``f``'s dtype.
+    Ts, N
+        Sample step and prediction horizon (cascade depth).
+    L0, beta0
+        Initial gain (scalar or (n,)) and decay rate, see :class:`CascadeGains`.
+    iterations, lr
+        Adam steps and learning rate (on the raw parameters).
+    u : Tensor, shape like ``y`` with m columns, optional
+        Inputs of a controlled model.
+    full, L_max
+        See :class:`CascadeGains`.
+    train_model : bool
+        Also descend on ``f``'s parameters (an ``nn.Module``).
+    """
+    x, Ts, N = _checked(y, Ts, N)
+    if x.shape[-2] <= N:
+        raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
+    if int(iterations) < 1:
+        raise ValueError(f"iterations must be >= 1, got {iterations!r}")
+    check_positive(lr, name="lr")
+    gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
+    params = list(gains.parameters())
+    if train_model:
+        if not isinstance(f, nn.Module):
+            raise TypeError("train_model=True needs f to be an nn.Module")
+        params += [p for p in f.parameters() if p.requires_grad]
+    frozen = [] if train_model or not isinstance(f, nn.Module) else [p for p in f.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(params, lr=float(lr))
+    result = TunedGains(gains, [], 0.0)
+    start = time.perf_counter()
+    try:
+        for p in frozen:  # a frozen model gets no gradient (and keeps no .grad)
+            p.requires_grad_(False)
+        for _ in range(int(iterations)):
+            opt.zero_grad()
+            loss = prediction_loss(cascade_forward(f, x, Ts, N, gains, u=u), x, N)
+            loss.backward()
+            opt.step()
+            result.loss.append(loss.item())
+    finally:
+        for p in frozen:
+            p.requires_grad_(True)
+    result.seconds = time.perf_counter() - start
+    vals = gains.values()
+    result.L, result.beta = vals["L"], vals["beta"]
+    return result

@@ -1,0 +1,51 @@
+r"""Observer settings from training data only (issue 16): the Kalman filter's process noise on the disturbance.
+
+The Kalman baselines (:mod:`fnnlib.observers.kalman`) model the residual :math:`\Delta f = \dot x - f_{neural}(x)`
+as a disturbance state with a random walk, :math:`d_{k+1} = d_k + w_k`, :math:`w_k \sim \mathcal N(0, q_d I)`.
+Reading :math:`q_d` off the true residual along the *test* trajectory tells the baseline what it is about to
+see. :func:`disturbance_drift_variance` estimates it from the training trajectories instead, through the
+filter's own plant (:mod:`fnnlib.observers.augmented`, Euler at :math:`T_s`):
+:math:`x_{k+1} = x_k + T_s (f_{neural}(x_k) + d_k)` gives :math:`d_k` from two samples, no true rate needed.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from fnnlib._validation import check_positive
+from fnnlib.feedback import VectorField, eval_field
+
+__all__ = ["disturbance_drift_variance"]
+
+
+def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField) -> float:
+    r""":math:`q_d`: the variance of the per-step change of :math:`\Delta f` on training trajectories.
+
+    Parameters
+    ----------
+    x : Tensor, shape (T, n) or (B, T, n)
+        Training trajectories sampled every ``Ts`` (T >= 3), never the test trajectory.
+    Ts : float
+        Sampling step.
+    field : callable
+        The learned field ``f(t, x)`` (autonomous), e.g. the trained neural ODE.
+
+    Returns
+    -------
+    float
+        The sample variance (``torch.std(...) ** 2``, unbiased) of :math:`d_{k+1} - d_k`
+        pooled over trajectories and coordinates, with
+        :math:`d_k = (x_{k+1} - x_k) / T_s - f_{neural}(x_k)` (the filter's Euler plant solved for
+        :math:`d_k`); the observers notebook's ``kf_q_d``.
+    """
+    x = torch.as_tensor(x)
+    Ts = check_positive(Ts, name="Ts")
+    if x.ndim not in (2, 3) or x.shape[-2] < 3:
+        raise ValueError(f"x must be (T, n) or (B, T, n) with T >= 3, got shape {tuple(x.shape)}")
+    if not bool(torch.isfinite(x).all()):
+        raise ValueError("x holds a NaN or infinite value")
+    with torch.no_grad():
+        # d_k = (x_{k+1} - x_k) / Ts - f_neural(x_k)   (the augmented plant's Euler step)
+        d = x.diff(dim=-2) / Ts - eval_field(field, x[..., :-1, :])
+    return float(d.diff(dim=-2).std() ** 2)

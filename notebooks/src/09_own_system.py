@@ -1,0 +1,220 @@
+# %% [markdown]
+# # Your own system: inputs, noisy measurements and gains tuned from data (claim B1)
+#
+# The paper's method on a system it does not treat: a damped pendulum driven by a known torque,
+# $\dot\theta = \omega$, $\dot\omega = -a\sin\theta - c\,\omega + b\,u + d$. A neural ODE
+# $f_{neural}(x, u)$ learns the nominal pendulum; at test time the pendulum is longer-lived and
+# damped differently and a constant torque $d$ disturbs it, and the measurements are noisy. The
+# linear feedback of Eqs. (7)-(8) and the cascade of Sec. 3.3 then predict $N$ steps ahead, with
+# the paper's hand-picked gain and decay rate, and with $L$ and $\beta$ of Eq. (11) **learned** by
+# descending the $N$-step prediction error through the cascade (`tune_gains`: the paper's stated open
+# problem, claim **B1**). The same comparison runs on the paper's noisy spiral (the S3 setting). A
+# Kalman filter on the same learned model is the classical baseline. Everything is repeated over
+# seeds and compared pair by pair.
+
+# %% tags=["parameters"]
+profile = "paper"
+out_dir = "outputs/manual/own_system"
+upstream_dirs = {"spiral": "outputs/paper/spiral"}
+seeds = [0, 1, 2, 3, 4]
+Ts = 0.02
+n_train = 500
+n_test = 500
+nominal = [9.81, 0.1, 1.0, 0.0]
+test = [7.0, 0.4, 1.0, 1.5]
+u_amp = 1.5
+hidden = [32, 32]
+activation = "tanh"
+iterations = 300
+noise_std = 0.01
+N = 30
+L_hand = 20.0
+beta_hand = 0.02
+L0 = 5.0
+beta0 = 0.05
+tune_iterations = 60
+tune_lr = 0.1
+kf_q_x = 1e-8
+kf_q_d = 0.01
+kf_p0_d = 100.0
+spiral_n_samples = 1000
+spiral_Ts = 0.01
+spiral_test = [3.0, 0.05, 10.0]
+spiral_x0 = [9.0, 0.0]
+spiral_tune_x0 = [0.0, 9.0]
+spiral_tune_samples = 400
+spiral_N = 50
+spiral_noise_std = 0.01
+spiral_L = 20.0
+spiral_beta = 0.02
+spiral_tune_iterations = 40
+
+# %%
+import fnnlib as F
+
+F.check_notebook_settings("own_system", globals())  # the checks `fnn-pipeline check` runs first
+
+# %% [tags: hide-input]
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+out = Path(out_dir)
+out.mkdir(parents=True, exist_ok=True)
+print(f"hand-picked gain: noise amplification {F.noise_amplification(L_hand, Ts, N, beta_hand, n=2):.3g}x "
+      f"(N = {N}), {F.noise_amplification(spiral_L, spiral_Ts, spiral_N, spiral_beta, n=2):.3g}x on the spiral")
+
+# %% [markdown]
+# ## The verdict rule for B1 (fixed before any number exists)
+# For each setting (the pendulum, the noisy spiral) the mean $N$-step error on the evaluation data is
+# computed per seed for four predictors: the open-loop neural ODE (Euler, no feedback), the cascade with
+# the hand-picked $(L, \beta)$, the cascade with the tuned $(L, \beta)$, and a steady-state Kalman filter
+# on the same model (with a constant-disturbance state) followed by a rollout. A *win* of A over B is
+# `F.paired_win`: A is lower in at least 4 of 5 seeds **and** the 90 % t-interval of the mean paired
+# difference excludes 0. Per setting, three checks:
+# 1. the tuned gains win over the hand-picked ones;
+# 2. the tuned gains win over the open-loop neural ODE;
+# 3. the tuned gains do not lose to the Kalman filter by more than a factor 2: tuned $\le 2\times$ Kalman
+#    in at least all seeds but one.
+#
+# All checks true: *reproduced*; some: *partly*; none: *not reproduced*.
+
+# %%
+def b1_checks(errors: dict) -> tuple[dict, dict]:
+    """errors[setting][predictor] = per-seed mean N-step errors; returns (checks, paired statistics)."""
+    checks, stats = {}, {}
+    for setting, e in errors.items():
+        tuned, S = np.asarray(e["tuned"]), len(e["tuned"])
+        for other in ("hand", "open_loop", "kalman"):
+            stats[f"{setting}:tuned_vs_{other}"] = F.paired_win(e["tuned"], e[other])
+        checks[f"{setting}:tuned_beats_hand"] = stats[f"{setting}:tuned_vs_hand"]["win"]
+        checks[f"{setting}:tuned_beats_open_loop"] = stats[f"{setting}:tuned_vs_open_loop"]["win"]
+        checks[f"{setting}:tuned_within_2x_kalman"] = int((tuned <= 2 * np.asarray(e["kalman"])).sum()) >= S - 1
+    return checks, stats
+
+
+# %% [markdown]
+# ## The pendulum, start to finish
+# One seed is one run of what a user writes: simulate, train (the quick recipe), measure with noise,
+# tune the gains on one test trajectory, predict on another, compare. The inputs are two sines with
+# phases drawn from the seed; each trajectory has its own inputs and start.
+
+# %%
+def pendulum_run(seed: int) -> dict:
+    gen = F.make_generator(seed)
+    t = torch.arange(max(n_train, n_test), dtype=torch.float64) * Ts
+    def inputs(T):  # a known torque, two sines with random phases
+        p = 2 * torch.pi * torch.rand(2, generator=gen, dtype=torch.float64)
+        return u_amp * (torch.sin(0.9 * t[:T] + p[0]) + 0.5 * torch.sin(2.3 * t[:T] + p[1]))[:, None]
+    u_train, u_tune, u_eval = inputs(n_train), inputs(n_test), inputs(n_test)
+    x0 = 0.5 * torch.randn(3, 2, generator=gen, dtype=torch.float64)
+    x_train = F.Pendulum(*nominal).simulate(x0[0], t[:n_train], u_train).float()
+    F.seed_everything(seed)
+    model = F.NeuralODE(2, hidden, activation, n_input=1)
+    F.train_neural_ode(model, t[:n_train].float(), x_train, F.QUICK_RECIPE.replace(iterations=iterations),
+                       seed=seed, u=u_train.float(), progress=False)
+    plant = F.Pendulum(*test)
+    x_tune, x_eval = (plant.simulate(x, t[:n_test], u).float() for x, u in [(x0[1], u_tune), (x0[2], u_eval)])
+    y_tune, y_eval = (F.add_measurement_noise(x, noise_std, gen) for x in (x_tune, x_eval))
+    u_tune, u_eval = u_tune.float(), u_eval.float()
+    tuned = F.tune_gains(model, y_tune, Ts, N, u=u_tune, L0=L0, beta0=beta0, iterations=tune_iterations, lr=tune_lr)
+    kalman = F.KalmanObserver(model, Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2,
+                              P0=[noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
+    with torch.no_grad():
+        preds = {"open_loop": F.cascade_predict(model, y_eval, Ts, N, 0.0, u=u_eval),
+                 "hand": F.cascade_predict(model, y_eval, Ts, N, L_hand, beta_hand, u=u_eval),
+                 "tuned": F.cascade_predict(model, y_eval, Ts, N, torch.tensor(tuned.L), tuned.beta, u=u_eval),
+                 "kalman": kalman.predict(y_eval, N, u=u_eval).float()}
+    return {"errors": {k: float(F.n_step_errors(z, x_eval, N).mean()) for k, z in preds.items()},
+            "L": tuned.L, "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
+            "trace": {k: z[: n_test - N, 0].numpy() for k, z in preds.items()} | {"truth": x_eval[N:, 0].numpy()}}
+
+
+# %%
+t0 = time.perf_counter()
+pendulum = [pendulum_run(s) for s in seeds]
+pendulum_seconds = time.perf_counter() - t0
+print(f"{len(seeds)} pendulum runs in {pendulum_seconds:.1f} s")
+{k: np.round([r["errors"][k] for r in pendulum], 4).tolist() for k in pendulum[0]["errors"]}
+
+# %% [markdown]
+# ## The noisy spiral (the S3 setting)
+# The spiral task's neural ODE (loaded, not retrained) on its test spiral with noise of std
+# `spiral_noise_std`; the hand-picked values are the paper's $L = 20$, $\beta = 0.02$. The gains are
+# tuned on a test spiral started elsewhere (`spiral_tune_x0`, its first `spiral_tune_samples` samples)
+# with its own noise, and evaluated on the S3 trajectory. Seeds draw the noise.
+
+# %%
+model_s, _ = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt", expected_kind="NeuralODE")
+t_s = torch.arange(spiral_n_samples, dtype=torch.float64) * spiral_Ts
+sys_s = F.Spiral(*spiral_test)
+x_s = sys_s.simulate(torch.tensor(spiral_x0), t_s).float()
+x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples]).float()
+kalman_s = F.KalmanObserver(model_s, spiral_Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
+                            P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
+
+
+def spiral_run(seed: int) -> dict:
+    gen = F.make_generator(1000 + seed)
+    y_tune, y = (F.add_measurement_noise(x, spiral_noise_std, gen) for x in (x_s_tune, x_s))
+    tuned = F.tune_gains(model_s, y_tune, spiral_Ts, spiral_N, L0=L0, beta0=beta0,
+                         iterations=spiral_tune_iterations, lr=tune_lr)
+    preds = {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, 0.0),
+             "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, spiral_L, spiral_beta),
+             "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, torch.tensor(tuned.L), tuned.beta),
+             "kalman": kalman_s.predict(y, spiral_N).float()}
+    return {"errors": {k: float(F.n_step_errors(z, x_s, spiral_N).mean()) for k, z in preds.items()},
+            "L": tuned.L, "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss}
+
+
+t0 = time.perf_counter()
+spiral = [spiral_run(s) for s in seeds]
+spiral_seconds = time.perf_counter() - t0
+print(f"{len(seeds)} spiral runs in {spiral_seconds:.1f} s")
+{k: np.round([r["errors"][k] for r in spiral], 4).tolist() for k in spiral[0]["errors"]}
+
+# %% [markdown]
+# ## Errors per seed, and one pendulum prediction
+
+# %%
+names = ["open_loop", "hand", "tuned", "kalman"]
+colors = [F.plotting.COLORS[c] for c in ("neural_ode", "feedback_nodecay", "feedback", "kalman")]
+fig, axes = F.new_figure(1, 3)
+for ax, runs, title in [(axes[0, 0], pendulum, f"pendulum, N = {N}"), (axes[0, 1], spiral, f"noisy spiral, N = {spiral_N}")]:
+    for i, (name, color) in enumerate(zip(names, colors)):
+        vals = [r["errors"][name] for r in runs]
+        ax.bar(i, np.mean(vals), color=color, alpha=0.5)
+        ax.plot([i] * len(vals), vals, "k.", ms=4)
+    ax.set(xticks=range(len(names)), yscale="log", ylabel="mean N-step error", title=title)
+    ax.set_xticklabels(names, rotation=20)
+ax = axes[0, 2]
+tr = pendulum[0]["trace"]
+tt = np.arange(N, n_test) * Ts
+ax.plot(tt, tr["truth"], color=F.plotting.COLORS["truth"], label="truth")
+for name, color in zip(names, colors):
+    ax.plot(tt, tr[name], "--", color=color, lw=1, label=name)
+ax.set(xlabel="t [s]", ylabel="theta", title=f"pendulum, {N}-step predictions (seed {seeds[0]})")
+ax.legend(fontsize=7)
+fig_b1 = F.save_figure(fig, out, "own_system_b1")
+
+# %% [tags: nbval-check-output]
+errors = {"pendulum": {k: [r["errors"][k] for r in pendulum] for k in names},
+          "spiral": {k: [r["errors"][k] for r in spiral] for k in names}}
+checks, stats = b1_checks(errors)
+tuned_values = {"pendulum": [{"L": r["L"], "beta": r["beta"]} for r in pendulum],
+                "spiral": [{"L": r["L"], "beta": r["beta"]} for r in spiral]}
+claims = [F.claim_result("B1", checks=checks, numbers={"errors": errors, "paired": stats, "tuned": tuned_values},
+                         rule="per setting: tuned (L, beta) wins (paired_win: >= 4 of 5 seeds and 90 % interval "
+                              "of the mean paired difference below 0) over the hand-picked gains and over the "
+                              "open-loop neural ODE, and is <= 2x the Kalman filter's error in all seeds but one",
+                         figure=fig_b1, title="L and beta tuned from data",
+                         headline=F.headline_number(f"noisy spiral N = {spiral_N} error, tuned gains",
+                                                    errors["spiral"]["tuned"]),
+                         paper="no number: the paper names the choice of gains as its open problem")]
+F.write_results(out, task="own_system", profile=profile, claims=claims,
+                metrics={"pendulum_seconds": pendulum_seconds, "spiral_seconds": spiral_seconds,
+                         "tune_seconds_mean": float(np.mean([r["tune_seconds"] for r in pendulum + spiral]))})
+for c in claims:
+    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")

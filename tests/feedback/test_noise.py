@@ -1,0 +1,62 @@
+"""Noise amplification of the cascade: the formula against its closed form and a Monte Carlo estimate."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import pytest
+import torch
+
+from fnnlib import GainWarning, NOISE_AMPLIFICATION_LIMIT, cascade_predict, check_gain, noise_amplification
+
+F64 = torch.float64
+
+
+def _zero(t, x):
+    return torch.zeros_like(x)
+
+
+def test_leading_coefficient_is_the_product_formula():
+    Ts, N, beta, L = 0.01, 50, 0.02, 20.0
+    expected = math.prod(1 + Ts * L * math.exp(-beta * i) for i in range(N))
+    assert noise_amplification(L, Ts, N, beta, n=2) == pytest.approx(expected, rel=1e-12)
+    assert noise_amplification(torch.tensor([L, 1.0]), Ts, N, beta) == pytest.approx(expected, rel=1e-12)
+
+
+def test_one_layer_exact_factor_matches_its_closed_form():
+    Ts, L = 0.1, 5.0
+    c, a = Ts * L, 1 - Ts * L
+    closed = math.sqrt((1 + c) ** 2 + c ** 4 / (1 - a ** 2))  # h_0 = 1 + c, h_j = -c^2 a^(j-1)
+    assert noise_amplification(L, Ts, 1, n=1, exact=True) == pytest.approx(closed, rel=1e-9)
+
+
+@pytest.mark.parametrize("L, beta, N", [(20.0, 0.02, 30), (5.0, 0.0, 20), (40.0, 0.1, 10)])
+def test_exact_factor_matches_monte_carlo_white_noise(L, beta, N):
+    Ts = 0.01
+    gen = torch.Generator().manual_seed(0)
+    v = torch.randn(16, 5000, 1, generator=gen, dtype=F64)  # unit white noise, the only input (f = 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GainWarning)
+        z = cascade_predict(_zero, v, Ts, N, torch.tensor([L]), beta)
+    mc = float(z[:, 1500:].std())  # after the start-up transient of every layer
+    exact = noise_amplification(L, Ts, N, beta, n=1, exact=True)
+    assert mc == pytest.approx(exact, rel=0.03)  # 16 x 3500 samples: standard error of a std ~0.3 %, tails correlated
+    assert noise_amplification(L, Ts, N, beta, n=1) <= exact  # the product formula is the leading term only
+
+
+def test_check_gain_warns_above_the_limit_only():
+    with pytest.warns(GainWarning, match=r"amplifies white measurement noise about .*x"):
+        check_gain(20.0, 2, 0.01, N=50, beta=0.02)
+    assert noise_amplification(2.0, 0.01, 50, 0.02, n=2) < NOISE_AMPLIFICATION_LIMIT
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GainWarning)
+        check_gain(2.0, 2, 0.01, N=50, beta=0.02)
+        check_gain(20.0, 2, 0.01)  # no N: no noise check
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="scalar gain L does not say the state dimension"):
+        noise_amplification(2.0, 0.01, 5)
+    with pytest.raises(ValueError, match="N must be an integer >= 1"):
+        noise_amplification(2.0, 0.01, 0, n=1)

@@ -1,0 +1,45 @@
+"""Issue 16: a flight records its MPC fallbacks (reasons, reference steps) and is marked diverged past the share."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fnnlib.mpc import OSQPMPC
+from fnnlib.mpc.flight import fly, lissajous_reference
+from fnnlib.mpc.linearized import DIVERGED_FALLBACK_SHARE
+from fnnlib.mpc.models import PredictionModel
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+
+N, STEPS = 10, 20
+
+
+def _mpc() -> OSQPMPC:
+    Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
+    return OSQPMPC(N, Q, np.ones(4), cost="as_flown", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+
+
+@pytest.mark.parametrize("n_bad", [0, 2, 14])
+def test_flight_counts_fallbacks_by_reason_and_marks_divergence(n_bad: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The QP refuses the data (as with a runaway model) at the last ``n_bad`` steps."""
+    x_r, u_r = lissajous_reference(STEPS, N)
+    mpc = _mpc()
+    real = mpc.solve
+    calls = []
+
+    def solve(x0, A, B, c, xr, ur):
+        calls.append(1)
+        if len(calls) > STEPS - n_bad:
+            c = np.array(c)
+            c[0, 0] = 1e31  # beyond OSQP's infinity: the guard's fallback
+        return real(x0, A, B, c, xr, ur)
+
+    monkeypatch.setattr(mpc, "solve", solve)
+    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    assert res.n_fallbacks == n_bad
+    assert res.fallback_reasons == ({"data_too_large": n_bad} if n_bad else {})
+    assert res.n_reference_fallbacks == max(0, n_bad - (N - 1))  # the plan covers N - 1 fallback steps
+    assert res.fallback_share == pytest.approx(n_bad / STEPS)
+    assert res.diverged == (n_bad / STEPS > DIVERGED_FALLBACK_SHARE)
+    assert np.isfinite(res.x).all()
+    assert (res.u >= 0).all() and (res.u <= 6.0).all()

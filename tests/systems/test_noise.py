@@ -1,0 +1,29 @@
+"""Measurement noise: scale, reproducibility, stacked draws, bad settings."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from fnnlib import add_measurement_noise, make_generator
+
+
+def test_draws_stack_independent_copies():
+    x = torch.zeros(50, 2, dtype=torch.float64)
+    y = add_measurement_noise(x, 0.5, make_generator(0), draws=3)
+    assert y.shape == (3, 50, 2)
+    assert not torch.equal(y[0], y[1])
+    assert 0.3 < float(y.std()) < 0.7
+    again = add_measurement_noise(x, 0.5, make_generator(0), draws=3)
+    assert torch.equal(y, again)
+    w = torch.randn((3, 50, 2), generator=make_generator(0), dtype=torch.float64)
+    assert torch.equal(y, x + 0.5 * w)  # one draw of shape (draws, ...): the order of the random numbers
+
+
+def test_zero_std_copies_and_bad_settings():
+    x = torch.ones(4, 2)
+    assert torch.equal(add_measurement_noise(x, 0.0, draws=2), x.expand(2, 4, 2))
+    with pytest.raises(ValueError, match="noise std"):
+        add_measurement_noise(x, -1.0)
+    with pytest.raises(ValueError, match="noise draws"):
+        add_measurement_noise(x, 0.1, draws=0)
