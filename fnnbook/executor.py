@@ -113,6 +113,7 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str],
     bar = tqdm(total=n, initial=len(outcomes), desc="tasks", unit="task", disable=not progress_bar,
                dynamic_ncols=True)
     pending = {f.key: name for name, f in futures.items()}
+    slots, shown = sum(client.nthreads().values()), None
     try:
         while pending:
             try:
@@ -129,10 +130,14 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str],
                 with tqdm.external_write_mode():
                     echo(f"[{index[name]}/{n}] {name} ... {line}")
                 bar.update(1)
-            running = {k for keys in client.processing().values() for k in keys} & set(pending)
+            # a worker's processing set also holds tasks queued behind the one it runs: at most one runs per thread
+            queued = {k for keys in client.processing().values() for k in keys} & set(pending)
             counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "failed", "skipped")}
-            bar.set_postfix(done=counts["ok"], running=len(running), failed=counts["failed"],
-                            skipped=counts["skipped"], refresh=True)
+            postfix = dict(done=counts["ok"], running=min(len(queued), slots), failed=counts["failed"],
+                           skipped=counts["skipped"])
+            if postfix != shown:  # redraw on change only: a log file gets one line per change, not one a second
+                bar.set_postfix(postfix, refresh=True)
+                shown = postfix
     except BaseException:
         bar.close()
         _cancel(client, futures, spec, plan, pending)
