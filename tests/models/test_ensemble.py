@@ -8,9 +8,10 @@ import torch
 import fnnlib as F
 
 
-def test_members_start_from_their_seeds_weights_and_evaluate_alone() -> None:
+@pytest.mark.parametrize("batch", [5, F.NeuralODEEnsemble.BMM_MAX_BATCH + 1])  # both evaluation paths
+def test_members_start_from_their_seeds_weights_and_evaluate_alone(batch: int) -> None:
     ens = F.NeuralODEEnsemble(2, [8, 8], "tanh", [3, 7])
-    x = torch.randn(5, 2)
+    x = torch.randn(batch, 2)
     out = F.split_members(ens(0.0, F.stack_members(x, 2)), 2)
     for e, s in enumerate([3, 7]):
         F.seed_everything(s)
