@@ -167,9 +167,10 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         if chapters:
             parts.append({"caption": part.title, "numbered": True, "chapters": chapters})
 
+    declared = {n: t.claims for n, t in spec.tasks.items()}
     if any(c.id == SELF_CHECK_ID for c in claims):
-        results = {**results, "scoreboard": {"claims": [self_check(claims, results)]}}
-    rows = score_rows(claims, results, {n: t.claims for n, t in spec.tasks.items()})
+        results = {**results, "scoreboard": {"claims": [self_check(claims, results, declared)]}}
+    rows = score_rows(claims, results, declared)
     plot_verdicts(rows, generated / "verdicts.png")
     (generated / "scoreboard.md").write_text(
         render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes,

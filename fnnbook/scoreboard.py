@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, GuaranteeFailed, claim_result, verdict_from_checks
 
 __all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of", "plot_verdicts", "read_claims",
            "render_scoreboard", "score_rows", "self_check", "short_title", "verdict_counts"]
@@ -374,23 +374,33 @@ def render_scoreboard(
     return "\n".join(out) + "\n"
 
 
-def self_check(claims: Sequence[Claim], results: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+def self_check(claims: Sequence[Claim], results: Mapping[str, Mapping[str, Any]],
+               declared: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
     """The scoreboard's own claim (B3): it is computed from the runs.
 
-    Checks: at least one task has results; every claim a result reports is
-    an ID of the claims file; every reported verdict is the one its checks
-    imply (no verdict set by hand).
+    Checks (each fails on a plausible run): some task has results; every claim a task declares (or, without
+    ``declared``, every claim of the claims file but B3 itself) has a verdict, i.e. no task failed or was
+    skipped.  Guarantees (bookkeeping that holds by construction, shown apart and never counted): every
+    reported ID is in the claims file, and every verdict is the one its checks imply.  A broken guarantee
+    stops the book (:class:`~fnnlib.results.GuaranteeFailed`) naming the claims at fault.
     """
     ids = {c.id for c in claims}
     entries = [e for data in results.values() for e in data.get("claims", [])]
     unknown = sorted({e["id"] for e in entries} - ids)
     mismatched = sorted(e["id"] for e in entries
                         if not e.get("checks") or verdict_from_checks(e["checks"]) != e.get("verdict"))
+    if unknown or mismatched:
+        raise GuaranteeFailed(f"claim {SELF_CHECK_ID}: IDs not in the claims file {unknown}; verdicts not "
+                              f"from their checks {mismatched}")
+    expected = ({cid for task_ids in declared.values() for cid in task_ids} if declared is not None
+                else ids - {SELF_CHECK_ID})
+    missing = sorted(expected - {e["id"] for e in entries})
     return claim_result(
         SELF_CHECK_ID,
-        checks={"results_found": bool(results), "ids_known": not unknown, "verdicts_follow_checks": not mismatched},
+        checks={"results_found": bool(results), "every_declared_claim_reported": not missing},
+        guarantees={"ids_known": not unknown, "verdicts_follow_checks": not mismatched},
         numbers={"tasks_with_results": len(results), "claims_reported": len(entries), "claims_listed": len(ids),
-                 "unknown_ids": unknown, "verdicts_not_from_checks": mismatched},
-        rule="some task has results; every reported ID is in the claims file; every verdict equals the one "
-             "its checks imply",
+                 "claims_not_reported": missing},
+        rule="some task has results and every claim a task declares has a verdict (checks); every reported ID "
+             "is in the claims file and every verdict equals the one its checks imply (guarantees: bookkeeping)",
     )

@@ -56,6 +56,16 @@ def _horizon(p: Mapping[str, Any], N: int) -> None:
         raise ValueError(f"need 1 <= N < n_samples, got N={N}, n_samples={p['n_samples']}")
 
 
+def _seeds(p: Mapping[str, Any]) -> None:
+    """``seeds``: at least two distinct integers (a paired comparison over seeds needs two, B2)."""
+    if "seeds" not in p:
+        return
+    seeds = p["seeds"]
+    if not isinstance(seeds, list) or len(seeds) < 2 or len(set(seeds)) != len(seeds) or not all(
+            isinstance(s, int) for s in seeds):
+        raise ValueError(f"seeds must list at least two distinct integers, got {seeds!r}")
+
+
 def _grids(p: Mapping[str, Any]) -> None:
     """Every ``*_range`` is a non-empty grid ``{start: step: stop}``."""
     for name, value in p.items():
@@ -72,6 +82,11 @@ def _spiral(p: Mapping[str, Any]) -> None:
                          f"n_samples={p['n_samples']}")
     _at_least(p, 1, "iterations", "batch_size", "batch_time")
     _sizes(p, "hidden")
+    _seeds(p)
+    if "noise_sweep" in p:  # S3 is judged at noise_std, against the noise-free control
+        sweep, std = p["noise_sweep"], p["noise_std"]
+        if 0.0 not in sweep or std not in sweep or std <= 0:
+            raise ValueError(f"noise_sweep must hold 0 and the judged level noise_std > 0, got {sweep} and {std}")
 
 
 def _theory(p: Mapping[str, Any]) -> None:
@@ -109,6 +124,7 @@ def _bottle(p: Mapping[str, Any]) -> None:
     _gain_and_decay(p, 6, BOTTLE_TS, p["N"])
     _at_least(p, 1, "iterations", "batch_size", "batch_time")
     _sizes(p, "hidden")
+    _seeds(p)
     if p["data"] == "real":
         folder = Path(p.get("data_dir") or ".") / "bottle"
         missing = [name for name in BOTTLE_FILES if not (folder / name).is_file()]

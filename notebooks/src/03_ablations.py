@@ -55,6 +55,7 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.rules import sec3
 
 # refuse bad settings before any work: gains (Theorem 1, Eq. (25)), decay rates, horizon, switch time
 gains = F.colon_range(*gain_range)
@@ -94,7 +95,10 @@ gen = F.make_generator(seed + 1)  # the noise of S7 and S9, drawn in that order
 # steps *away from the nominal level* (to the left and to the right) in which the error increases is at least
 # `trend_fraction` = 0.8 — checked on the noisy map and on the noise-free map. (ii) *Under noise the error first
 # falls, then rises with the gain*: for more than half of the levels the noisy error is smallest at an
-# interior gain (neither $0$ nor the largest).
+# interior gain (neither $0$ nor the largest). (iii) *The rise is the noise's doing*: for more than half of the
+# levels the best gain with noise is lower than the best gain of the noise-free control (each layer amplifies
+# the noise by about $1 + T_s L_i$, Sec. 3.3), so the shape is not there without noise as well.
+# Deviation: the map runs at $\beta = 0.02$ (the release's value); the paper does not say Fig. 3 uses decay.
 
 # %%
 centre = int((levels - torch.tensor(nominal, dtype=torch.float64)).abs().sum(-1).argmin())
@@ -193,7 +197,9 @@ fig_s8 = F.save_figure(fig, out, "figS9_residual_levels")
 # where the error turns, beyond the paper's grid (reported, not part of the verdict).
 #
 # **Rule.** "First falls, then rises": the RMSE at $\beta = 0.01$ is below that at $\beta = 0$, and the
-# smallest RMSE over the paper's grid is at an interior $\beta$ (neither $0$ nor $0.06$).
+# smallest RMSE over the paper's grid is at an interior $\beta$ (neither $0$ nor $0.06$). The noise mechanism
+# (the paper: the rise comes from slower convergence, the fall from the noise): the best $\beta$ with noise is
+# larger than the best $\beta$ of the noise-free control.
 
 # %%
 x9 = F.Spiral(*test).simulate(torch.tensor(x0), t).float()
@@ -230,9 +236,13 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # **Rule (fixed before measuring).** Steady levels: the largest error over the `steady_window` = 1 s before the
 # switch and over the last 1 s of the run; band = `band_factor` (2) $\times$ the larger of the two (the residual,
 # hence the steady error, differs before and after the switch). Re-convergence time: from the switch to the
-# first sample after which the error stays in the band until the end. "Attenuated quickly": the observer error
-# $\|\tilde x\|$ and the change-rate error $\|\tilde f\|$ both re-converge within `settle_threshold` = 0.5 s, and
-# after that the feedback change-rate error is on average below the neural ODE's.
+# first sample after which the error stays in the band until the end. "Attenuated quickly", for each of the
+# observer error $\|\tilde x\|$, the change-rate error $\|\tilde f\|$ and the $N$-step prediction error: the
+# error first *leaves* the band after the switch (otherwise there is nothing to attenuate and the check would be
+# vacuous), then re-converges within `settle_threshold` = 0.5 s; and after that the feedback change-rate error is
+# on average below the neural ODE's. The $N$-step error is indexed by the time the prediction *starts*: a
+# prediction issued before the switch cannot know of it, so its recovery is timed from the predictions issued
+# after it (the same error indexed by the predicted time is reported as well).
 
 # %%
 sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
@@ -249,9 +259,14 @@ s10 = {f"{k}_{name}": v for name, r in [("x", r_x), ("f", r_f)] for k, v in r.it
 # %%
 z_fb10 = F.cascade_predict(model, x10, Ts, N, L, beta)
 z_nn10 = F.rollout_predict(model, x10, Ts, N, method="euler")
-e_ms = F.n_step_errors(z_fb10, x10, N)  # indexed by the predicted time t_{k+N}; same rule, reported only
+e_ms = F.n_step_errors(z_fb10, x10, N)  # row k: the prediction started at t_k
+r_ms = F.reconvergence(t[:-N], e_ms, t_switch, window=steady_window, band_factor=band_factor)
+s10 |= {f"{k}_multistep": v for k, v in r_ms.items()}
 s10["time_multistep_predicted_time"] = F.reconvergence(t[N:], e_ms, t_switch, window=steady_window,
                                                      band_factor=band_factor)["time"]
+peaks = {"x": float(e_x[t >= t_switch].max()), "f": float(e_f[t >= t_switch].max()),
+         "multistep": float(e_ms[t[:-N] >= t_switch].max())}
+s10 |= {f"peak_{k}": v for k, v in peaks.items()}
 late = t >= t_switch + settle_threshold
 s10 |= {"rate_err_after_feedback": float(e_f[late].mean()), "rate_err_after_neural_ode": float(e_nn[late].mean()),
         "peak_rate_err_feedback": float(e_f[t >= t_switch].max())}
@@ -286,37 +301,39 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # The rules are the ones stated in each section; each check is computed from the numbers above.
 
 # %% [tags: nbval-check-output]
-trend = f"(frac>={trend_fraction:g})"
 claims = [
-    F.claim_result("S7", checks={
-        f"error_grows_with_uncertainty_noisy{trend}": s7["outward_increase_noisy"] >= trend_fraction,
-        f"error_grows_with_uncertainty_noise_free{trend}": s7["outward_increase_noise_free"] >= trend_fraction,
-        "noisy_error_falls_then_rises_with_gain(most_levels)": s7["levels_with_interior_minimum"] > len(levels) / 2},
-        numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()},
-        rule=f"fraction of outward steps from the nominal level with growing error >= {trend_fraction:g} (noisy and "
-             "noise-free maps); noisy error minimal at an interior gain for more than half the levels", figure=fig_s7)]
+    F.claim_result("S7", **sec3.s7(outward_noisy=s7["outward_increase_noisy"],
+                                   outward_noise_free=s7["outward_increase_noise_free"],
+                                   levels_interior_min_noisy=s7["levels_with_interior_minimum"], n_levels=len(levels),
+                                   best_gain_noisy=s7["best_gain_noisy_per_level"],
+                                   best_gain_noise_free=s7["best_gain_noise_free_per_level"],
+                                   trend_fraction=trend_fraction),
+                   numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()}, figure=fig_s7,
+                   headline=F.headline_number("levels with an interior best gain, noisy",
+                                              s7["levels_with_interior_minimum"]))]
 
 # %%
-n_lv = len(res_levels)
 claims += [
-    F.claim_result("S8", checks={f"rate_better_at_all_{n_lv}_levels": s8["levels_rate_better"] == n_lv,
-                                 f"multistep_better_at_all_{n_lv}_levels": s8["levels_multistep_better"] == n_lv},
-                   numbers=s8, rule="feedback error below the neural ODE's at every residual level (change-rate RMSE; "
-                                    "mean N-step error)", figure=fig_s8),
-    F.claim_result("S9", checks={"falls_at_first": s9["rmse_noisy"][1] < s9["rmse_noisy"][0],
-                                 "interior_minimum": 0 < int(rmse9.argmin()) < len(betas) - 1},
-                   numbers=s9, rule="noisy N-step RMSE lower at the second beta than at beta = 0; smallest at an "
-                                    "interior beta of the paper's grid", figure=fig_s9)]
+    F.claim_result("S8", **sec3.s8(rate_neural_ode=s8["rate_rmse_neural_ode"], rate_feedback=s8["rate_rmse_feedback"],
+                                   err_N_neural_ode=s8[f"mean_err_N{N}_neural_ode"],
+                                   err_N_feedback=s8[f"mean_err_N{N}_feedback"]),
+                   numbers=s8, figure=fig_s8,
+                   headline=F.headline_number("levels where the feedback wins the N-step error",
+                                              s8["levels_multistep_better"])),
+    F.claim_result("S9", **sec3.s9(beta=s9["beta"], rmse_noisy=s9["rmse_noisy"], rmse_noise_free=s9["rmse_noise_free"]),
+                   numbers=s9, figure=fig_s9, headline=F.headline_number("best beta with noise", s9["best_beta"]))]
 
 # %%
-within = f"within_{settle_threshold:g}s"
 claims += [
-    F.claim_result("S10", checks={
-        f"observer_error_reconverges_{within}": s10["time_x"] <= settle_threshold,
-        f"rate_error_reconverges_{within}": s10["time_f"] <= settle_threshold,
-        "rate_error_below_neural_ode_after": s10["rate_err_after_feedback"] < s10["rate_err_after_neural_ode"]},
-        numbers=s10, rule=f"errors back within {band_factor:g}x their steady level within {settle_threshold:g} s of "
-                          "the switch; feedback rate error then below the neural ODE's", figure=fig_s10),
+    F.claim_result("S10", **sec3.s10(state={"band": s10["band_x"], "peak": s10["peak_x"], "time": s10["time_x"]},
+                                     rate={"band": s10["band_f"], "peak": s10["peak_f"], "time": s10["time_f"]},
+                                     multistep={"band": s10["band_multistep"], "peak": s10["peak_multistep"],
+                                                "time": s10["time_multistep"]},
+                                     rate_err_after_feedback=s10["rate_err_after_feedback"],
+                                     rate_err_after_neural_ode=s10["rate_err_after_neural_ode"],
+                                     settle_threshold=settle_threshold),
+                   numbers=s10, figure=fig_s10,
+                   headline=F.headline_number("change-rate error back in its band after", s10["time_f"], unit="s")),
 ]
 
 # %%

@@ -52,6 +52,8 @@ d1_factor = 1.5
 d2_factor = 1.5
 d3_ratio = 0.5
 d3_flat = 0.1
+heldout_flip = [1.0, -1.0, 1.0]
+heldout_min_distance = 3.0
 
 # %%
 import fnnlib as F
@@ -66,6 +68,7 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.rules import sec4
 
 task_start = time.perf_counter()
 # refuse bad settings before any work
@@ -110,8 +113,8 @@ print(f"{len(cases)} randomized cases, {dr_n_samples} samples each over {float(t
 # the data sets $\{x_{i,j-1}, \hat x_{i,j-1}, x^*_{i,j}\}$, and descend Eq. (12) — the mean of
 # $\|x^*_{i,j} - x_{i,j}\|$ with the Euler prediction $x_{i,j} = x_{i,j-1} + T_s(f_{neural}(x_{i,j-1}) +
 # h_{neural}(x_{i,j-1} - \hat x_{i,j-1}))$ — on random mini-batches from all cases. The rollout is refreshed every
-# `refresh_every` iterations (paper profile: 10; every iteration costs about 0.2 s, i.e. ~7 min for 2000 iterations,
-# against 2 s for 10 — see the report). The frozen $f_{neural}$ is checked to be bitwise unchanged.
+# `refresh_every` iterations (paper profile: 10; what one refresh costs, and what refreshing at every iteration
+# would cost, is measured below). The frozen $f_{neural}$ bitwise unchanged is a guarantee of the run.
 #
 # The domain-randomized neural ODE has the nominal model's architecture and recipe (the `spiral` task's
 # parameters) and is trained on the same 20 cases.
@@ -132,8 +135,14 @@ hist_dr = F.train_neural_ode(model_dr, t_dr, X_dr, recipe, seed=seed)
 F.save_checkpoint(out / "neural_ode_dr.pt", model_dr, {"seed": seed, "iterations": recipe.iterations,
                                                        "method": recipe.method, "adjoint": recipe.adjoint,
                                                        "final_loss": hist_dr.loss[-1]})
+t0 = time.perf_counter()
+F.NeuralFeedbackObserver(model, h, float(dr_Ts), 2).observe(X_dr)  # one refresh of Alg. 1: all cases at once
+refresh_s = time.perf_counter() - t0
 print(f"feedback: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/iteration), frozen neural ODE "
       f"unchanged: {frozen_unchanged}; domain-randomized neural ODE: {hist_dr.seconds:.1f} s")
+print(f"one refresh of the rollout costs {1000 * refresh_s:.0f} ms: refreshing at every one of the {fb_iterations} "
+      f"iterations would add about {refresh_s * fb_iterations / 60:.1f} min, every {refresh_every} adds "
+      f"{refresh_s * fb_iterations / refresh_every:.1f} s")
 
 # %% [markdown]
 # ## The nominal task (Fig. 5a-b, claims D1 and D2)
@@ -143,7 +152,8 @@ print(f"feedback: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/ite
 #
 # **Rules (fixed before computing).** D1: the domain-randomized model's relative RMSE exceeds `d1_factor` = 1.5
 # $\times$ the nominal model's. D2: the frozen model with the neural feedback has a relative RMSE at most
-# `d2_factor` = 1.5 $\times$ the nominal model's, and the frozen model is bitwise unchanged by training.
+# `d2_factor` = 1.5 $\times$ the nominal model's. The frozen model bitwise unchanged by training is a guarantee
+# (it holds by construction; a failure stops the notebook), not a check.
 
 # %%
 nf = F.NeuralFeedbackObserver(model, h, Ts, 2)
@@ -196,8 +206,15 @@ fig_c = F.save_figure(fig, out, "fig5c_feedback_loss")
 # ($L = 20$, $\beta = 0.02$) is shown beside them (reported, not part of the verdict). The feedback was trained at
 # $T_s = 0.02$ and runs here at $0.01$: Eq. (8) is the Euler step of $\dot{\hat x} = \hat f$, so $h$ carries over.
 #
+# The S8 levels sit next to the domain-randomized training cases (in units of the training grid's steps, level
+# $j$ has $\omega$ and $\varepsilon$ of case $j + 4$ and $\eta$ of case $j + 6$). *Held-out levels* away from them:
+# the same offsets with the $\eta$ offset reversed (`heldout_flip`), which leaves the line the 20 cases lie on;
+# those at least `heldout_min_distance` training steps (Euclidean, in step units) from every case are judged.
+# The cascade runs without decay (the paper gives no decay for the neural feedback; see the paper-vs-release page).
+#
 # **Rule (fixed before computing).** At each level, the neural feedback beats the neural ODE when both its
-# change-rate RMSE and its mean $N$-step error are lower. Reproduced if at all levels, partly if at some.
+# change-rate RMSE and its mean $N$-step error are lower. Checks: it does at every S8 level; and at every
+# held-out level.
 
 # %%
 systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
@@ -243,30 +260,60 @@ for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N
     ax.legend(fontsize=8)
 fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
 
+# %%
+steps = torch.tensor([dr_omega_range[1], dr_eta_range[1], dr_eps_range[1]], dtype=torch.float64)
+flipped = F.offset_spirals(residual_base, res_levels * torch.tensor(heldout_flip, dtype=res_levels.dtype))
+p_flip = torch.tensor([[s.omega, s.eta, s.eps] for s in flipped], dtype=torch.float64)
+dist = torch.cdist(p_flip / steps, cases.to(torch.float64) / steps).amin(-1)  # to the nearest training case
+far = dist >= heldout_min_distance
+held = [s for s, keep in zip(flipped, far.tolist()) if keep]
+if not held:
+    raise ValueError(f"no held-out level is {heldout_min_distance} training steps from the cases; distances "
+                     f"{dist.tolist()}")
+x_h = F.simulate_levels([F.Spiral(*torch.tensor([s.omega, s.eta, s.eps]).tolist()) for s in held], x0_t, t,
+                        exact=True).float()
+f_h = torch.stack([s.rate(x) for s, x in zip(held, x_h)])
+with torch.no_grad():
+    f_h_nn = F.eval_field(model, x_h)
+held_out = {"params": p_flip[far].tolist(), "distance_steps": dist[far].tolist(),
+            "all_distances_steps": dist.tolist(),
+            "rate_rmse_neural_ode": F.rmse_over_time(f_h_nn, f_h).tolist(),
+            "rate_rmse_neural_feedback": F.rmse_over_time(nf.observe(x_h).f_hat, f_h).tolist(),
+            f"mean_err_N{N}_neural_ode": F.n_step_errors(F.rollout_predict(model, x_h, Ts, N, method="euler"), x_h,
+                                                         N).mean(-1).tolist(),
+            f"mean_err_N{N}_neural_feedback": F.n_step_errors(nf.predict(x_h, N), x_h, N).mean(-1).tolist()}
+{k: np.round(v, 3).tolist() for k, v in held_out.items()}  # held-out levels: parameters, distances, errors
+
 # %% [markdown]
 # ## Verdicts
 
 # %% [tags: nbval-check-output]
 claims = [
-    F.claim_result("D1", checks={"dr_worse_than_nominal_by_factor": d12["rel_rmse_dr_neural_ode"]
-                                 > d1_factor * d12["rel_rmse_nominal_neural_ode"]},
-                   numbers=d12, rule=f"domain-randomized relative change-rate RMSE on the nominal task > {d1_factor:g}x "
-                                     "the nominal model's", figure=fig_ab),
-    F.claim_result("D2", checks={"feedback_within_factor_of_nominal": d12["rel_rmse_neural_feedback"]
-                                 <= d2_factor * d12["rel_rmse_nominal_neural_ode"],
-                                 "frozen_neural_ode_unchanged": frozen_unchanged},
-                   numbers=d12, rule=f"frozen neural ODE + neural feedback relative RMSE <= {d2_factor:g}x the nominal "
-                                     "model's; frozen parameters bitwise unchanged", figure=fig_ab)]
+    F.claim_result("D1", **sec4.d1(rel_dr=d12["rel_rmse_dr_neural_ode"], rel_nominal=d12["rel_rmse_nominal_neural_ode"],
+                                   factor=d1_factor),
+                   numbers=d12, figure=fig_ab,
+                   headline=F.headline_number("nominal rate error, domain-randomized / nominal neural ODE",
+                                              d12["rel_rmse_dr_neural_ode"] / d12["rel_rmse_nominal_neural_ode"])),
+    F.claim_result("D2", **sec4.d2(rel_feedback=d12["rel_rmse_neural_feedback"],
+                                   rel_nominal=d12["rel_rmse_nominal_neural_ode"], frozen_unchanged=frozen_unchanged,
+                                   factor=d2_factor),
+                   numbers=d12, figure=fig_ab,
+                   headline=F.headline_number("nominal rate error, neural feedback / nominal neural ODE",
+                                              d12["rel_rmse_neural_feedback"] / d12["rel_rmse_nominal_neural_ode"]))]
 
 # %%
 claims += [
-    F.claim_result("D3", checks={"last_below_ratio_of_first": d3["ratio"] < d3_ratio,
-                                 "last_window_flat": abs(d3["last_window_trend_relative"]) < d3_flat},
-                   numbers=d3, rule=f"mean loss of the last 10 % < {d3_ratio:g}x that of the first 10 %, and the last "
-                                    f"10 % change by < {d3_flat:.0%} along their fitted line", figure=fig_c),
-    F.claim_result("D4", checks={f"level_{j}": bool(b) for j, b in enumerate(better.tolist())},
-                   numbers=d4, rule=f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error, "
-                                    "per level; reproduced at all levels", figure=fig_d4),
+    F.claim_result("D3", **sec4.d3(ratio=d3["ratio"], trend=d3["last_window_trend_relative"], ratio_max=d3_ratio,
+                                   flat=d3_flat),
+                   numbers=d3, figure=fig_c, headline=F.headline_number("loss, last / first 10 %", d3["ratio"])),
+    F.claim_result("D4", **sec4.d4(rate_neural_feedback=rate["neural_feedback"], rate_neural_ode=rate["neural_ode"],
+                                   err_N_neural_feedback=ms["neural_feedback"], err_N_neural_ode=ms["neural_ode"],
+                                   heldout_rate_neural_feedback=held_out["rate_rmse_neural_feedback"],
+                                   heldout_rate_neural_ode=held_out["rate_rmse_neural_ode"],
+                                   heldout_err_N_neural_feedback=held_out[f"mean_err_N{N}_neural_feedback"],
+                                   heldout_err_N_neural_ode=held_out[f"mean_err_N{N}_neural_ode"], N=N),
+                   numbers=d4 | {"held_out": held_out}, figure=fig_d4,
+                   headline=F.headline_number("S8 levels won (both metrics)", d4["levels_both_better"])),
 ]
 
 # %%
@@ -274,7 +321,8 @@ task_seconds = time.perf_counter() - task_start
 F.write_results(out, task="neural_feedback", profile=profile, claims=claims,
                 metrics={"task_seconds": task_seconds, "feedback_train_seconds": hist_fb.seconds,
                          "feedback_ms_per_iteration": hist_fb.ms_per_iteration, "dr_train_seconds": hist_dr.seconds,
-                         "refresh_every": refresh_every, "cascade_seconds": cascade_s})
+                         "refresh_every": refresh_every, "cascade_seconds": cascade_s,
+                         "refresh_seconds": refresh_s})
 for c in claims:
     print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
 print(f"task time (after kernel start): {task_seconds:.1f} s")

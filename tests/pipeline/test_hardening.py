@@ -62,6 +62,9 @@ def test_data_files_enter_the_fingerprint_not_the_data_path(make_pipeline: MakeP
     ("L", 250.0, "unstable"),
     ("N", 0, "N"),
     ("iterations", 0, "iterations must be an integer >= 1"),
+    ("seeds", [0], "seeds must list at least two distinct integers"),
+    ("seeds", [1, 1], "seeds must list at least two distinct integers"),
+    ("noise_std", 0.03, "noise_sweep must hold 0 and the judged level"),
 ])
 def test_notebook_value_checks_run_before_anything(name: str, value: object, message: str,
                                                    tmp_path: Path) -> None:

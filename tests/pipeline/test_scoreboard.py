@@ -8,7 +8,7 @@ import pytest
 
 from fnnbook.scoreboard import (NOT_RUN, headline_of, plot_verdicts, read_claims, render_scoreboard, score_rows,
                                short_title, verdict_counts)
-from fnnlib.results import claim_result, headline_number
+from fnnlib.results import GuaranteeFailed, claim_result, headline_number
 
 CLAIMS = """# What the book must reproduce
 
@@ -156,7 +156,25 @@ def test_self_check_flags_a_verdict_not_from_its_checks() -> None:
     good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")
     assert self_check(claims, {"task": {"claims": [good]}})["verdict"] == "reproduced"
     forged = {**good, "checks": {"a": False}}  # verdict says reproduced, checks say otherwise
-    result = self_check(claims, {"task": {"claims": [forged]}})
-    assert result["verdict"] == "partly"
-    assert result["numbers"]["verdicts_not_from_checks"] == ["S1"]
+    with pytest.raises(GuaranteeFailed, match=r"verdicts not from their checks \['S1'\]"):
+        self_check(claims, {"task": {"claims": [forged]}})
+    with pytest.raises(GuaranteeFailed, match=r"not in the claims file \['X9'\]"):
+        self_check(claims, {"task": {"claims": [{**good, "id": "X9"}]}})
     assert self_check(claims, {})["checks"]["results_found"] is False
+    assert self_check(claims, {})["verdict"] == "not reproduced"
+
+
+def test_self_check_b3_fails_when_a_declared_claim_has_no_result() -> None:
+    """B3's checks can fail on a plausible run: a task that did not run (e.g. data missing)."""
+    from fnnlib.results import claim_result
+    from fnnbook.scoreboard import Claim, self_check
+
+    claims = [Claim(id=i, group="g", text="t", figure="") for i in ("S1", "O1", "B3")]
+    good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")
+    result = self_check(claims, {"spiral": {"claims": [good]}}, {"spiral": ["S1"], "bottle": ["O1"]})
+    assert result["verdict"] == "partly"
+    assert result["checks"] == {"results_found": True, "every_declared_claim_reported": False}
+    assert result["numbers"]["claims_not_reported"] == ["O1"]
+    assert set(result["guarantees"]) == {"ids_known", "verdicts_follow_checks"}
+    passing = self_check(claims, {"spiral": {"claims": [good]}}, {"spiral": ["S1"]})
+    assert passing["verdict"] == "reproduced"

@@ -1,0 +1,59 @@
+"""Rules of the Sec. 5.1 claims O1-O2 (the thrown bottle, Fig. 6, S2, S3).
+
+Errors are 0.5 s position errors, one row per test throw (one column per seed).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fnnbook.rules._compare import Value, beats, per_seed
+
+Rule = dict[str, Any]
+
+
+def _throws(value: Any, name: str) -> np.ndarray:
+    """A (throws, seeds) array."""
+    arr = np.asarray(value, dtype=float)
+    arr = arr[:, None] if arr.ndim == 1 else arr
+    if arr.ndim != 2 or arr.shape[0] < 2 or not np.isfinite(arr).all():
+        raise ValueError(f"O1: {name} needs finite errors of shape (throws >= 2,) or (throws, seeds)")
+    return arr
+
+
+def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> Rule:
+    """O1 (Fig. 6): feedback < neural ODE < drag model in 0.5 s position error.
+
+    ``feedback``, ``neural_ode``: (throws, seeds); ``drag`` (throws,) or (throws, 1): the fitted drag model
+    has no seed.  Each "a < b" is judged twice with the one paired rule
+    (:func:`fnnlib.stats.paired_win`): per throw (errors averaged over seeds, one pair per throw, so a win
+    needs all throws but one), and over seeds (errors averaged over throws; skipped with one seed).
+    """
+    fb, nn, dr = _throws(feedback, "feedback"), _throws(neural_ode, "neural_ode"), _throws(drag, "drag")
+    if fb.shape != nn.shape or dr.shape[0] != fb.shape[0]:
+        raise ValueError(f"O1: shapes {fb.shape}, {nn.shape}, {dr.shape} do not pair throw by throw")
+    checks = {"feedback<neural_ode per throw": beats(fb.mean(1), nn.mean(1)),
+              "neural_ode<drag per throw": beats(nn.mean(1), dr.mean(1))}
+    S = fb.shape[1]
+    if S > 1:
+        checks |= {"feedback<neural_ode over seeds": beats(fb.mean(0), nn.mean(0)),
+                   "neural_ode<drag over seeds": beats(nn.mean(0), np.full(S, dr.mean()))}
+    n = fb.shape[0]
+    return {"checks": checks, "guarantees": {},
+            "rule": f"a < b when lower on >= {n - 1} of the {n} throws and the 90 % interval of the mean paired "
+                    "difference excludes 0" + (f"; and the same over {S} seeds on the mean over throws" if S > 1
+                                               else "; one seed (single trained network)")}
+
+
+def o2(*, acc_rmse_feedback: Value, acc_rmse_neural_ode: Value, error_feedback: Value, travel: float,
+       overlap_fraction: float = 0.1) -> Rule:
+    """O2 (Figs. S2, S3): the feedback's learned accelerations are closer to the measured ones than the neural
+    ODE's, and its predicted positions almost overlap the truth (mean error < ``overlap_fraction`` of the
+    distance flown in 0.5 s, in every seed)."""
+    return {"checks": {"feedback_acc_closer": beats(acc_rmse_feedback, acc_rmse_neural_ode),
+                       "positions_overlap": bool((per_seed(error_feedback) < overlap_fraction * travel).all())},
+            "guarantees": {},
+            "rule": "feedback acceleration RMSE beats the neural ODE's; mean feedback error < "
+                    f"{overlap_fraction:.0%} of the distance flown in 0.5 s in every seed"}

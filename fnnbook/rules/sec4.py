@@ -1,0 +1,74 @@
+"""Rules of the Sec. 4 claims D1-D4 (the neural feedback of Eq. (12), Alg. 1, Fig. 5, S10).
+
+Every function takes measured numbers (one value, or one value per seed) and returns
+``{"checks", "guarantees", "rule"}`` for :func:`fnnlib.results.claim_result`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from fnnbook.rules._compare import Value, beats, per_seed, seeds_note
+
+Rule = dict[str, Any]
+
+
+def d1(*, rel_dr: Value, rel_nominal: Value, factor: float = 1.5) -> Rule:
+    """D1 (Fig. 5a): the domain-randomized neural ODE's relative change-rate RMSE on the nominal task exceeds
+    ``factor`` x the nominal model's."""
+    return {"checks": {"dr_worse_than_nominal_by_factor": beats(factor * per_seed(rel_nominal), rel_dr)},
+            "guarantees": {},
+            "rule": f"domain-randomized relative change-rate RMSE on the nominal task > {factor:g}x the nominal "
+                    "neural ODE's" + seeds_note(rel_dr)}
+
+
+def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool, factor: float = 1.5) -> Rule:
+    """D2 (Fig. 5b): the frozen neural ODE + neural feedback keeps the nominal accuracy: relative RMSE at most
+    ``factor`` x the nominal model's in every seed.  The frozen model being bitwise unchanged by the training
+    of the feedback is a guarantee (it is frozen by construction)."""
+    ok = bool((per_seed(rel_feedback) <= factor * per_seed(rel_nominal)).all())
+    return {"checks": {"feedback_within_factor_of_nominal": ok},
+            "guarantees": {"frozen_neural_ode_unchanged": bool(frozen_unchanged)},
+            "rule": f"frozen neural ODE + neural feedback relative RMSE <= {factor:g}x the nominal neural ODE's in "
+                    "every seed; the frozen model bitwise unchanged is a guarantee" + seeds_note(rel_feedback)}
+
+
+def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1) -> Rule:
+    """D3 (Fig. 5c): the feedback's training loss converges: last 10 % mean < ``ratio_max`` x first 10 % mean,
+    and the last 10 % flat (least-squares trend < ``flat`` of their mean), in every seed."""
+    return {"checks": {"last_below_ratio_of_first": bool((per_seed(ratio) < ratio_max).all()),
+                       "last_window_flat": bool((np.abs(per_seed(trend)) < flat).all())},
+            "guarantees": {},
+            "rule": f"mean loss of the last 10 % < {ratio_max:g}x that of the first 10 %, and the last 10 % change "
+                    f"by < {flat:.0%} of their mean, in every seed" + seeds_note(ratio)}
+
+
+def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any) -> list[bool]:
+    """Per level: the neural feedback beats the neural ODE in change rate and in N-step error."""
+    arrs = [np.asarray(v, dtype=float) for v in (rate_nf, rate_nn, ms_nf, ms_nn)]
+    if len({a.shape for a in arrs}) != 1 or arrs[0].ndim not in (1, 2) or arrs[0].size == 0:
+        raise ValueError("D4: one value per level (and per seed) for every metric")
+    rows = [a if a.ndim == 2 else a[:, None] for a in arrs]
+    return [beats(rows[0][j], rows[1][j]) and beats(rows[2][j], rows[3][j]) for j in range(rows[0].shape[0])]
+
+
+def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback: Any, err_N_neural_ode: Any,
+       heldout_rate_neural_feedback: Any, heldout_rate_neural_ode: Any, heldout_err_N_neural_feedback: Any,
+       heldout_err_N_neural_ode: Any, N: int) -> Rule:
+    """D4 (Fig. S10): the neural feedback beats the neural ODE at the 12 residual levels of S8 -- which sit next
+    to the domain-randomized training cases -- and at held-out levels away from them.
+
+    Arrays: one row per level (one column per seed).  A level is won when both the change-rate RMSE and the
+    mean ``N``-step error are lower.
+    """
+    s8 = _both_better(rate_neural_feedback, rate_neural_ode, err_N_neural_feedback, err_N_neural_ode)
+    held = _both_better(heldout_rate_neural_feedback, heldout_rate_neural_ode, heldout_err_N_neural_feedback,
+                        heldout_err_N_neural_ode)
+    return {"checks": {f"all_{len(s8)}_S8_levels": all(s8), f"all_{len(held)}_heldout_levels": all(held)},
+            "guarantees": {},
+            "rule": f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error at every S8 "
+                    f"level ({sum(s8)} of {len(s8)}) and at every held-out level ({sum(held)} of {len(held)})"
+                    + seeds_note(np.asarray(rate_neural_feedback, dtype=float).reshape(len(s8), -1)[0])}

@@ -1,0 +1,48 @@
+"""NeuralODEEnsemble: E networks side by side on the stacked state, each exactly as it would run alone."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import fnnlib as F
+
+
+@pytest.mark.parametrize("batch", [5, F.NeuralODEEnsemble.BMM_MAX_BATCH + 1])  # both evaluation paths
+def test_members_start_from_their_seeds_weights_and_evaluate_alone(batch: int) -> None:
+    ens = F.NeuralODEEnsemble(2, [8, 8], "tanh", [3, 7])
+    x = torch.randn(batch, 2)
+    out = F.split_members(ens(0.0, F.stack_members(x, 2)), 2)
+    for e, s in enumerate([3, 7]):
+        F.seed_everything(s)
+        alone = F.NeuralODE(2, [8, 8], "tanh")
+        torch.testing.assert_close(out[e], alone(0.0, x))
+        torch.testing.assert_close(ens.member(e)(0.0, x), alone(0.0, x))
+
+
+def test_cascade_on_the_stacked_state_equals_each_member_alone() -> None:
+    ens = F.NeuralODEEnsemble(2, [8], "relu", [0, 1, 2])
+    x = torch.randn(40, 2)
+    z = F.split_members(F.cascade_predict(ens, F.stack_members(x, 3), 0.01, 5, 20.0, 0.02), 3)
+    for e in range(3):
+        torch.testing.assert_close(z[e], F.cascade_predict(ens.member(e), x, 0.01, 5, 20.0, 0.02), atol=1e-5, rtol=0)
+
+
+def test_member_gradients_do_not_mix() -> None:
+    ens = F.NeuralODEEnsemble(2, [4], "relu", [0, 1])
+    x = F.stack_members(torch.randn(6, 2), 2)
+    out = F.split_members(ens(0.0, x), 2)
+    out[1].sum().backward()  # a loss on member 1 only
+    assert all(float(p.grad[0].abs().max()) == 0.0 for p in [*ens.weights, *ens.biases])
+    assert any(float(p.grad[1].abs().max()) > 0.0 for p in ens.weights)
+
+
+@pytest.mark.parametrize("seeds", [[], [1, 1]])
+def test_bad_seeds_are_refused(seeds: list[int]) -> None:
+    with pytest.raises(ValueError, match="seed"):
+        F.NeuralODEEnsemble(2, [4], "relu", seeds)
+
+
+def test_wrong_state_width_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"\(batch, 4\)"):
+        F.NeuralODEEnsemble(2, [4], "relu", [0, 1])(0.0, torch.randn(3, 2))

@@ -1,0 +1,62 @@
+"""Rules of D1-D4: for every claim, numbers that must pass and numbers that must fail."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fnnbook.rules import sec4
+from fnnlib.results import GuaranteeFailed, claim_result
+
+
+def verdict(claim_id: str, rule: dict) -> str:
+    return claim_result(claim_id, **rule, numbers={})["verdict"]
+
+
+def test_d1() -> None:
+    assert verdict("D1", sec4.d1(rel_dr=0.2, rel_nominal=0.01)) == "reproduced"
+    assert verdict("D1", sec4.d1(rel_dr=[0.2, 0.3, 0.25, 0.2, 0.22], rel_nominal=[0.01] * 5)) == "reproduced"
+    # worse by only 1.2x in most seeds
+    assert verdict("D1", sec4.d1(rel_dr=[0.012, 0.3, 0.012, 0.012, 0.2], rel_nominal=[0.01] * 5)) == "not reproduced"
+
+
+def test_d2() -> None:
+    r = sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=True)
+    assert verdict("D2", r) == "reproduced" and r["guarantees"] == {"frozen_neural_ode_unchanged": True}
+    # 9.5x off the nominal accuracy: not reproduced (the frozen weights no longer count)
+    assert verdict("D2", sec4.d2(rel_feedback=0.095, rel_nominal=0.01, frozen_unchanged=True)) == "not reproduced"
+    with pytest.raises(GuaranteeFailed, match="frozen_neural_ode_unchanged"):
+        claim_result("D2", **sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=False), numbers={})
+
+
+def test_d3() -> None:
+    assert verdict("D3", sec4.d3(ratio=[0.1] * 5, trend=[0.01, -0.02, 0.0, 0.05, 0.03])) == "reproduced"
+    assert verdict("D3", sec4.d3(ratio=0.1, trend=0.3)) == "partly"  # still falling at the end
+    assert verdict("D3", sec4.d3(ratio=0.9, trend=0.3)) == "not reproduced"
+
+
+def d4_numbers(**over):
+    lo, hi = np.full(12, 0.1), np.full(12, 0.2)
+    base = dict(rate_neural_feedback=lo, rate_neural_ode=hi, err_N_neural_feedback=lo, err_N_neural_ode=hi,
+                heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=hi[:6],
+                heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=hi[:6], N=50)
+    return base | over
+
+
+def test_d4() -> None:
+    assert verdict("D4", sec4.d4(**d4_numbers())) == "reproduced"
+    # one held-out level lost in the N-step error: the held-out check fails
+    held = np.full(6, 0.1)
+    held[3] = 0.3
+    r = sec4.d4(**d4_numbers(heldout_err_N_neural_feedback=held))
+    assert r["checks"] == {"all_12_S8_levels": True, "all_6_heldout_levels": False} and verdict("D4", r) == "partly"
+    # one S8 level lost (11 of 12, the single-seed paper run): no longer "partly" by a count of levels
+    s8 = np.full(12, 0.1)
+    s8[6] = 0.3
+    r = sec4.d4(**d4_numbers(err_N_neural_feedback=s8, heldout_err_N_neural_feedback=held))
+    assert verdict("D4", r) == "not reproduced" and "11 of 12" in r["rule"]
+    # per seed: a level is won only by the paired rule
+    seeds = np.tile([0.1, 0.3, 0.1, 0.3, 0.1], (12, 1))
+    r = sec4.d4(**d4_numbers(rate_neural_feedback=seeds, rate_neural_ode=np.full((12, 5), 0.2),
+                             err_N_neural_feedback=np.full((12, 5), 0.1), err_N_neural_ode=np.full((12, 5), 0.2)))
+    assert r["checks"]["all_12_S8_levels"] is False and "5 seeds" in r["rule"]
