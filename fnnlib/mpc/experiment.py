@@ -10,7 +10,7 @@ the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -21,6 +21,7 @@ from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.flight import FlightResult, fly, tracking_rmse
 from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import AdaptiveNNModel, PredictionModel, paper_models
+from fnnlib.mpc.tuning import GainSelection, select_gain_on_validation
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "FlightTest",
     "acc_pred_rmse",
     "adapnn_flights",
+    "adapnn_gain_on_validation",
     "adapnn_model",
     "disturbance_realisations",
     "fallback_note",
@@ -160,6 +162,20 @@ def adapnn_model(residual: nn.Module, Gamma: float, *, Ts: float) -> AdaptiveNNM
 def adapnn_flights(residual: nn.Module, gammas: Iterable[float], mpc: MPC, test: FlightTest) -> dict[float, FlightResult]:
     """AdapNN flown once per adaptation gain (the paper tunes it "for optimal performance")."""
     return {g: test.fly(adapnn_model(residual, g, Ts=test.Ts), mpc) for g in gammas}
+
+
+def adapnn_gain_on_validation(residual: nn.Module, grid: Sequence[float], refs: Sequence[tuple[Tensor, Tensor]],
+                              truth: Quadrotor, mpc: MPC, *, like: FlightTest, steps: int, rtol: float) -> GainSelection:
+    """AdapNN's gain chosen on validation flights (:func:`~fnnlib.mpc.tuning.select_gain_on_validation`).
+
+    Every reference of ``refs`` is flown for ``steps`` steps on ``truth`` (not the test vehicle) with the loop
+    settings of ``like``; the test flight is never seen.
+    """
+    def fly_fn(gain: float, x_r: Tensor, u_r: Tensor) -> FlightResult:
+        test = replace(like, truth=truth, x_r=x_r, u_r=u_r, steps=int(steps))
+        return test.fly(adapnn_model(residual, gain, Ts=like.Ts), mpc)
+
+    return select_gain_on_validation(fly_fn, grid, refs, rtol=rtol)
 
 
 def speed_runs(models: Iterable[PredictionModel], mpc: MPC, test: FlightTest, repeats: int) -> dict[str, dict[str, Any]]:

@@ -10,6 +10,7 @@ import torch
 
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightTest, acc_pred_rmse, adapnn_flights,
+                                   adapnn_gain_on_validation, adapnn_model,
                                    disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
                                    pooled_speed, speed_runs, speed_summary, theorem2_check, validation_vehicle)
 from fnnlib.mpc.flight import FlightResult, lissajous_reference
@@ -111,15 +112,21 @@ def test_theorem2_check_counts_the_ball_after_the_transient():
     assert out["max_error"] == 2.0
 
 
-def test_adapnn_flights_fly_one_model_per_gain():
+def _tiny(steps: int, N: int = 3, truth=TEST_TRUTH) -> tuple:
+    """A small network, a short Lissajous test on ``truth`` (torch backend) and an as-flown QP with N = 3."""
     torch.manual_seed(0)
     net = AeroResidual((4,), "tanh").double()
-    N, steps = 3, 3
     x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
-    test = FlightTest(Quadrotor(TEST_TRUTH), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend="torch",
+    test = FlightTest(Quadrotor(truth), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend="torch",
                       linearize_method="forward")
     mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
                    theta_max=1.5, solver="OSQP")
+    return net, test, mpc
+
+
+def test_adapnn_flights_fly_one_model_per_gain():
+    steps = 3
+    net, test, mpc = _tiny(steps)
     runs = adapnn_flights(net, [1.0, 8.0], mpc, test)
     assert list(runs) == [1.0, 8.0] and all(r.name == "AdapNN" and r.x.shape == (steps + 1, 12) for r in runs.values())
     assert not np.array_equal(runs[1.0].x, runs[8.0].x)  # the gain is used
@@ -141,3 +148,15 @@ def test_paired_grid_pairs_every_model_over_networks_and_tests():
     assert not np.array_equal(grid["FNN"][0].x, grid["FNN"][2].x)  # another network, the same test
     with pytest.raises(ValueError, match="at least one"):
         paired_grid([], nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+
+
+def test_adapnn_gain_on_validation_flies_the_validation_vehicle_not_the_test() -> None:
+    N, steps = 3, 4
+    net, test, mpc = _tiny(steps, N)
+    x_v, u_v = lissajous_reference(steps + 2, N, Ts=0.02, params=NOMINAL, curve={**PAPER_LISSAJOUS, "r_x": 1.0})
+    val = Quadrotor(validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, 0.5))
+    sel = adapnn_gain_on_validation(net, [0.04, 0.16], [(x_v, u_v)], val, mpc, like=test, steps=steps + 2, rtol=0.0)
+    assert sel.value in (0.04, 0.16) and set(sel.table) == {0.04, 0.16}
+    flown = FlightTest(val, x_v, u_v, steps=steps + 2, Ts=0.02, substeps=1, backend="torch",
+                       linearize_method="forward").fly(adapnn_model(net, 0.16, Ts=0.02), mpc)
+    assert sel.table[0.16]["rmse_per_flight"] == [pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)]
