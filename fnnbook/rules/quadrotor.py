@@ -16,14 +16,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from torch import Tensor
 
+from fnnlib.mpc.experiment import SIX
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
 __all__ = ["SIX", "Rule", "count_trainable", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
            "q5_adaptive", "q6_training_cost"]
-
-SIX = ("Nomi", "Neural", "MLP", "FB", "AdapNN", "FNN")
-"""The six models that Q3 and Q4 rank (Fig. 7, Fig. S8); AdapFNN is Q5's."""
 
 
 class Rule(NamedTuple):

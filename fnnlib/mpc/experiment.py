@@ -213,9 +213,10 @@ def paired_grid(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, tes
     """
     if not members or not tests:
         raise ValueError("need at least one trained network and one test")
-    fixed = {m.name: m for m in paper_models(members[0][1], mlp, **model_settings) if m.name not in CARRYING}
+    models = paper_models(members[0][1], mlp, **model_settings)
+    fixed = {m.name: m for m in models if m.name not in CARRYING}
     fixed_flights = {n: [t.fly(m, mpc) for t in tests] for n, m in fixed.items()}
-    out: dict[str, list[FlightResult]] = {n: [] for n in (*fixed, *CARRYING)}
+    out: dict[str, list[FlightResult]] = {m.name: [] for m in models}  # the paper's order
     for _, net in members:
         ms = {m.name: m for m in paper_models(net, mlp, **model_settings)}
         ms["AdapNN"] = adapnn_model(net, adapnn_gamma, Ts=model_settings["Ts"])

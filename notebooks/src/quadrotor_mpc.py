@@ -310,6 +310,9 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
     for c in costs:
         print(f"{q} {c}: {F.verdict_from_checks(r[c].checks)}; " + "; ".join(
             f"{k.split(': ', 1)[1]} {'holds' if v else 'fails'}" for k, v in r[c].checks.items()))
+        held = r[c].numbers.get("paired", {})
+        print("   holds in " + ", ".join(f"{k}: {w['wins']}/{w['seeds']}" for k, w in held.items())
+              if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the runs")
 
 # %%
 def merged(r):

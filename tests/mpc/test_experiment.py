@@ -143,7 +143,7 @@ def test_paired_grid_pairs_every_model_over_networks_and_tests():
                    theta_max=1.5, solver="OSQP")
     kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Gamma=0.16, Ts=0.02)
     grid = paired_grid(nets, nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
-    assert set(grid) == set(SIX) | {"AdapFNN"} and all(len(v) == 4 for v in grid.values())
+    assert list(grid) == [*SIX, "AdapFNN"] and all(len(v) == 4 for v in grid.values())
     assert grid["Nomi"][0] is grid["Nomi"][2] and not np.array_equal(grid["Nomi"][0].x, grid["Nomi"][1].x)
     assert not np.array_equal(grid["FNN"][0].x, grid["FNN"][2].x)  # another network, the same test
     with pytest.raises(ValueError, match="at least one"):
@@ -160,3 +160,16 @@ def test_adapnn_gain_on_validation_flies_the_validation_vehicle_not_the_test() -
     flown = FlightTest(val, x_v, u_v, steps=steps + 2, Ts=0.02, substeps=1, backend="torch",
                        linearize_method="forward").fly(adapnn_model(net, 0.16, Ts=0.02), mpc)
     assert sel.table[0.16]["rmse_per_flight"] == [pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)]
+
+
+@pytest.mark.parametrize(("change", "match"), [({"u_max_judged": 5.0}, "u_max_judged"), ({"costs": ["paper"]}, "costs"),
+                                               ({"validation_flights": 0}, "validation_flights")])
+def test_mpc_settings_are_checked_before_any_flight(change: dict, match: str) -> None:
+    from fnnlib.settings import check_notebook_settings
+
+    good = {"dt": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
+            "steps": 300, "N": 10, "truth_substeps": 1, "validation_flights": 2, "validation_steps": 300,
+            "disturbance_draws": 2}
+    check_notebook_settings("quadrotor_mpc", good)
+    with pytest.raises(ValueError, match=match):
+        check_notebook_settings("quadrotor_mpc", {**good, **change})
