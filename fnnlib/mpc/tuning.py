@@ -11,6 +11,7 @@ with a seed of their own, and the test flight is flown once with the chosen valu
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -68,7 +69,7 @@ class GainSelection:
     table : dict
         Per gain: ``rmse`` (mean over the validation flights of the per-axis-mean position RMSE, the
         paper's number; inf when a flight diverged), ``rmse_per_flight``, ``fallback_share`` (largest
-        over the flights) and ``diverged`` (any flight marked diverged, :attr:`FlightResult.diverged`, or
+        over the flights), ``fallback_reasons`` (summed over the flights) and ``diverged`` (any flight marked diverged, :attr:`FlightResult.diverged`, or
         refused by ``fly`` with a ValueError as it left the model's domain; then ``error`` holds the message).
     """
 
@@ -128,8 +129,10 @@ def select_gain_on_validation(fly_fn: Callable[[float, Tensor, Tensor], FlightRe
             continue
         per_flight = [tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in flights]
         diverged = any(r.diverged for r in flights)
+        reasons = Counter(k for r in flights for k, n in r.fallback_reasons.items() for _ in range(n))
         table[g] = {"rmse": math.inf if diverged else float(np.mean(per_flight)), "rmse_per_flight": per_flight,
-                    "fallback_share": max(r.fallback_share for r in flights), "diverged": diverged}
+                    "fallback_share": max(r.fallback_share for r in flights), "fallback_reasons": dict(reasons),
+                    "diverged": diverged}
     usable = {g: row["rmse"] for g, row in table.items() if not row["diverged"]}
     if not usable:
         raise ValueError(f"every gain diverged on a validation flight: {table}")

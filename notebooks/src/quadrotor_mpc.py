@@ -146,7 +146,8 @@ gamma_sel = {cost: adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_re
                                              rtol=Gamma_rtol) for cost in costs}
 for cost, sel in gamma_sel.items():
     print(f"{cost}: validation RMSE by Gamma " + ", ".join(
-        f"{g}: {row['rmse']:.3f}{' DIVERGED' if row['diverged'] else ''} (fallback share {row['fallback_share']:.2f})"
+        f"{g}: {row['rmse']:.3f}{' DIVERGED' if row['diverged'] else ''} (fallback share {row['fallback_share']:.2f}"
+        f"{' ' + str(row.get('fallback_reasons')) if row.get('fallback_reasons') else ''})"
         for g, row in sel.table.items()) + f" -> Gamma = {sel.value}")
 
 # %% [markdown]

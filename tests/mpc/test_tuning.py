@@ -29,7 +29,8 @@ def fake_flight(offset: float, x_r: torch.Tensor, n_fallbacks: int = 0) -> Fligh
     x[:, :3] += offset
     z12, z4 = np.zeros((T, 12)), np.zeros((T, 4))
     return FlightResult(name="fake", x=x, u=z4, x_ref=x_ref, xdot_true=z12, xdot_pred=z12, x_tilde=z12, delta=z12,
-                        t_linearize=np.zeros(T), t_solve=np.zeros(T), Ts=PAPER_TS, n_fallbacks=n_fallbacks)
+                        t_linearize=np.zeros(T), t_solve=np.zeros(T), Ts=PAPER_TS, n_fallbacks=n_fallbacks,
+                        fallback_reasons={"not_optimal": n_fallbacks} if n_fallbacks else {})
 
 
 @pytest.fixture(scope="module")
@@ -68,6 +69,8 @@ def test_the_gain_with_the_lowest_validation_rmse_is_chosen_and_diverged_gains_n
     assert sel.table[0.16]["rmse"] == pytest.approx(0.1) and sel.table[0.04]["rmse"] == pytest.approx(0.3)
     assert sel.table[2.56]["diverged"] and math.isinf(sel.table[2.56]["rmse"])
     assert sel.table[2.56]["fallback_share"] == 0.5
+    assert sel.table[2.56]["fallback_reasons"] == {"not_optimal": STEPS // 2 * len(refs)}
+    assert sel.table[0.16]["fallback_reasons"] == {}
     # parsimony: the smallest gain within (1 + rtol) of the best 0.1 (0.04 at 0.3 is within 3.5x, not 2.5x)
     assert select_gain_on_validation(fly_fn, list(error), refs, rtol=1.5).value == 0.16
     assert select_gain_on_validation(fly_fn, list(error), refs, rtol=2.5).value == 0.04
