@@ -5,8 +5,8 @@ One 6 s Lissajous flight (300 steps of 0.02 s, N = 10, Q = diag(100 x3, 50 x6, 1
 models of App. A.5.4 and each configuration (QP implementation x numerics backend and
 linearization method x truth sub-steps). The residual networks are the trained ones of the ``quadrotor_learning`` task when
 ``--learning-dir`` holds them, else freshly initialised networks of the paper's size (2 x 36, tanh:
-the cost per step does not depend on the weights); AdapNN adapts with Gamma = 4, the gain the notebook's
-sweep keeps. Reported per model: median and p95 of
+the cost per step does not depend on the weights); AdapNN adapts with Gamma = Ts * 8 = 0.16, the release's
+effective gain in this library's convention (see :class:`~fnnlib.mpc.models.AdaptiveNNModel`). Reported per model: median and p95 of
 linearize + solve per step, the median of each part, and the whole loop's wall time (truth
 simulation, model updates and bookkeeping included) as a multiple of real time (with --repeats R, the
 step statistics pool all R flights and the loop time is their median).
@@ -103,8 +103,8 @@ def main() -> None:
         mpc = cls(N, Q, R, cost=args.cost, u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
         models = paper_models(residual, mlp, plant=Quadrotor(NOMINAL), L=PAPER_L, beta=PAPER_BETA, N=N,
                               Gamma=PAPER_GAMMA, Ts=TS)
-        # AdapNN with the gain the notebook's sweep keeps (4.0): at the release's 8.0 it diverges at 6 N
-        models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, 4.0), Ts=TS)
+        # AdapNN at the release's effective gain Ts * Gamma_rel (this library's Gamma = 8 runs away at 6 N)
+        models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, TS * PAPER_GAMMA), Ts=TS)
         for model in models:
             runs = [fly(model, mpc, truth, x_r, u_r, steps=args.steps, Ts=TS, substeps=substeps,
                         linearize_method=method if backend == "torch" else None, backend=backend)

@@ -149,7 +149,12 @@ def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
     check_gain(p["L"], 12, Ts)
     if not p["u_max"] or min(p["u_max"]) <= 0:
         raise ValueError(f"u_max must list positive thrust bounds, got {p['u_max']}")
-    _at_least(p, 1, "steps", "N", "speed_repeats", "truth_substeps")
+    if p["u_max_judged"] not in p["u_max"]:
+        raise ValueError(f"u_max_judged = {p['u_max_judged']} must be one of u_max = {p['u_max']}")
+    if not p["costs"] or any(c not in ("as_written", "as_flown") for c in p["costs"]):
+        raise ValueError(f"costs must list 'as_written' and/or 'as_flown', got {p['costs']}")
+    _at_least(p, 1, "steps", "N", "truth_substeps", "validation_flights", "validation_steps")
+    _at_least(p, 0, "disturbance_draws")
 
 
 def _own_system(p: Mapping[str, Any]) -> None:

@@ -2,14 +2,15 @@ r"""The flight test of Sec. 5.2.2 (App. A.5.3-A.5.4, A.9): seven prediction mode
 
 What the ``quadrotor_mpc`` notebook computes, as functions: the QP with the paper's boxes, the flight
 settings shared by every flight (:class:`FlightTest`), the per-model table, the AdapNN gain sweep, the
-speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), the spread over
-the trained networks and the claim checks Q3-Q5.
+speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), the validation
+vehicle and the disturbance realisations, and the flights paired over trained networks x disturbances that
+the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -18,9 +19,10 @@ from torch import Tensor, nn
 from fnnlib.stability import theorem1_balls
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.flight import FlightResult, fly, tracking_rmse
-from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
+from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import AdaptiveNNModel, PredictionModel, paper_models
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+from fnnlib.mpc.tuning import GainSelection, select_gain_on_validation
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
 
 __all__ = [
     "CARRYING",
@@ -30,15 +32,18 @@ __all__ = [
     "FlightTest",
     "acc_pred_rmse",
     "adapnn_flights",
+    "adapnn_gain_on_validation",
     "adapnn_model",
-    "claim_checks",
+    "disturbance_realisations",
+    "fallback_note",
     "flight_row",
     "make_mpc",
-    "seed_spread",
+    "paired_grid",
+    "pooled_speed",
     "speed_runs",
     "speed_summary",
-    "spread_orderings",
     "theorem2_check",
+    "validation_vehicle",
 ]
 
 QP_CLASSES: dict[str, type[OSQPMPC] | type[LinearizedMPC]] = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
@@ -56,17 +61,54 @@ SPEED_TARGETS = {"step_ms_median": 4.0, "real_time_factor": 5.0}
 MPC = OSQPMPC | LinearizedMPC
 
 
-def make_mpc(qp: str, N: int, Q: Sequence[float], R: Sequence[float], *, u_max: float, theta_max: float,
-             solver: str) -> MPC:
+def make_mpc(qp: str, N: int, Q: Sequence[float], R: Sequence[float], *, cost: str, u_max: float,
+             theta_max: float, solver: str) -> MPC:
     """Eq. (28) with diagonal weights ``Q`` (12), ``R`` (4), thrust box ``[0, u_max]`` and ``|Theta| <= theta_max``.
 
-    ``qp`` is a key of :data:`QP_CLASSES`; ``solver`` is passed on (``"OSQP"`` in the paper run).
+    ``qp`` is a key of :data:`QP_CLASSES`; ``cost`` one of :data:`~fnnlib.mpc.linearized.COSTS` (Eq. (28)
+    as written, or the release's weighting); ``solver`` is passed on (``"OSQP"`` in the paper run).
     """
     if qp not in QP_CLASSES:
         raise ValueError(f"qp must be one of {sorted(QP_CLASSES)}, got {qp!r}")
+    if cost not in COSTS:
+        raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
     x_lb = np.r_[np.full(6, -np.inf), np.full(3, -theta_max), np.full(3, -np.inf)]
-    return QP_CLASSES[qp](N, np.asarray(Q), np.asarray(R), u_lb=np.zeros(4), u_ub=np.full(4, u_max), x_lb=x_lb,
-                          x_ub=-x_lb, solver=solver)
+    return QP_CLASSES[qp](N, np.asarray(Q), np.asarray(R), cost=cost, u_lb=np.zeros(4), u_ub=np.full(4, u_max),
+                          x_lb=x_lb, x_ub=-x_lb, solver=solver)
+
+
+def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int, spread: float) -> list[tuple[float, ...]]:
+    """The paper's constant force and ``n_drawn`` drawn around it (issue 16: Q3-Q5 over disturbances).
+
+    Each drawn force has every axis uniform in ``paper * (1 +- spread)`` (``numpy.random.default_rng(seed)``),
+    so both its size and its direction vary around the paper's 0.3 N per axis. The paper's force comes first.
+    """
+    F0 = np.asarray(paper, dtype=float)
+    if F0.shape != (3,) or not np.isfinite(F0).all():
+        raise ValueError(f"paper must be 3 finite forces, got {paper}")
+    if int(n_drawn) < 0 or not (0 <= spread < 1):
+        raise ValueError(f"need n_drawn >= 0 and 0 <= spread < 1, got {n_drawn}, {spread}")
+    rng = np.random.default_rng(seed)
+    drawn = F0 * (1.0 + spread * rng.uniform(-1.0, 1.0, size=(int(n_drawn), 3)))
+    return [tuple(float(f) for f in F0)] + [tuple(float(f) for f in row) for row in drawn]
+
+
+def validation_vehicle(train: QuadrotorParams, test: QuadrotorParams, fraction: float) -> QuadrotorParams:
+    """A vehicle between the training and the test vehicle: mass, inertia, drag and force interpolated.
+
+    ``fraction`` 0 is the training vehicle, 1 the test one; it must lie strictly between, so the validation
+    flights neither repeat the training data's vehicle (on which the adaptation has nothing to do) nor fly
+    the test vehicle (which would tune on the test).
+    """
+    if not 0 < fraction < 1:
+        raise ValueError(f"fraction must lie strictly between 0 and 1, got {fraction}")
+
+    def mix(a: Any, b: Any) -> Any:
+        return float((1 - fraction) * a + fraction * b) if np.isscalar(a) else tuple(
+            float((1 - fraction) * ai + fraction * bi) for ai, bi in zip(a, b))
+
+    return train.replace(**{k: mix(getattr(train, k), getattr(test, k))
+                            for k in ("mass", "inertia", "drag", "force_disturbance")})
 
 
 @dataclass(frozen=True)
@@ -93,9 +135,17 @@ def acc_pred_rmse(r: FlightResult) -> float:
     return float(np.sqrt(np.mean(np.sum((r.xdot_pred[:, 3:6] - r.xdot_true[:, 3:6]) ** 2, axis=1))))
 
 
+def fallback_note(r: FlightResult) -> str:
+    """``"DIVERGED"`` past the fallback share, then the fallbacks by reason (empty when there were none)."""
+    reasons = ", ".join(f"{k} {v}" for k, v in sorted(r.fallback_reasons.items()))
+    return ("DIVERGED " if r.diverged else "") + (f"[{reasons}]" if reasons else "")
+
+
 def flight_row(r: FlightResult) -> dict[str, Any]:
     """One model's row of the flight table: tracking RMSE, prediction RMSE, fallbacks, timings."""
     return {**tracking_rmse(r.x, r.x_ref), "acc_pred_rmse": acc_pred_rmse(r), "fallbacks": r.n_fallbacks,
+            "fallback_reasons": dict(r.fallback_reasons), "reference_fallbacks": r.n_reference_fallbacks,
+            "diverged": r.diverged,
             "reference_linearizations": r.n_reference_linearizations,
             "step_ms_median": 1e3 * float(np.median(r.t_linearize + r.t_solve)),
             "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
@@ -114,6 +164,20 @@ def adapnn_flights(residual: nn.Module, gammas: Iterable[float], mpc: MPC, test:
     return {g: test.fly(adapnn_model(residual, g, Ts=test.Ts), mpc) for g in gammas}
 
 
+def adapnn_gain_on_validation(residual: nn.Module, grid: Sequence[float], refs: Sequence[tuple[Tensor, Tensor]],
+                              truth: Quadrotor, mpc: MPC, *, like: FlightTest, steps: int, rtol: float) -> GainSelection:
+    """AdapNN's gain chosen on validation flights (:func:`~fnnlib.mpc.tuning.select_gain_on_validation`).
+
+    Every reference of ``refs`` is flown for ``steps`` steps on ``truth`` (not the test vehicle) with the loop
+    settings of ``like``; the test flight is never seen.
+    """
+    def fly_fn(gain: float, x_r: Tensor, u_r: Tensor) -> FlightResult:
+        test = replace(like, truth=truth, x_r=x_r, u_r=u_r, steps=int(steps))
+        return test.fly(adapnn_model(residual, gain, Ts=like.Ts), mpc)
+
+    return select_gain_on_validation(fly_fn, grid, refs, rtol=rtol)
+
+
 def speed_runs(models: Iterable[PredictionModel], mpc: MPC, test: FlightTest, repeats: int) -> dict[str, dict[str, Any]]:
     """Each model flown ``repeats`` times: median and 95th percentile of its steps, median real-time factor."""
     if int(repeats) < 1:
@@ -126,6 +190,42 @@ def speed_runs(models: Iterable[PredictionModel], mpc: MPC, test: FlightTest, re
                           "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
                           "real_time_factor_each": [r.real_time_factor for r in runs]}
     return timing
+
+
+def pooled_speed(flights: Mapping[str, Sequence[FlightResult]]) -> dict[str, dict[str, Any]]:
+    """Per model, the timing of all its flights pooled, as :func:`speed_runs` reports a model's repeats."""
+    timing = {}
+    for name, runs in flights.items():
+        steps_ms = 1e3 * np.concatenate([r.t_linearize + r.t_solve for r in runs])
+        timing[name] = {"step_ms_median": float(np.median(steps_ms)), "step_ms_p95": float(np.percentile(steps_ms, 95)),
+                        "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
+                        "flights": len(runs)}
+    return timing
+
+
+def paired_grid(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, tests: Sequence[FlightTest], mpc: MPC,
+                model_settings: Mapping[str, Any], adapnn_gamma: float) -> dict[str, list[FlightResult]]:
+    """All seven models flown for every trained network x every test (one per disturbance): paired flights.
+
+    Returns, per model, the flights in the order ``(seed, test)`` with the test varying fastest; models that
+    do not carry the network (Nomi, MLP, FB) are flown once per test and repeated for each seed, so every
+    model's list pairs entry by entry. AdapNN flies at ``adapnn_gamma``.
+    """
+    if not members or not tests:
+        raise ValueError("need at least one trained network and one test")
+    models = paper_models(members[0][1], mlp, **model_settings)
+    fixed = {m.name: m for m in models if m.name not in CARRYING}
+    fixed_flights = {n: [t.fly(m, mpc) for t in tests] for n, m in fixed.items()}
+    out: dict[str, list[FlightResult]] = {m.name: [] for m in models}  # the paper's order
+    for _, net in members:
+        ms = {m.name: m for m in paper_models(net, mlp, **model_settings)}
+        ms["AdapNN"] = adapnn_model(net, adapnn_gamma, Ts=model_settings["Ts"])
+        for i, t in enumerate(tests):
+            for n in fixed:
+                out[n].append(fixed_flights[n][i])
+            for n in CARRYING:
+                out[n].append(t.fly(ms[n], mpc))
+    return out
 
 
 def speed_summary(timing: Mapping[str, Mapping[str, Any]], *, repeats: int, thrust_bound: float, qp: str,
@@ -155,63 +255,3 @@ def theorem2_check(r: FlightResult, L: float, transient_steps: int) -> dict[str,
     ball_x, _ = theorem1_balls(L, gamma, 12)
     return {"gamma": gamma, "ball_x": ball_x, "inside_fraction": float(np.mean(e <= ball_x)),
             "max_error": float(e.max())}
-
-
-def seed_spread(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, u_max: Sequence[float],
-                make_qp: Callable[[float], MPC], test: FlightTest, model_settings: Mapping[str, Any],
-                adapnn_gamma: Mapping[str, float]) -> dict[str, dict[str, dict[str, float]]]:
-    """Mean per-axis RMSE of the :data:`CARRYING` models flown with every trained network.
-
-    ``members`` are ``(seed, network)`` pairs; ``model_settings`` the keywords of :func:`paper_models`
-    after the networks; AdapNN flies at ``adapnn_gamma[str(u_max)]``. Returns ``[str(u_max)][model][seed]``.
-    """
-    spread: dict[str, dict[str, dict[str, float]]] = {str(umax): {n: {} for n in CARRYING} for umax in u_max}
-    for seed, net in members:
-        for umax in u_max:
-            mpc = make_qp(umax)
-            ms = {m.name: m for m in paper_models(net, mlp, **model_settings)}
-            ms["AdapNN"] = adapnn_model(net, adapnn_gamma[str(umax)], Ts=model_settings["Ts"])
-            for name in CARRYING:
-                r = test.fly(ms[name], mpc)
-                spread[str(umax)][name][seed] = tracking_rmse(r.x, r.x_ref)["mean_axis"]
-    return spread
-
-
-def spread_orderings(spread: Mapping[str, Mapping[str, Mapping[str, float]]],
-                     table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> dict[str, dict[str, float]]:
-    """Per thrust bound, the fraction of trained networks for which each ordering of the claims holds.
-
-    Nomi, MLP and FB do not carry the network: their flights of ``table`` stand for every seed.
-    """
-    orderings = {}
-    for u, per_model in spread.items():
-        fixed = {n: table[u][n]["mean_axis"] for n in ("Nomi", "MLP", "FB")}
-        per_seed = [{**fixed, **{n: per_model[n][sd] for n in CARRYING}} for sd in per_model["FNN"]]
-        orderings[u] = {
-            "FNN best of the six": float(np.mean([min(SIX, key=r.get) == "FNN" for r in per_seed])),
-            "FNN < Neural": float(np.mean([r["FNN"] < r["Neural"] for r in per_seed])),
-            "FNN < AdapNN": float(np.mean([r["FNN"] < r["AdapNN"] for r in per_seed])),
-            "Neural < Nomi": float(np.mean([r["Neural"] < r["Nomi"] for r in per_seed])),
-            "AdapFNN >= FNN": float(np.mean([r["AdapFNN"] >= r["FNN"] for r in per_seed])),
-            "AdapFNN within 25 % of FNN": float(np.mean([abs(r["AdapFNN"] - r["FNN"]) <= 0.25 * r["FNN"]
-                                                          for r in per_seed])),
-        }
-    return orderings
-
-
-def claim_checks(table: Mapping[str, Mapping[str, Mapping[str, Any]]],
-                 thm2: Mapping[str, Mapping[str, float]]) -> tuple[dict[str, bool], dict[str, bool], dict[str, bool]]:
-    """The checks of Q3 (tracking), Q4 (first-step prediction) and Q5 (AdapFNN), at every thrust bound."""
-    q3, q4, q5 = {}, {}, {}
-    for umax, rows in table.items():
-        rm = {n: rows[n]["mean_axis"] for n in rows}
-        ac = {n: rows[n]["acc_pred_rmse"] for n in rows}
-        q3[f"{umax} N: FNN best of the six"] = min(SIX, key=rm.get) == "FNN"
-        q3[f"{umax} N: Neural < Nomi"] = rm["Neural"] < rm["Nomi"]
-        q3[f"{umax} N: MLP > Neural"] = rm["MLP"] > rm["Neural"]
-        q4[f"{umax} N: best first-step prediction is a feedback model"] = min(SIX, key=ac.get) in ("FB", "FNN")
-        q4[f"{umax} N: FNN < Neural"] = ac["FNN"] < ac["Neural"]
-        q5[f"{umax} N: AdapFNN within 25 % of FNN"] = abs(rm["AdapFNN"] - rm["FNN"]) <= 0.25 * rm["FNN"]
-        q5[f"{umax} N: AdapFNN >= FNN"] = rm["AdapFNN"] >= rm["FNN"]
-        q5[f"{umax} N: Theorem 2 ball holds >= 95 % after the transient"] = thm2[umax]["inside_fraction"] >= 0.95
-    return q3, q4, q5

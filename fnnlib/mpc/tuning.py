@@ -3,7 +3,7 @@ r"""Baseline settings chosen away from the test flight (issue 16): validation fl
 The paper tunes AdapNN "for optimal performance"; choosing its gain :math:`\Gamma` of Eq. (30) on the
 test Lissajous flight itself would hand the baseline knowledge of the test. Here a gain is chosen on
 *validation* flights drawn like the training data of App. A.5.4 (random rest-to-rest minimum-snap flights
-through waypoints in the training box, :func:`~fnnlib.control.trajectories.random_min_snap_flights`)
+through waypoints in the training box, :func:`~fnnlib.control.min_snap.random_min_snap_flights`)
 with a seed of their own, and the test flight is flown once with the chosen value. The oracle-tuned value
 (best on the test flight) can still be reported beside it, as context.
 """
@@ -11,6 +11,7 @@ with a seed of their own, and the test flight is flown once with the chosen valu
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -20,31 +21,34 @@ from torch import Tensor
 
 from fnnlib._validation import check_positive
 from fnnlib.control.flatness import flat_reference
-from fnnlib.control.trajectories import random_min_snap_flights
+from fnnlib.control.min_snap import random_min_snap_flights
 from fnnlib.mpc.flight import FlightResult, tracking_rmse
-from fnnlib.systems.quadrotor import NOMINAL, QuadrotorParams
+from fnnlib.systems.quadrotor import QuadrotorParams
 
 __all__ = ["GainSelection", "select_gain_on_validation", "validation_references"]
 
 Reference = tuple[Tensor, Tensor]
 
 
-def validation_references(n_flights: int, steps: int, N: int, *, seed: int, dt: float = 0.02,
-                          n_waypoints: int = 3, params: QuadrotorParams = NOMINAL) -> list[Reference]:
+def validation_references(n_flights: int, steps: int, N: int, *, seed: int, Ts: float, n_waypoints: int,
+                          box: Sequence[Sequence[float]], max_speed: float,
+                          params: QuadrotorParams) -> list[Reference]:
     """Validation references from the training distribution: random min-snap flights on the control grid.
 
     Each is ``(x_r (steps + N + 1, 12), u_r (steps + N, 4))``, float64, by differential flatness
     (zero yaw) like :func:`~fnnlib.mpc.flight.lissajous_reference`, from
-    ``random_min_snap_flights(n_flights, steps + N + 1, dt, seed, n_waypoints)``: the training box and
-    speed limit of App. A.5.4. Pass a ``seed`` that neither the training nor the validation set of the
-    learning task used. The training flights have about 100 nodes (2 s) per segment; ``n_waypoints``
-    = 1 + (steps + N) / 100 keeps that pace (4 for the paper's 300 steps). Fly them on the vehicle the
-    training data came from, not on the test vehicle.
+    ``random_min_snap_flights(n_flights, steps + N + 1, Ts=Ts, seed=seed, n_waypoints=..., box=...,
+    max_speed=...)``: the training box and speed limit of App. A.5.4
+    (:data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`). Pass a ``seed`` that neither the training nor
+    the validation set of the learning task used. The training flights have about 100 nodes (2 s) per
+    segment; ``n_waypoints`` = 1 + (steps + N) / 100 keeps that pace (4 for the paper's 300 steps).
+    ``params`` is the vehicle the references are computed for by flatness (the paper's: the nominal
+    model, like the test reference). Fly them on a vehicle other than the test vehicle.
     """
     if int(steps) < 1 or int(N) < 1:
         raise ValueError(f"steps and N must be >= 1, got steps={steps}, N={N}")
-    flights = random_min_snap_flights(n_flights, int(steps) + int(N) + 1, check_positive(dt, name="dt"), seed,
-                                      n_waypoints)
+    flights = random_min_snap_flights(n_flights, int(steps) + int(N) + 1, Ts=check_positive(Ts, name="Ts"),
+                                      seed=seed, n_waypoints=n_waypoints, box=box, max_speed=max_speed)
     refs = []
     for psi, snap in zip(flights.psi, flights.snap):
         x_r, u_r = flat_reference(torch.as_tensor(psi, dtype=torch.float64), torch.as_tensor(snap, dtype=torch.float64),
@@ -65,7 +69,7 @@ class GainSelection:
     table : dict
         Per gain: ``rmse`` (mean over the validation flights of the per-axis-mean position RMSE, the
         paper's number; inf when a flight diverged), ``rmse_per_flight``, ``fallback_share`` (largest
-        over the flights) and ``diverged`` (any flight marked diverged, :attr:`FlightResult.diverged`, or
+        over the flights), ``fallback_reasons`` (summed over the flights) and ``diverged`` (any flight marked diverged, :attr:`FlightResult.diverged`, or
         refused by ``fly`` with a ValueError as it left the model's domain; then ``error`` holds the message).
     """
 
@@ -125,8 +129,10 @@ def select_gain_on_validation(fly_fn: Callable[[float, Tensor, Tensor], FlightRe
             continue
         per_flight = [tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in flights]
         diverged = any(r.diverged for r in flights)
+        reasons = Counter(k for r in flights for k, n in r.fallback_reasons.items() for _ in range(n))
         table[g] = {"rmse": math.inf if diverged else float(np.mean(per_flight)), "rmse_per_flight": per_flight,
-                    "fallback_share": max(r.fallback_share for r in flights), "diverged": diverged}
+                    "fallback_share": max(r.fallback_share for r in flights), "fallback_reasons": dict(reasons),
+                    "diverged": diverged}
     usable = {g: row["rmse"] for g, row in table.items() if not row["diverged"]}
     if not usable:
         raise ValueError(f"every gain diverged on a validation flight: {table}")

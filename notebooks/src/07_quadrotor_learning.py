@@ -51,7 +51,10 @@ import fnnlib as F
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
 from fnnlib.models.residual import AeroResidual
-from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_MLP_RECIPE
+from fnnbook.rules import quadrotor as rules
+from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
+from fnnlib.quadrotor_presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
+                                      PAPER_MLP_RECIPE)
 from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
 from fnnlib.training.residual import (convergence_checks, predict_flights, state_group_errors, train_residual_ensemble,
                                       train_single_step)
@@ -95,13 +98,13 @@ F.save_figure(fig, out, "training_flights")
 # `segment_length` steps, `batch_size` segments per update, learning rate `lr`, float32; loss Eq. (13) with
 # unit weights on the 12 vehicle states and zero on the 6 controller states (the authors' release).
 #
-# **Rule Q1**, fixed before the run: training *converges* for every initialisation when (a) its final
+# **Rule Q1** (`fnnbook.rules.quadrotor`), fixed before the run: at least 5 initialisations, and training *converges* for every initialisation when (a) its final
 # training loss is at most 10 % of its initial loss and (b) the last 10 % of epochs change it by less than
 # 20 %; and the initialisations agree: (c) the largest final loss is at most 2x the smallest.
 #
-# **Rule Q6**: (a) the feedback part has no trainable parameter (it needs no training); (b) 50 epochs of one
-# model take at most the paper's 30 min (14-core laptop) here on 2 cores. Our own target, 3 min per model,
-# is reported beside.
+# **Rule Q6**: the feedback part has no trainable parameter (it needs no training), counted on the feedback
+# object the MPC flies (`FeedbackCascadeModel`, the paper's L, beta, N). The training time is reported, not
+# judged: the paper's 30 min were measured on another machine and no baseline is timed here.
 
 # %%
 fit = train_residual_ensemble(seeds, train, controller=controller, plant=model_plant, hidden=hidden,
@@ -192,32 +195,30 @@ for k in range(val.n_flights):
 
 # %% [tags: nbval-check-output]
 final, first = member_loss[-1], member_loss[0]
-q1_checks = convergence_checks(member_loss, epochs)
-n_feedback_params = 0  # the linear feedback L(x - x_hat) has no trainable parameter: L and beta are set by hand
-q6_checks = {
-    "linear feedback needs no training (0 trainable parameters)": n_feedback_params == 0,
-    "50 epochs of one model <= 30 min (the paper's laptop time)": per_model_s * 50 / epochs <= 30 * 60,
-}
-q2_checks = {
-    "neural ODE: relative RMSE <= 10 % for p, v, Theta and omega": all(v <= 0.10 for v in rel["neural ODE"].values()),
-    "neural ODE below nominal for p and v": all(rel["neural ODE"][g] < rel["nominal"][g] for g in ("p", "v")),
-}
+feedback = FeedbackCascadeModel(PredictionModel("Neural", model_plant, residual, Ts=dt), PAPER_L, PAPER_BETA, PAPER_HORIZON)
+n_feedback_params = rules.count_trainable(t for t in vars(feedback).values() if isinstance(t, torch.Tensor))
+r1, r2 = rules.q1_convergence(member_loss), rules.q2_prediction(rel)
+r6 = rules.q6_training_cost(n_feedback_params, per_model_s * 50 / epochs)
+for q, r in (("Q1", r1), ("Q2", r2), ("Q6", r6)):
+    print(q, F.verdict_from_checks(r.checks), r.checks)
 
 # %%
 claims = [
-    F.claim_result("Q1", checks=q1_checks, figure="figures/training_curves.png",
-                   numbers={"seeds": seeds, "initial_loss": first.tolist(), "final_loss": final.tolist(),
-                            "val_loss_final": val_loss[-1].tolist()},
-                   rule="final <= 10 % of initial and flat over the last 10 % of epochs for every seed; max/min final <= 2"),
-    F.claim_result("Q2", checks=q2_checks, figure="figures/validation_flight_1.png",
-                   numbers={name: {g: round(v, 5) for g, v in r.items()} for name, r in rel.items()},
-                   rule="relative RMSE per state group <= 10 %; below the nominal model for p and v"),
-    F.claim_result("Q6", checks=q6_checks, figure="figures/training_curves.png",
-                   numbers={"seconds_all_members": round(fit.seconds, 1), "members": len(seeds),
-                            "seconds_per_model_50_epochs": round(per_model_s * 50 / epochs, 1),
-                            "ms_per_update": round(fit.history.ms_per_update, 1), "updates": fit.history.n_updates,
-                            "target_seconds_per_model": 180},
-                   rule="no trainable feedback parameter; 50 epochs of one model <= 30 min on this machine"),
+    F.claim_result("Q1", checks=r1.checks, figure="figures/training_curves.png",
+                   numbers={"seeds": seeds, "initial_loss": first.tolist(), "val_loss_final": val_loss[-1].tolist(), **r1.numbers},
+                   headline=F.headline_number("final / initial training loss", final / first),
+                   paper="training converges for 5-6 random initialisations (Fig. A)", title="Training converges",
+                   rule="at least 5 initialisations; final <= 10 % of initial and flat over the last 10 % of epochs for each; max/min final <= 2"),
+    F.claim_result("Q2", checks=r2.checks, figure="figures/validation_flight_1.png", numbers=r2.numbers,
+                   headline=F.headline_number("neural ODE relative RMSE of p", rel["neural ODE"]["p"]),
+                   paper="the learned model predicts all 12 states on 3 flights 2.5x longer than training (Figs. S4-S7)",
+                   title="Long-horizon prediction", rule="relative RMSE per state group <= 10 %; below the nominal model for p and v"),
+    F.claim_result("Q6", checks=r6.checks, figure="figures/training_curves.png",
+                   numbers={**r6.numbers, "seconds_all_members": round(fit.seconds, 1), "members": len(seeds),
+                            "ms_per_update": round(fit.history.ms_per_update, 1), "updates": fit.history.n_updates},
+                   headline=F.headline_number("training time per model, 50 epochs (reported, not judged)", per_model_s * 50 / epochs, unit="s"),
+                   paper="linear feedback needs no training; about 30 min for 50 epochs on a 14-core laptop",
+                   title="Training cost", rule="no trainable parameter on the feedback object; the time is reported without a baseline to judge it"),
 ]
 
 # %%

@@ -2,12 +2,16 @@
 # # Model predictive control of a quadrotor under uncertainty (Sec. 5.2.2, App. A.5.3-A.5.4, A.9; Fig. 7, S8, S14)
 #
 # A quadrotor tracks a Lissajous trajectory with MPC (Eq. (28): horizon N = 10, Ts = 0.02 s,
-# Q = diag(100 x3, 50 x6, 1 x3), R = I4, thrust box, |Theta| <= pi/2). At every step the prediction model is
-# linearized along the previous plan and the time-varying QP is solved (OSQP, warm-started, the problem set up
-# once). Seven prediction models are compared on a test vehicle the models have never seen:
+# Q = diag(100 x3, 50 x6, 1 x3), thrust box, |Theta| <= pi/2). At every step the prediction model is
+# linearized along the previous plan and the time-varying QP is solved (OSQP, warm-started, the problem
+# written once in cvxpy). Seven prediction models are compared on a test vehicle the models have never seen:
 # +0.5 kg mass, +2e-3 kg m^2 x/y inertia, drag diag(0.6, 0.6, 0.15) instead of the training diag(0.7, 0.7, 0.2),
 # and a 0.3 N force on every axis. Claims **Q3** (tracking), **Q4** (first-step acceleration prediction) and
 # **Q5** (AdapFNN, Eqs. (29)-(30), Theorem 2). The residual networks come from the `quadrotor_learning` task.
+#
+# Eq. (28) is flown with two weightings (issue 16): **as written** in the paper (R = I on every input
+# u_0..u_{N-1}, Q_N = Q) and **as flown** by the authors' release (Q on x_1..x_{N-1}, no weight on x_N, only the
+# last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
 # %% tags=["parameters"]
 profile = "paper"
@@ -18,22 +22,32 @@ N = 10
 dt = 0.02
 Q = [100.0, 100.0, 100.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.0, 1.0, 1.0]
 R = [1.0, 1.0, 1.0, 1.0]
+costs = ["as_written", "as_flown"]
 u_max = [4.0, 6.0]
+u_max_judged = 6.0
 theta_max = 1.5707963267948966
 L = 3.0
 beta = 0.1
 Gamma = 8.0
-Gamma_adapnn_grid = [0.25, 1.0, 4.0, 8.0]
+Gamma_adapnn_grid = [0.04, 0.16, 0.64, 2.56]
+Gamma_rtol = 0.05
+validation_flights = 2
+validation_steps = 300
+validation_waypoints = 4
+validation_seed = 1000
+validation_vehicle_fraction = 0.5
 truth_mass = 1.33
 truth_inertia = [0.005, 0.005, 0.004]
 truth_drag = [0.6, 0.6, 0.15]
 disturbance = [0.3, 0.3, 0.3]
+disturbance_draws = 2
+disturbance_spread = 0.5
+disturbance_seed = 11
 truth_substeps = 1
 solver = "OSQP"
 qp = "osqp"
 linearize_method = "forward"
 backend = "numba"
-speed_repeats = 5
 transient_s = 1.0
 
 # %%
@@ -48,256 +62,290 @@ from pathlib import Path
 import numpy as np
 
 import fnnlib as F
+from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc.compiled import warm_up
-from fnnlib.mpc.experiment import (CARRYING, QP_CLASSES, FlightTest, adapnn_flights, adapnn_model, claim_checks,
-                                   flight_row, make_mpc, seed_spread, speed_runs, speed_summary, spread_orderings,
-                                   theorem2_check)
+from fnnlib.mpc.experiment import (CARRYING, FlightTest, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
+                                   disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
+                                   pooled_speed, speed_summary, theorem2_check, validation_vehicle)
 from fnnlib.mpc.flight import lissajous_reference, tracking_rmse
 from fnnlib.mpc.models import paper_models
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
-from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+from fnnlib.mpc.tuning import validation_references
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
 
 # %%
 up = Path(upstream_dirs["quadrotor_learning"])
 residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
 mlp, _ = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()
-truth = Quadrotor(TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
-                                     force_disturbance=tuple(disturbance)))
-F.check_gain(L, 12, dt)  # refuse an unstable feedback gain before any flight
-if not u_max or min(u_max) <= 0:
-    raise ValueError(f"u_max must list positive thrust bounds, got {u_max}")
-if qp not in QP_CLASSES:
-    raise ValueError(f"qp must be one of {sorted(QP_CLASSES)}, got {qp!r}")
-if backend not in ("torch", "numba"):
-    raise ValueError(f"backend must be 'torch' or 'numba', got {backend!r}")
-
-# %%
-x_r, u_r = lissajous_reference(steps, N, Ts=dt, params=NOMINAL, curve=PAPER_LISSAJOUS)
-test = FlightTest(truth, x_r, u_r, steps=steps, Ts=dt, substeps=truth_substeps, backend=backend,
-                  linearize_method=linearize_method)
-models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=dt)
-
-
-def make_qp(umax):
-    """Eq. (28) with this run's weights, thrust box [0, umax] and |Theta| <= theta_max."""
-    return make_mpc(qp, N, Q, R, u_max=umax, theta_max=theta_max, solver=solver)
-
-
-out = Path(out_dir)
-out.mkdir(parents=True, exist_ok=True)
-print(f"residual from seed {meta_res.get('seed')}; reference thrust range {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N "
-      f"(nominal vehicle); the test vehicle needs {truth_mass * 9.81 / 4:.2f} N per motor just to hover")
-
-# %% [markdown]
-# ## Flights
-# The paper bounds each thrust by 4 N, the authors' release by 6 N. With the 1.33 kg test vehicle, hovering
-# alone takes 3.26 N per motor and the Lissajous peak (13 m/s^2 sideways) about 5.5 N, so under 4 N no
-# model can follow the reference; we fly both bounds and report both.
-#
-# `qp = "osqp"` solves the QP of Eq. (28) with OSQP directly (the problem set up once, each step only new
-# numbers in a fixed sparsity pattern); `qp = "cvxpy"` solves the same QP through the cvxpy problem built once
-# with Parameters. The tests hold the two to the same inputs (1e-6); the direct form skips cvxpy's per-solve
-# work, ~3.5 of the ~4.5 ms a cvxpy solve takes. The truth is integrated with one RK4 step of 0.02 s
-# (`truth_substeps`): against 16 sub-steps that differs by 1.3e-8 per step, far below any model error here.
-#
-# `backend = "numba"` evaluates the models along the plan, their exact Jacobians (forward mode through the RK4
-# stages) and the truth's step with the compiled twins in `fnnlib.mpc.compiled`; `backend = "torch"` with the
-# torch reference, linearizing by `linearize_method`. The tests hold the two to the same flight (1e-8 m). The
-# kernels are compiled, or loaded from numba's cache, before the first flight, outside the timed loops.
-
-# %%
-compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
-print(f"compiled kernels ready in {compile_s:.1f} s" if backend == "numba" else "torch backend")
-flights = {}
-for umax in u_max:
-    mpc = make_qp(umax)
-    flights[umax] = {m.name: test.fly(m, mpc, progress=True) for m in paper_models(residual, mlp, **models_kw)}
-names = list(flights[u_max[0]])
-
-# %% [markdown]
-# The paper tunes AdapNN "for optimal performance": we fly it for every gain in `Gamma_adapnn_grid` and keep the
-# best per thrust bound (the whole sweep is in the results).
-
-# %%
-adapnn_sweep = {}
-for umax in u_max:
-    runs = adapnn_flights(residual, Gamma_adapnn_grid, make_qp(umax), test)
-    adapnn_sweep[str(umax)] = {g: tracking_rmse(r.x, r.x_ref)["mean_axis"] for g, r in runs.items()}
-    best_g = min(runs, key=lambda g: adapnn_sweep[str(umax)][g])
-    flights[umax]["AdapNN"] = runs[best_g]
-    print(f"thrust <= {umax} N: AdapNN RMSE by Gamma {adapnn_sweep[str(umax)]}; keeping Gamma = {best_g}")
-best_gamma = {str(umax): min(adapnn_sweep[str(umax)], key=adapnn_sweep[str(umax)].get) for umax in u_max}
-
-# %%
-table = {str(umax): {n: flight_row(r) for n, r in fl.items()} for umax, fl in flights.items()}
-for umax, rows in table.items():
-    print(f"thrust <= {umax} N   RMSE mean-axis   norm  acc-pred  fallbacks  ms/step (median, p95)  flight s  x real time")
-    for n, v in rows.items():
-        print(f"  {n:8s} {v['mean_axis']:12.3f} {v['norm']:7.3f} {v['acc_pred_rmse']:8.3f} {v['fallbacks']:9d}"
-              f"   {v['step_ms_median']:6.1f} {v['step_ms_p95']:6.1f}   {v['flight_s']:10.2f} {v['real_time_factor']:8.1f}")
-
-# %% [markdown]
-# ## Speed
-# Targets set for this reproduction (not a paper claim): the median control step (linearize + solve) at most
-# 4 ms and the 6 s flight, simulation included, at least 5x faster than real time, on the 2-core CI machine.
-# Wall time on this machine varies from run to run (a pure-Python loop timed six times in a row spread over
-# 0.60-1.06 s), so one flight per model is a noisy sample. The rule: every model is flown `speed_repeats` times
-# at the largest thrust bound, kernels already compiled; per model, the step time is the median over all steps
-# of all its repeats and the real-time factor the median over its repeats; the targets are met when the worst
-# model meets both. The single flights above are in the table as they came. `benchmarks/bench_flight.py`
-# repeats the measurement without the notebook around it, for both backends.
-
-# %%
-timed = paper_models(residual, mlp, **models_kw)
-timed[names.index("AdapNN")] = adapnn_model(residual, best_gamma[str(max(u_max))], Ts=dt)  # the gain the sweep keeps
-timing = speed_runs(timed, make_qp(max(u_max)), test, speed_repeats)
-speed = speed_summary(timing, repeats=speed_repeats, thrust_bound=max(u_max), qp=qp, backend=backend,
-                      linearize_method=linearize_method, compile_s=compile_s)
-for n, v in timing.items():
-    print(f"  {n:8s} linearize + solve {v['step_ms_median']:.2f} ms (p95 {v['step_ms_p95']:.2f}); "
-          f"x real time, median of {int(speed_repeats)}: {v['real_time_factor_median']:.1f} "
-          f"(each {', '.join(f'{f:.1f}' for f in v['real_time_factor_each'])})")
-print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.2f} to "
-      f"{speed['step_ms_median_worst_model']:.2f} ms over the models (target <= 4)")
-print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['real_time_factor_best_model']:.1f}x "
-      f"faster than real time (target >= 5x); targets met: {speed['met']}")
-
-# %%
-t_grid = np.arange(steps + 1) * dt
-for umax, fl in flights.items():
-    fig, axes = F.new_figure(1, 2)
-    axes = axes[0]
-    axes[0].plot(x_r[:steps + 1, 0], x_r[:steps + 1, 1], "k", lw=2, label="reference")
-    for n, r in fl.items():
-        axes[0].plot(r.x[:, 0], r.x[:, 1], lw=1, label=f"{n} ({table[str(umax)][n]['mean_axis']:.3f} m)")
-        axes[1].plot(t_grid, np.linalg.norm(r.x[:, :3] - r.x_ref[:, :3], axis=1), lw=1, label=n)
-    axes[0].set(xlabel="x [m]", ylabel="y [m]", title=f"Lissajous tracking, thrust <= {umax} N (Fig. 7)")
-    axes[1].set(xlabel="t [s]", ylabel="position error [m]", yscale="log")
-    axes[0].legend(fontsize=6)
-    F.save_figure(fig, out, f"tracking_u{umax:g}")
-
-# %%
-for umax, fl in flights.items():
-    fig, axes = F.new_figure(1, 3, sharey=True)
-    axes = axes[0]
-    for c, ax in enumerate(axes):
-        ax.plot(t_grid[:-1], fl["Nomi"].xdot_true[:, 3 + c], "k", lw=1.5, label="truth")
-        for n in ("Nomi", "Neural", "FB", "FNN"):
-            ax.plot(t_grid[:-1], fl[n].xdot_pred[:, 3 + c], lw=0.9, label=n)
-        ax.set(xlabel="t [s]", title=f"first-step prediction of dv{'xyz'[c]}/dt")
-    axes[0].set_ylabel("acceleration [m/s^2]")
-    axes[0].legend(fontsize=6)
-    F.save_figure(fig, out, f"acc_prediction_u{umax:g}")
-
-# %% [markdown]
-# ## Theorem 2 on the AdapFNN flight
-# Layer 0 of the cascade obeys $\tilde x_{t+1} = (I - T_s L)\tilde x_t + T_s\Delta_t$ (Eq. (25)) with $\Delta_t$ the
-# model's one-step residual, whatever the adaptation does to the network; Theorem 2 bounds the error by
-# $\gamma/\lambda_m(L)$ with $\gamma$ the bound on the residual. We take $\gamma$ as the largest $\lVert\Delta_t\rVert$ after
-# the first `transient_s` seconds and check how often $\lVert\tilde x_t\rVert$ stays in the ball there.
-#
-# **Rules**, fixed before the run (each evaluated at every thrust bound; a claim's verdict follows from all of
-# its checks):
-# * Q3: FNN has the lowest mean per-axis RMSE of the six models (Nomi, Neural, MLP, FB, AdapNN, FNN);
-#   Neural < Nomi; MLP > Neural.
-# * Q4: the lowest first-step acceleration-prediction RMSE of the six belongs to a feedback model (FB or FNN),
-#   and FNN's is below Neural's.
-# * Q5: AdapFNN is comparable to FNN (RMSE within 25 %) and slightly larger (>= FNN); Theorem 2's ball
-#   holds for >= 95 % of the AdapFNN flight after the transient.
-
-# %%
-thm2 = {str(umax): theorem2_check(fl["AdapFNN"], L, int(round(transient_s / dt))) for umax, fl in flights.items()}
-for umax, fl in flights.items():
-    fig, ax = F.new_figure()
-    ax.semilogy(t_grid[:-1], np.linalg.norm(fl["AdapFNN"].x_tilde, axis=1), label="AdapFNN ||x - x_hat||")
-    ax.semilogy(t_grid[:-1], np.linalg.norm(fl["FNN"].x_tilde, axis=1), label="FNN ||x - x_hat||", alpha=0.7)
-    ax.axhline(thm2[str(umax)]["ball_x"], color="k", ls="--", label="Theorem 2 ball gamma / lambda_m(L)")
-    ax.axvline(transient_s, color="gray", lw=0.8)
-    ax.set(xlabel="t [s]", title=f"Observation error, thrust <= {umax} N (Fig. S14)")
-    ax.legend(fontsize=7)
-    F.save_figure(fig, out, f"adapfnn_u{umax:g}")
-for umax, v in thm2.items():
-    print(f"thrust <= {umax} N: gamma = {v['gamma']:.2f}, ball gamma/lambda_m(L) = {v['ball_x']:.2f}, "
-          f"max ||x_tilde|| after {transient_s} s = {v['max_error']:.2f}, inside {100 * v['inside_fraction']:.0f} %")
-
-# %% [markdown]
-# ## Spread over the trained networks
-# The flights above use the residual network with the lowest validation loss. The four models that carry it
-# (Neural, AdapNN, FNN, AdapFNN) are flown again with every initialisation trained by `quadrotor_learning`
-# (AdapNN at the gain kept above); Nomi and FB do not use it and MLP is one network, so their flights are the
-# ones above. This is spread over training seeds only: the flight itself is deterministic (the member that
-# is also `residual.pt` reproduces the flights above exactly). The verdicts below use the flights above, as
-# the rules say; the fractions here show how often each ordering holds over seeds.
-
-# %%
 member_files = json.loads((up / "results.json").read_text()).get("metrics", {}).get("member_checkpoints")
 if not member_files:
     raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
 members = [(str(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up / fname, expected_kind="AeroResidual") for fname in member_files)]
-spread = seed_spread(members, mlp, u_max=u_max, make_qp=make_qp, test=test, model_settings=models_kw,
-                     adapnn_gamma=best_gamma)
-kept = str(meta_res.get("seed"))  # the network of the flights above flies the same flights
-for u, per_model in spread.items():
-    for name, by_seed in per_model.items():
-        assert kept not in by_seed or abs(by_seed[kept] - table[u][name]["mean_axis"]) < 1e-9
-orderings = spread_orderings(spread, table)
+kept = [sd for sd, _ in members].index(str(meta_res.get("seed")))  # the network with the lowest validation loss
+if u_max_judged not in u_max:
+    raise ValueError(f"u_max_judged = {u_max_judged} must be one of u_max = {u_max}")
 
 # %%
-for u, per_model in spread.items():
-    print(f"thrust <= {u} N, {len(per_model['FNN'])} seeds:")
-    for n, by_seed in per_model.items():
-        v = np.array(list(by_seed.values()))
-        print(f"  {n:8s} mean {v.mean():.3f}  std {v.std(ddof=1) if v.size > 1 else 0.0:.3f}  min {v.min():.3f}  "
-              f"max {v.max():.3f}")
-    print("  fraction of seeds where " + "; ".join(f"{k}: {v:.1f}" for k, v in orderings[u].items()))
+test_params = TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
+                                 force_disturbance=tuple(disturbance))
+forces = disturbance_realisations(disturbance, disturbance_draws, seed=disturbance_seed, spread=disturbance_spread)
+x_r, u_r = lissajous_reference(steps, N, Ts=dt, params=NOMINAL, curve=PAPER_LISSAJOUS)
+tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=f)), x_r, u_r, steps=steps, Ts=dt,
+                    substeps=truth_substeps, backend=backend, linearize_method=linearize_method) for f in forces]
+models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=dt)
+
+
+def make_qp(cost, umax):
+    """Eq. (28) with this run's weights and cost variant, thrust box [0, umax] and |Theta| <= theta_max."""
+    return make_mpc(qp, N, Q, R, cost=cost, u_max=umax, theta_max=theta_max, solver=solver)
+
+
+out = Path(out_dir)
+out.mkdir(parents=True, exist_ok=True)
+hover = truth_mass * NOMINAL.g / 4
+print(f"{len(members)} trained networks (kept: seed {members[kept][0]}); disturbances [N]: "
+      + "; ".join(", ".join(f"{c:.2f}" for c in f) for f in forces))
+print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per motor (nominal vehicle); "
+      f"the test vehicle needs {hover:.2f} N per motor to hover")
+
+# %% [markdown]
+# ## Which thrust bound is judged
+# The paper bounds each thrust by 4 N, the authors' release by 6 N. The cell above prints what the test
+# vehicle needs per motor just to hover and the nominal reference's thrust range; the heavier vehicle needs
+# more still at the Lissajous peaks (the 4 N table below shows every model far off the reference). A claim
+# about which model tracks best needs flights that can track, so Q3-Q5 are judged at `u_max_judged` (6 N);
+# the 4 N flights are reported as context only and count toward no verdict.
+#
+# `backend = "numba"` evaluates the models along the plan, their exact Jacobians and the truth's step with the
+# compiled twins in `fnnlib.mpc.compiled`; the tests hold them to the torch reference (1e-8 m). `qp = "osqp"`
+# updates OSQP from cvxpy's canonicalisation of the one cvxpy problem; `qp = "cvxpy"` solves it through cvxpy.
+# A guard before every solve refuses data at or above OSQP's infinity or not finite and plans outside the
+# boxes; such a step flies the previous plan for at most N steps, then the reference input, and is counted
+# with its reason. A flight whose fallback share exceeds `DIVERGED_FALLBACK_SHARE` is marked DIVERGED.
+
+# %% [markdown]
+# ## AdapNN's gain, chosen away from the test flight
+# Convention (see `fnnlib.mpc.models.AdaptiveNNModel`): each step adds $\Gamma(v_{t+1} - \hat v_{t+1})\phi^\top$; the
+# release steps $T_s\Gamma_{rel}\,e\,\phi^\top$, so $\Gamma = T_s\Gamma_{rel}$ and the release's 8 is 0.16 here. The
+# grid brackets 0.16. Protocol: `validation_flights` random minimum-snap flights drawn like the training data
+# (App. A.5.4, their own seed), flown on a vehicle halfway between the training and the test vehicle (mass,
+# inertia, drag and force interpolated: on the training vehicle itself the adaptation has nothing to correct
+# and the sweep is flat; the test vehicle would tune on the test). The smallest gain within `Gamma_rtol` of the
+# best mean validation RMSE is kept (larger adaptive gains are riskier); a gain with a diverged flight never is.
 
 # %%
-fig, axes = F.new_figure(1, len(u_max))
-for ax, u in zip(np.ravel(axes), spread):  # one panel per thrust bound (a lone Axes when there is one)
-    for i, n in enumerate(CARRYING):
-        ax.plot(np.full(len(spread[u][n]), i), list(spread[u][n].values()), "o", alpha=0.7)
-    for n, style in (("Nomi", ":"), ("MLP", "-."), ("FB", "--")):
-        ax.axhline(table[u][n]["mean_axis"], color="k", ls=style, lw=0.8, label=n)
-    ax.set(xticks=range(len(CARRYING)), xticklabels=CARRYING, ylabel="mean per-axis RMSE [m]", yscale="log",
-           title=f"thrust <= {u} N: one dot per trained network")
-    ax.legend(fontsize=7)
+compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
+val_truth = Quadrotor(validation_vehicle(TRAINING_TRUTH, test_params, validation_vehicle_fraction))
+val_refs = validation_references(validation_flights, validation_steps, N, seed=validation_seed, Ts=dt,
+                                 n_waypoints=validation_waypoints, box=PAPER_FLIGHT_DATA["box"],
+                                 max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
+gamma_sel = {cost: adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_refs, val_truth,
+                                             make_qp(cost, u_max_judged), like=tests[0], steps=validation_steps,
+                                             rtol=Gamma_rtol) for cost in costs}
+for cost, sel in gamma_sel.items():
+    print(f"{cost}: validation RMSE by Gamma " + ", ".join(
+        f"{g}: {row['rmse']:.3f}{' DIVERGED' if row['diverged'] else ''} (fallback share {row['fallback_share']:.2f}"
+        f"{' ' + str(row.get('fallback_reasons')) if row.get('fallback_reasons') else ''})"
+        for g, row in sel.table.items()) + f" -> Gamma = {sel.value}")
+
+# %% [markdown]
+# For context only, the oracle: every gain flown on the test flight itself (kept network, the paper's force).
+
+# %%
+oracle = {cost: adapnn_flights(residual, Gamma_adapnn_grid, make_qp(cost, u_max_judged), tests[0]) for cost in costs}
+for cost, runs in oracle.items():
+    best = min(runs, key=lambda g: tracking_rmse(runs[g].x, runs[g].x_ref)["mean_axis"])
+    print(f"{cost}: test-flight RMSE by Gamma " + ", ".join(
+        f"{g}: {tracking_rmse(r.x, r.x_ref)['mean_axis']:.3f} {fallback_note(r)}" for g, r in runs.items())
+          + f" -> oracle Gamma = {best} (validation chose {gamma_sel[cost].value})")
+
+# %% [markdown]
+# ## Flights at the judged bound: every trained network x every disturbance
+# Each cost variant: the four models that carry the trained network fly once per network and disturbance; Nomi,
+# MLP and FB once per disturbance (they do not use the network). The rows below are the kept network under the
+# paper's force; the verdicts use all the paired flights.
+
+# %%
+grid = {cost: paired_grid(members, mlp, tests=tests, mpc=make_qp(cost, u_max_judged), model_settings=models_kw,
+                          adapnn_gamma=gamma_sel[cost].value) for cost in costs}
+main = {cost: {n: runs[kept * len(tests)] for n, runs in g.items()} for cost, g in grid.items()}
+context = {}
+for umax in (u for u in u_max if u != u_max_judged):
+    for cost in costs:
+        ms = paper_models(residual, mlp, **models_kw)
+        ms[[m.name for m in ms].index("AdapNN")] = adapnn_model(residual, gamma_sel[cost].value, Ts=dt)
+        context[(cost, umax)] = {m.name: tests[0].fly(m, make_qp(cost, umax)) for m in ms}
+
+# %%
+tables = {f"{cost}, {u_max_judged:g} N": fl for cost, fl in main.items()}
+tables.update({f"{cost}, {umax:g} N (context)": fl for (cost, umax), fl in context.items()})
+table = {k: {n: flight_row(r) for n, r in fl.items()} for k, fl in tables.items()}
+for k, fl in tables.items():
+    print(f"{k:28s} RMSE mean-axis  z     acc-pred  fallbacks")
+    for n, r in fl.items():
+        v = table[k][n]
+        print(f"  {n:8s} {v['mean_axis']:20.3f} {v['z']:6.3f} {v['acc_pred_rmse']:8.3f} {v['fallbacks']:6d} {fallback_note(r)}")
+
+# %%
+t_grid = np.arange(steps + 1) * dt
+for cost, fl in main.items():
+    fig, axes = F.new_figure(1, 2)
+    axes = axes[0]
+    axes[0].plot(x_r[:steps + 1, 0], x_r[:steps + 1, 1], "k", lw=2, label="reference")
+    for n, r in fl.items():
+        mark = " DIVERGED" if r.diverged else ""
+        axes[0].plot(r.x[:, 0], r.x[:, 1], lw=1, label=f"{n} ({table[f'{cost}, {u_max_judged:g} N'][n]['mean_axis']:.3f} m){mark}")
+        axes[1].plot(t_grid, np.linalg.norm(r.x[:, :3] - r.x_ref[:, :3], axis=1), lw=1, label=n)
+    axes[0].set(xlabel="x [m]", ylabel="y [m]", title=f"Lissajous tracking, {cost}, thrust <= {u_max_judged:g} N (Fig. 7)")
+    axes[1].set(xlabel="t [s]", ylabel="position error [m]", yscale="log")
+    axes[0].legend(fontsize=6)
+    F.save_figure(fig, out, f"tracking_{cost}")
+
+# %% [markdown]
+# ## Why the two costs differ: Nomi's altitude
+# With R = I the nominal model (0.83 kg) pays for every newton it plans above its reference input; flying the
+# heavier vehicle, it trades altitude for thrust. With the release's weighting the inputs are in effect free.
+
+# %%
+fig, axes = F.new_figure(1, 2)
+axes = axes[0]
+for cost, fl in main.items():
+    axes[0].plot(t_grid, fl["Nomi"].x[:, 2], lw=1, label=f"Nomi, {cost}")
+    axes[1].plot(t_grid[:-1], fl["Nomi"].u.sum(axis=1), lw=1, label=f"Nomi, {cost}")
+axes[0].plot(t_grid, x_r[:steps + 1, 2], "k--", lw=1, label="reference")
+axes[1].plot(t_grid[:-1], u_r[:steps].sum(axis=1), "k--", lw=1, label="reference input (nominal)")
+axes[0].set(xlabel="t [s]", ylabel="z [m] (z down)", title="Nomi's altitude under both costs")
+axes[1].set(xlabel="t [s]", ylabel="total thrust [N]")
+axes[0].legend(fontsize=7)
+F.save_figure(fig, out, "nomi_z_costs")
+z = {cost: table[f"{cost}, {u_max_judged:g} N"]["Nomi"]["z"] for cost in costs}
+share = {cost: z[cost] / table[f"{cost}, {u_max_judged:g} N"]["Nomi"]["mean_axis"] / 3 for cost in costs}
+print(" ".join(f"{cost}: Nomi's z RMSE {z[cost]:.3f} m, {100 * share[cost]:.0f} % of its summed per-axis RMSE, "
+               f"mean total thrust {main[cost]['Nomi'].u.sum(axis=1).mean():.2f} N." for cost in costs)
+      + f" The test vehicle needs {4 * hover:.2f} N to hover.")
+
+# %%
+for cost, fl in main.items():
+    fig, axes = F.new_figure(1, 3, sharey=True)
+    axes = axes[0]
+    for c, ax in enumerate(axes):
+        ax.plot(t_grid[:-1], fl["Nomi"].xdot_true[:, 3 + c], "k", lw=1.5, label="truth")
+        for n in ("Nomi", "Neural", "FB", "AdapNN", "FNN"):
+            ax.plot(t_grid[:-1], fl[n].xdot_pred[:, 3 + c], lw=0.9, label=n)
+        ax.set(xlabel="t [s]", title=f"first-step prediction of dv{'xyz'[c]}/dt, {cost}")
+    axes[0].set_ylabel("acceleration [m/s^2]")
+    axes[0].legend(fontsize=6)
+    F.save_figure(fig, out, f"acc_prediction_{cost}")
+
+# %% [markdown]
+# ## Speed
+# Targets set for this reproduction (not a paper claim): the median control step (linearize + solve) at most
+# 4 ms and the 6 s flight, simulation included, at least 5x faster than real time, on the 2-core CI machine.
+# Per model, the step time is the median over all steps of all its flights at the judged bound (both costs,
+# every network and disturbance; kernels compiled before) and the real-time factor the median over those
+# flights; the targets are met when the worst model meets both.
+
+# %%
+timing = pooled_speed({n: [r for cost in costs for r in grid[cost][n]] for n in grid[costs[0]]})
+speed = speed_summary(timing, repeats=min(v["flights"] for v in timing.values()), thrust_bound=u_max_judged, qp=qp,
+                      backend=backend, linearize_method=linearize_method, compile_s=compile_s)
+for n, v in timing.items():
+    print(f"  {n:8s} linearize + solve {v['step_ms_median']:.2f} ms (p95 {v['step_ms_p95']:.2f}); x real time, "
+          f"median of {v['flights']} flights: {v['real_time_factor_median']:.1f}")
+print(f"median linearize + solve per step: {speed['step_ms_median_best_model']:.2f} to "
+      f"{speed['step_ms_median_worst_model']:.2f} ms over the models (target <= 4)")
+print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['real_time_factor_best_model']:.1f}x "
+      f"faster than real time (target >= 5x); targets met: {speed['met']}")
+
+# %% [markdown]
+# ## Theorem 2 on the AdapFNN flights
+# Layer 0 of the cascade obeys $\tilde x_{t+1} = (I - T_s L)\tilde x_t + T_s\Delta_t$ (Eq. (25)) with $\Delta_t$ the
+# model's one-step residual, whatever the adaptation does to the network; Theorem 2 bounds the error by
+# $\gamma/\lambda_m(L)$ with $\gamma$ the bound on the residual. We take $\gamma$ as the largest $\lVert\Delta_t\rVert$ after
+# the first `transient_s` seconds of the same flight: the ball is then a guarantee, checked on every flight,
+# not a check that counts.
+
+# %%
+transient = int(round(transient_s / dt))
+thm2 = {cost: [theorem2_check(r, L, transient) for r in g["AdapFNN"]] for cost, g in grid.items()}
+fig, ax = F.new_figure()
+for cost, fl in main.items():
+    ax.semilogy(t_grid[:-1], np.linalg.norm(fl["AdapFNN"].x_tilde, axis=1), lw=1, label=f"AdapFNN, {cost}")
+    ax.axhline(thm2[cost][kept * len(tests)]["ball_x"], ls="--", lw=0.8, label=f"ball gamma / lambda_m(L), {cost}")
+ax.axvline(transient_s, color="gray", lw=0.8)
+ax.set(xlabel="t [s]", ylabel="||x - x_hat||", title=f"Observation error, thrust <= {u_max_judged:g} N (Fig. S14)")
+ax.legend(fontsize=7)
+F.save_figure(fig, out, "adapfnn")
+
+# %% [markdown]
+# ## Spread over networks and disturbances
+# One dot per (trained network, disturbance); the flights themselves are deterministic.
+
+# %%
+rmse = {cost: {n: [tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs] for n, runs in g.items()}
+        for cost, g in grid.items()}
+acc = {cost: {n: [flight_row(r)["acc_pred_rmse"] for r in runs] for n, runs in g.items()} for cost, g in grid.items()}
+fig, axes = F.new_figure(1, len(costs))
+for ax, cost in zip(np.ravel(axes), costs):
+    for i, n in enumerate(rmse[cost]):
+        ax.plot(np.full(len(rmse[cost][n]), i), rmse[cost][n], "o", alpha=0.6)
+    ax.set(xticks=range(len(rmse[cost])), xticklabels=list(rmse[cost]), ylabel="mean per-axis RMSE [m]",
+           yscale="log", title=f"{cost}, {u_max_judged:g} N: {len(members)} networks x {len(tests)} disturbances")
 _ = F.save_figure(fig, out, "seed_spread")
 
 # %% [markdown]
 # ## Verdicts
+# Rules (`fnnbook.rules.quadrotor`), per cost variant at the judged bound, paired over networks x disturbances
+# (a win: in at least S - 1 of S pairs and the 90 % interval of the mean paired difference below 0):
+# Q3: FNN beats each of the other five; Neural beats Nomi; Neural beats MLP. Q4: FNN's first-step acceleration
+# prediction beats each of the other five (Fig. S8). Q5: AdapFNN within 25 % of FNN in at least S - 1 pairs and
+# its mean RMSE >= FNN's; Theorem 2's ball is a guarantee.
 
 # %% [tags: nbval-check-output]
-q3, q4, q5 = claim_checks(table, thm2)
-rmse_numbers = {u: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for u, rows in table.items()}
-acc_numbers = {u: {n: round(v["acc_pred_rmse"], 4) for n, v in rows.items()} for u, rows in table.items()}
+r3 = {c: rules.q3_tracking(rmse[c], label=c) for c in costs}
+r4 = {c: rules.q4_prediction({n: acc[c][n] for n in rules.SIX}, label=c) for c in costs}
+r5 = {c: rules.q5_adaptive(rmse[c], [t["inside_fraction"] for t in thm2[c]], label=c) for c in costs}
+for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
+    for c in costs:
+        print(f"{q} {c}: {F.verdict_from_checks(r[c].checks)}; " + "; ".join(
+            f"{k.split(': ', 1)[1]} {'holds' if v else 'fails'}" for k, v in r[c].checks.items()))
+        held = r[c].numbers.get("paired", {})
+        print("   holds in " + ", ".join(f"{k}: {w['wins']}/{w['seeds']}" for k, w in held.items())
+              if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the runs")
 
-
-def over_seeds(*keys):
-    """The fractions of ``orderings`` for ``keys``, per thrust bound."""
-    return {u: {k: o[k] for k in keys} for u, o in orderings.items()}
+# %%
+def merged(r):
+    """One claim's checks, guarantees and numbers over the cost variants."""
+    return dict(checks={k: v for c in costs for k, v in r[c].checks.items()},
+                guarantees={k: v for c in costs for k, v in r[c].guarantees.items()},
+                numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
+                    k: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for k, rows in table.items() if "context" in k}})
 
 
 # %%
+S = len(members) * len(tests)
 claims = [
-    F.claim_result("Q3", checks=q3, figure=f"figures/tracking_u{u_max[0]:g}.png",
-                   numbers={"mean_axis_rmse_m": rmse_numbers,
-                            "over_seeds_fraction": over_seeds("FNN best of the six", "FNN < Neural", "Neural < Nomi")},
-                   rule="FNN lowest mean per-axis RMSE of the six; Neural < Nomi; MLP > Neural (every thrust bound)"),
-    F.claim_result("Q4", checks=q4, figure=f"figures/acc_prediction_u{u_max[0]:g}.png",
-                   numbers={"acc_pred_rmse": acc_numbers},
-                   rule="lowest first-step acceleration RMSE of the six is FB or FNN; FNN < Neural"),
-    F.claim_result("Q5", checks=q5, figure=f"figures/adapfnn_u{u_max[0]:g}.png",
-                   numbers={"mean_axis_rmse_m": {u: {n: rmse_numbers[u][n] for n in ("FNN", "AdapFNN")} for u in rmse_numbers},
-                            "theorem2": thm2,
-                            "over_seeds_fraction": over_seeds("AdapFNN >= FNN", "AdapFNN within 25 % of FNN")},
-                   rule="AdapFNN within 25 % of FNN and >= FNN; Theorem 2 ball holds >= 95 % after the transient"),
+    F.claim_result("Q3", **merged(r3), figure=f"figures/tracking_{costs[-1]}.png",
+                   headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
+                   paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
+                   title="MPC tracking with the feedback model", rule=f"paired wins over {S} runs per cost at {u_max_judged:g} N"),
+    F.claim_result("Q4", **merged(r4), figure=f"figures/acc_prediction_{costs[-1]}.png",
+                   headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
+                   paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
+                   title="First-step prediction", rule=f"FNN paired-beats the other five over {S} runs per cost"),
+    F.claim_result("Q5", **merged(r5), figure="figures/adapfnn.png",
+                   headline=F.headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
+                   paper="AdapFNN is comparable to FNN with a slightly larger RMSE (Fig. S14, Theorem 2)",
+                   title="Adaptive feedback network", rule="within 25 % in >= S - 1 runs and mean >= FNN's; Theorem 2 ball a guarantee"),
 ]
 
 # %%
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
-                metrics={"table": table, "adapnn_gamma_sweep": adapnn_sweep, "speed": speed,
-                         "seed_spread": {"mean_axis_rmse_m": spread, "orderings_fraction": orderings}})
+                metrics={"table": table, "speed": speed, "disturbances": forces,
+                         "adapnn_gamma": {c: {"chosen": s.value, "validation": s.table} for c, s in gamma_sel.items()},
+                         "adapnn_oracle_sweep": {c: {g: flight_row(r) for g, r in runs.items()} for c, runs in oracle.items()},
+                         "paired_mean_axis_rmse_m": rmse, "paired_acc_pred_rmse": acc})
 for c in claims:
     print(c["id"], c["verdict"], c["checks"])

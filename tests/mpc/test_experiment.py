@@ -9,12 +9,14 @@ import pytest
 import torch
 
 from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightTest, acc_pred_rmse, adapnn_flights, claim_checks,
-                                   flight_row, make_mpc, speed_runs, speed_summary, spread_orderings, theorem2_check)
+from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightTest, acc_pred_rmse, adapnn_flights,
+                                   adapnn_gain_on_validation, adapnn_model,
+                                   disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
+                                   pooled_speed, speed_runs, speed_summary, theorem2_check, validation_vehicle)
 from fnnlib.mpc.flight import FlightResult, lissajous_reference
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
-from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
 
 
 def _result(T: int = 50, seed: int = 0) -> FlightResult:
@@ -28,13 +30,17 @@ def _result(T: int = 50, seed: int = 0) -> FlightResult:
 
 def test_make_mpc_builds_eq28_with_the_boxes():
     for qp, cls in (("osqp", OSQPMPC), ("cvxpy", LinearizedMPC)):
-        mpc = make_mpc(qp, 5, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], u_max=6.0, theta_max=PAPER_THETA_MAX,
-                       solver="OSQP")
-        assert type(mpc) is cls and mpc.N == 5
+        mpc = make_mpc(qp, 5, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
+                       theta_max=PAPER_THETA_MAX, solver="OSQP")
+        assert type(mpc) is cls and mpc.N == 5 and mpc.cost == "as_flown"
         np.testing.assert_array_equal(mpc.u_lb, np.zeros(4))
         np.testing.assert_array_equal(mpc.u_ub, np.full(4, 6.0))
     with pytest.raises(ValueError, match="qp must be one of"):
-        make_mpc("qpoases", 5, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], u_max=6.0, theta_max=1.0, solver="OSQP")
+        make_mpc("qpoases", 5, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_written", u_max=6.0,
+                 theta_max=1.0, solver="OSQP")
+    with pytest.raises(ValueError, match="cost must be one of"):
+        make_mpc("osqp", 5, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="paper", u_max=6.0, theta_max=1.0,
+                 solver="OSQP")
 
 
 def test_flight_row_holds_tracking_prediction_and_timing():
@@ -46,6 +52,38 @@ def test_flight_row_holds_tracking_prediction_and_timing():
     assert row["acc_pred_rmse"] == acc_pred_rmse(r) == pytest.approx(math.sqrt((e**2).sum(1).mean()), rel=1e-15)
     assert row["step_ms_median"] == pytest.approx(3.0) and row["fallbacks"] == 1
     assert row["real_time_factor"] == pytest.approx(50 * 0.02 / 0.5)
+    assert not row["diverged"] and fallback_note(r) == ""
+    r.n_fallbacks, r.fallback_reasons = 10, {"not_optimal": 10}  # 10 of 50 steps: past the diverged share
+    assert flight_row(r)["diverged"] and fallback_note(r) == "DIVERGED [not_optimal 10]"
+
+
+def test_pooled_speed_pools_every_flight_of_a_model():
+    a, b = _result(), _result(seed=1)
+    b.t_solve[:] = 4e-3
+    t = pooled_speed({"m": [a, b]})["m"]
+    assert t["flights"] == 2 and t["step_ms_median"] == pytest.approx(4.0)  # medians of 3 ms and 5 ms steps: 4
+    assert t["real_time_factor_median"] == pytest.approx(50 * 0.02 / 0.5)
+
+
+def test_disturbances_start_with_the_papers_and_vary_size_and_direction():
+    d = disturbance_realisations((0.3, 0.3, 0.3), 3, seed=5, spread=0.5)
+    assert len(d) == 4 and d[0] == (0.3, 0.3, 0.3)
+    drawn = np.array(d[1:])
+    assert ((drawn >= 0.15) & (drawn <= 0.45)).all() and len({tuple(r) for r in drawn}) == 3
+    assert np.ptp(drawn / np.linalg.norm(drawn, axis=1, keepdims=True), axis=0).max() > 0.01  # directions differ
+    assert d == disturbance_realisations((0.3, 0.3, 0.3), 3, seed=5, spread=0.5)
+    with pytest.raises(ValueError):
+        disturbance_realisations((0.3, 0.3), 3, seed=5, spread=0.5)
+
+
+def test_validation_vehicle_lies_between_training_and_test():
+    v = validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, 0.5)
+    assert v.mass == pytest.approx((TRAINING_TRUTH.mass + TEST_TRUTH.mass) / 2)
+    assert v.drag == pytest.approx(tuple((a + b) / 2 for a, b in zip(TRAINING_TRUTH.drag, TEST_TRUTH.drag)))
+    assert v.force_disturbance == pytest.approx((0.15, 0.15, 0.15)) and v != TEST_TRUTH
+    for bad in (0.0, 1.0):
+        with pytest.raises(ValueError, match="strictly between"):
+            validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, bad)
 
 
 def test_speed_summary_is_met_only_when_the_worst_model_meets_both_targets():
@@ -74,39 +112,64 @@ def test_theorem2_check_counts_the_ball_after_the_transient():
     assert out["max_error"] == 2.0
 
 
-def _table(rmse: dict[str, float], acc: dict[str, float]) -> dict:
-    return {"6.0": {n: {"mean_axis": rmse[n], "acc_pred_rmse": acc[n]} for n in rmse}}
-
-
-def test_claim_checks_follow_the_rules():
-    rmse = {"Nomi": 0.5, "Neural": 0.3, "MLP": 0.4, "FB": 0.2, "AdapNN": 0.25, "FNN": 0.1, "AdapFNN": 0.11}
-    acc = {"Nomi": 3.0, "Neural": 2.0, "MLP": 2.5, "FB": 1.0, "AdapNN": 1.8, "FNN": 0.9, "AdapFNN": 0.95}
-    q3, q4, q5 = claim_checks(_table(rmse, acc), {"6.0": {"inside_fraction": 0.97}})
-    assert all(q3.values()) and all(q4.values()) and all(q5.values()) and len(q3) == 3 and len(q5) == 3
-    worse = {**rmse, "AdapFNN": 0.2, "FNN": 0.21}  # FNN no longer the best of the six, AdapFNN < FNN
-    q3, _, q5 = claim_checks(_table(worse, acc), {"6.0": {"inside_fraction": 0.5}})
-    assert not q3["6.0 N: FNN best of the six"] and not q5["6.0 N: AdapFNN >= FNN"]
-    assert not q5["6.0 N: Theorem 2 ball holds >= 95 % after the transient"]
-
-
-def test_spread_orderings_are_fractions_over_seeds():
-    table = {"6.0": {"Nomi": {"mean_axis": 0.5}, "MLP": {"mean_axis": 0.4}, "FB": {"mean_axis": 0.2}}}
-    spread = {"6.0": {"Neural": {"0": 0.3, "1": 0.3}, "AdapNN": {"0": 0.25, "1": 0.05},
-                      "FNN": {"0": 0.1, "1": 0.1}, "AdapFNN": {"0": 0.11, "1": 0.09}}}
-    o = spread_orderings(spread, table)["6.0"]
-    assert o["FNN best of the six"] == 0.5 and o["FNN < AdapNN"] == 0.5 and o["Neural < Nomi"] == 1.0
-    assert o["AdapFNN >= FNN"] == 0.5 and o["AdapFNN within 25 % of FNN"] == 1.0
-    assert set(CARRYING) < set(SIX) | {"AdapFNN"}
+def _tiny(steps: int, N: int = 3, truth=TEST_TRUTH) -> tuple:
+    """A small network, a short Lissajous test on ``truth`` (torch backend) and an as-flown QP with N = 3."""
+    torch.manual_seed(0)
+    net = AeroResidual((4,), "tanh").double()
+    x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    test = FlightTest(Quadrotor(truth), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend="torch",
+                      linearize_method="forward")
+    mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
+                   theta_max=1.5, solver="OSQP")
+    return net, test, mpc
 
 
 def test_adapnn_flights_fly_one_model_per_gain():
-    torch.manual_seed(0)
-    net = AeroResidual((4,), "tanh").double()
-    N, steps = 3, 3
-    x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
-    test = FlightTest(Quadrotor(TEST_TRUTH), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend="torch",
-                      linearize_method="forward")
-    mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], u_max=6.0, theta_max=1.5, solver="OSQP")
+    steps = 3
+    net, test, mpc = _tiny(steps)
     runs = adapnn_flights(net, [1.0, 8.0], mpc, test)
     assert list(runs) == [1.0, 8.0] and all(r.name == "AdapNN" and r.x.shape == (steps + 1, 12) for r in runs.values())
     assert not np.array_equal(runs[1.0].x, runs[8.0].x)  # the gain is used
+
+
+def test_paired_grid_pairs_every_model_over_networks_and_tests():
+    torch.manual_seed(0)
+    nets = [("0", AeroResidual((4,), "tanh").double()), ("1", AeroResidual((4,), "tanh").double())]
+    N, steps = 3, 3
+    x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    tests = [FlightTest(Quadrotor(TEST_TRUTH.replace(force_disturbance=F)), x_r, u_r, steps=steps, Ts=0.02, substeps=1,
+                        backend="torch", linearize_method="forward") for F in ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2))]
+    mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
+                   theta_max=1.5, solver="OSQP")
+    kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Gamma=0.16, Ts=0.02)
+    grid = paired_grid(nets, nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+    assert list(grid) == [*SIX, "AdapFNN"] and all(len(v) == 4 for v in grid.values())
+    assert grid["Nomi"][0] is grid["Nomi"][2] and not np.array_equal(grid["Nomi"][0].x, grid["Nomi"][1].x)
+    assert not np.array_equal(grid["FNN"][0].x, grid["FNN"][2].x)  # another network, the same test
+    with pytest.raises(ValueError, match="at least one"):
+        paired_grid([], nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+
+
+def test_adapnn_gain_on_validation_flies_the_validation_vehicle_not_the_test() -> None:
+    N, steps = 3, 4
+    net, test, mpc = _tiny(steps, N)
+    x_v, u_v = lissajous_reference(steps + 2, N, Ts=0.02, params=NOMINAL, curve={**PAPER_LISSAJOUS, "r_x": 1.0})
+    val = Quadrotor(validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, 0.5))
+    sel = adapnn_gain_on_validation(net, [0.04, 0.16], [(x_v, u_v)], val, mpc, like=test, steps=steps + 2, rtol=0.0)
+    assert sel.value in (0.04, 0.16) and set(sel.table) == {0.04, 0.16}
+    flown = FlightTest(val, x_v, u_v, steps=steps + 2, Ts=0.02, substeps=1, backend="torch",
+                       linearize_method="forward").fly(adapnn_model(net, 0.16, Ts=0.02), mpc)
+    assert sel.table[0.16]["rmse_per_flight"] == [pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)]
+
+
+@pytest.mark.parametrize(("change", "match"), [({"u_max_judged": 5.0}, "u_max_judged"), ({"costs": ["paper"]}, "costs"),
+                                               ({"validation_flights": 0}, "validation_flights")])
+def test_mpc_settings_are_checked_before_any_flight(change: dict, match: str) -> None:
+    from fnnlib.settings import check_notebook_settings
+
+    good = {"dt": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
+            "steps": 300, "N": 10, "truth_substeps": 1, "validation_flights": 2, "validation_steps": 300,
+            "disturbance_draws": 2}
+    check_notebook_settings("quadrotor_mpc", good)
+    with pytest.raises(ValueError, match=match):
+        check_notebook_settings("quadrotor_mpc", {**good, **change})

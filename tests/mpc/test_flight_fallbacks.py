@@ -9,6 +9,7 @@ from fnnlib.mpc import OSQPMPC
 from fnnlib.mpc.flight import fly, lissajous_reference
 from fnnlib.mpc.linearized import DIVERGED_FALLBACK_SHARE
 from fnnlib.mpc.models import PredictionModel
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_TS
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 N, STEPS = 10, 20
@@ -22,7 +23,7 @@ def _mpc() -> OSQPMPC:
 @pytest.mark.parametrize("n_bad", [0, 2, 14])
 def test_flight_counts_fallbacks_by_reason_and_marks_divergence(n_bad: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """The QP refuses the data (as with a runaway model) at the last ``n_bad`` steps."""
-    x_r, u_r = lissajous_reference(STEPS, N)
+    x_r, u_r = lissajous_reference(STEPS, N, Ts=PAPER_TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
     mpc = _mpc()
     real = mpc.solve
     calls = []
@@ -35,7 +36,8 @@ def test_flight_counts_fallbacks_by_reason_and_marks_divergence(n_bad: int, monk
         return real(x0, A, B, c, xr, ur)
 
     monkeypatch.setattr(mpc, "solve", solve)
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL)), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS)
+    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL), Ts=PAPER_TS), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS,
+              Ts=PAPER_TS, substeps=1, backend="torch", linearize_method="central")
     assert res.n_fallbacks == n_bad
     assert res.fallback_reasons == ({"data_too_large": n_bad} if n_bad else {})
     assert res.n_reference_fallbacks == max(0, n_bad - (N - 1))  # the plan covers N - 1 fallback steps

@@ -10,8 +10,15 @@ import torch
 
 from fnnlib.mpc.flight import FlightResult, lissajous_reference
 from fnnlib.mpc.tuning import select_gain_on_validation, validation_references
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_TS
+from fnnlib.systems.quadrotor import NOMINAL
 
 N, STEPS = 10, 30
+DATA = {k: PAPER_FLIGHT_DATA[k] for k in ("n_waypoints", "box", "max_speed")}
+
+
+def refs_for(n: int, seed: int) -> list:
+    return validation_references(n, STEPS, N, seed=seed, Ts=PAPER_TS, params=NOMINAL, **DATA)
 
 
 def fake_flight(offset: float, x_r: torch.Tensor, n_fallbacks: int = 0) -> FlightResult:
@@ -22,17 +29,18 @@ def fake_flight(offset: float, x_r: torch.Tensor, n_fallbacks: int = 0) -> Fligh
     x[:, :3] += offset
     z12, z4 = np.zeros((T, 12)), np.zeros((T, 4))
     return FlightResult(name="fake", x=x, u=z4, x_ref=x_ref, xdot_true=z12, xdot_pred=z12, x_tilde=z12, delta=z12,
-                        t_linearize=np.zeros(T), t_solve=np.zeros(T), n_fallbacks=n_fallbacks)
+                        t_linearize=np.zeros(T), t_solve=np.zeros(T), Ts=PAPER_TS, n_fallbacks=n_fallbacks,
+                        fallback_reasons={"not_optimal": n_fallbacks} if n_fallbacks else {})
 
 
 @pytest.fixture(scope="module")
 def refs() -> list:
-    return validation_references(3, STEPS, N, seed=1234)
+    return refs_for(3, 1234)
 
 
 def test_validation_references_come_from_the_training_distribution(refs) -> None:
     assert len(refs) == 3
-    x_lissajous, _ = lissajous_reference(STEPS, N)
+    x_lissajous, _ = lissajous_reference(STEPS, N, Ts=PAPER_TS, params=NOMINAL, curve=PAPER_LISSAJOUS)
     for x_r, u_r in refs:
         assert x_r.shape == (STEPS + N + 1, 12) and u_r.shape == (STEPS + N, 4) and x_r.dtype == torch.float64
         # rest to rest through waypoints in the training box ((-3, 3), (-3, 3), (-2, 2)), speed <= 10 m/s
@@ -41,9 +49,9 @@ def test_validation_references_come_from_the_training_distribution(refs) -> None
         assert torch.linalg.norm(x_r[:, 3:6], dim=1).max() <= 10.0
         assert torch.isfinite(u_r).all()
         assert not torch.allclose(x_r, x_lissajous)
-    again = validation_references(3, STEPS, N, seed=1234)
+    again = refs_for(3, 1234)
     assert all(torch.equal(a[0], b[0]) for a, b in zip(refs, again))
-    assert not torch.equal(validation_references(1, STEPS, N, seed=99)[0][0], refs[0][0])
+    assert not torch.equal(refs_for(1, 99)[0][0], refs[0][0])
 
 
 def test_the_gain_with_the_lowest_validation_rmse_is_chosen_and_diverged_gains_never(refs) -> None:
@@ -61,6 +69,8 @@ def test_the_gain_with_the_lowest_validation_rmse_is_chosen_and_diverged_gains_n
     assert sel.table[0.16]["rmse"] == pytest.approx(0.1) and sel.table[0.04]["rmse"] == pytest.approx(0.3)
     assert sel.table[2.56]["diverged"] and math.isinf(sel.table[2.56]["rmse"])
     assert sel.table[2.56]["fallback_share"] == 0.5
+    assert sel.table[2.56]["fallback_reasons"] == {"not_optimal": STEPS // 2 * len(refs)}
+    assert sel.table[0.16]["fallback_reasons"] == {}
     # parsimony: the smallest gain within (1 + rtol) of the best 0.1 (0.04 at 0.3 is within 3.5x, not 2.5x)
     assert select_gain_on_validation(fly_fn, list(error), refs, rtol=1.5).value == 0.16
     assert select_gain_on_validation(fly_fn, list(error), refs, rtol=2.5).value == 0.04

@@ -1,0 +1,139 @@
+r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out (issue 15).
+
+Each rule returns a :class:`Rule`: ``checks`` decide the verdict and each can fail on a plausible run;
+``guarantees`` hold by construction or by a theorem whose constants are measured on the same run, and never
+count. Comparisons over trained networks (and disturbances) are paired and decided by
+:func:`fnnlib.stats.paired_win` (lower is better: a win holds in at least S - 1 of S pairs and the 90 %
+t-interval of the mean paired difference excludes 0). The notebooks pass ``checks``, ``guarantees`` and
+``numbers`` on to :func:`fnnlib.results.claim_result`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+from torch import Tensor
+
+from fnnlib.mpc.experiment import SIX
+from fnnlib.stats import paired_win
+from fnnlib.training.residual import convergence_checks
+
+__all__ = ["SIX", "Rule", "count_trainable", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
+           "q5_adaptive", "q6_training_cost"]
+
+
+class Rule(NamedTuple):
+    """What a rule returns: the verdict's checks, the guarantees apart, and the numbers behind both."""
+
+    checks: dict[str, bool]
+    guarantees: dict[str, bool]
+    numbers: dict[str, Any]
+
+
+def _paired(values: Mapping[str, Sequence[float]], names: Iterable[str]) -> dict[str, np.ndarray]:
+    """The named models' paired values (one per network x disturbance), checked to pair."""
+    out = {n: np.asarray(values[n], dtype=float) for n in names}
+    lengths = {v.shape for v in out.values()}
+    if len(lengths) != 1 or next(iter(lengths))[0] < 2 or len(next(iter(lengths))) != 1:
+        raise ValueError(f"need one 1-D series of >= 2 paired values per model, got shapes "
+                         f"{ {n: v.shape for n, v in out.items()} }")
+    return out
+
+
+def _wins(v: Mapping[str, np.ndarray], pairs: Iterable[tuple[str, str]], label: str) -> tuple[dict[str, bool], dict]:
+    """``a beats b`` by :func:`paired_win` for each pair, with its statistics (wins = how often it holds)."""
+    checks, stats = {}, {}
+    for a, b in pairs:
+        w = paired_win(v[a], v[b])
+        checks[f"{label}: {a} beats {b} (paired, >= {w['seeds'] - 1} of {w['seeds']})"] = w["win"]
+        stats[f"{a} < {b}"] = w
+    return checks, stats
+
+
+def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> Rule:
+    """Q1: training converges for every one of at least ``min_members`` random initialisations (Fig. A).
+
+    ``member_loss`` (epochs + 1, E): row 0 before training. Checks: at least ``min_members`` members; every
+    final loss <= 10 % of its initial one; the last 10 % of epochs change every loss by < 20 %; the largest
+    final loss at most 2x the smallest.
+    """
+    loss = np.asarray(member_loss, dtype=float)
+    if loss.ndim != 2 or loss.shape[0] < 2 or not np.isfinite(loss).all():
+        raise ValueError(f"member_loss must be a finite (epochs + 1, members) array, got shape {loss.shape}")
+    checks = {f"at least {min_members} initialisations": loss.shape[1] >= min_members,
+              **convergence_checks(loss, loss.shape[0] - 1)}
+    return Rule(checks, {}, {"final_over_initial": (loss[-1] / loss[0]).tolist(), "final_loss": loss[-1].tolist()})
+
+
+def q2_prediction(rel: Mapping[str, Mapping[str, float]], *, tol: float = 0.10) -> Rule:
+    """Q2: the learned model predicts all 12 states of the long validation flights (Figs. S4-S7).
+
+    ``rel[model][group]``: relative RMSE per state group (p, v, Theta, omega) for ``"neural ODE"`` and
+    ``"nominal"``. Checks: the neural ODE's is at most ``tol`` for every group; below the nominal model's
+    for p and v.
+    """
+    nn_, nom = rel["neural ODE"], rel["nominal"]
+    if set(nn_) != {"p", "v", "Theta", "omega"}:
+        raise ValueError(f"need the groups p, v, Theta, omega, got {sorted(nn_)}")
+    checks = {f"neural ODE: relative RMSE <= {100 * tol:g} % for p, v, Theta and omega": all(v <= tol for v in nn_.values()),
+              "neural ODE below nominal for p and v": all(nn_[g] < nom[g] for g in ("p", "v"))}
+    return Rule(checks, {}, {name: {g: float(v) for g, v in r.items()} for name, r in rel.items()})
+
+
+def q3_tracking(rmse: Mapping[str, Sequence[float]], *, label: str) -> Rule:
+    """Q3 (Fig. 7): FNN tracks best of the six; Neural < Nomi; MLP worse than Neural. Paired over runs.
+
+    ``rmse[model]``: mean per-axis tracking RMSE, one value per (trained network, disturbance), in the same
+    order for every model. ``label`` names the setting in each check (e.g. the cost variant).
+    """
+    v = _paired(rmse, SIX)
+    pairs = [("FNN", m) for m in SIX if m != "FNN"] + [("Neural", "Nomi"), ("Neural", "MLP")]
+    checks, stats = _wins(v, pairs, label)
+    return Rule(checks, {}, {"paired": stats, "mean": {n: float(x.mean()) for n, x in v.items()}})
+
+
+def q4_prediction(acc_rmse: Mapping[str, Sequence[float]], *, label: str) -> Rule:
+    """Q4 (Fig. S8): the first-step acceleration prediction is best with FNN, among the six. Paired over runs."""
+    v = _paired(acc_rmse, SIX)
+    checks, stats = _wins(v, [("FNN", m) for m in SIX if m != "FNN"], label)
+    return Rule(checks, {}, {"paired": stats, "mean": {n: float(x.mean()) for n, x in v.items()}})
+
+
+def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[float], *, label: str,
+                rel_tol: float = 0.25, min_inside: float = 0.95) -> Rule:
+    r"""Q5 (Fig. S14): AdapFNN is comparable to FNN with a slightly larger RMSE; Theorem 2's ball holds.
+
+    Checks (paired over runs): AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs; AdapFNN's mean
+    RMSE >= FNN's. Guarantee: on every run, the layer-0 error stays in the ball :math:`\gamma/\lambda_m(L)` for at
+    least ``min_inside`` of the steps after the transient, :math:`\gamma` measured on the same run (Theorem 2).
+    """
+    v = _paired(rmse, ("FNN", "AdapFNN"))
+    inside = np.asarray(theorem2_inside, dtype=float)
+    within = np.abs(v["AdapFNN"] - v["FNN"]) <= rel_tol * v["FNN"]
+    S = len(within)
+    checks = {f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN (>= {S - 1} of {S})": int(within.sum()) >= S - 1,
+              f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)": float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
+    guarantees = {f"{label}: Theorem 2 ball holds >= {100 * min_inside:g} % after the transient, every run":
+                  bool(inside.size > 0 and (inside >= min_inside).all())}
+    return Rule(checks, guarantees, {"within_fraction": float(within.mean()), "mean": {n: float(x.mean()) for n, x in v.items()},
+                                     "theorem2_inside_min": float(inside.min()) if inside.size else None})
+
+
+def count_trainable(tensors: Iterable[Tensor]) -> int:
+    """Number of trainable entries (``requires_grad``) among ``tensors``."""
+    return int(sum(t.numel() for t in tensors if t.requires_grad))
+
+
+def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> Rule:
+    """Q6: the linear feedback needs no training. The training time is reported, not judged.
+
+    ``n_trainable_feedback`` is counted on the feedback object (:func:`count_trainable`); the paper's 30 min
+    on a 14-core laptop has no baseline measured here, so ``seconds_per_model`` is a number only.
+    """
+    if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model):
+        raise ValueError(f"bad inputs: {n_trainable_feedback}, {seconds_per_model}")
+    return Rule({"linear feedback has no trainable parameter (counted on the feedback object)": int(n_trainable_feedback) == 0},
+                {}, {"trainable_feedback_parameters": int(n_trainable_feedback),
+                     "seconds_per_model_50_epochs": float(seconds_per_model)})

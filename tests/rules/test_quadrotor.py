@@ -1,0 +1,93 @@
+"""Issue 15: the Sec. 5 rules (Q1-Q6) fed numbers that must pass and numbers that must fail."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from fnnbook.rules.quadrotor import (SIX, count_trainable, q1_convergence, q2_prediction, q3_tracking, q4_prediction,
+                                     q5_adaptive, q6_training_cost)
+
+RNG = np.random.default_rng(0)
+S = 15  # 5 trained networks x 3 disturbances
+
+
+def runs(mean: float, noise: float = 0.005) -> np.ndarray:
+    return mean + noise * RNG.standard_normal(S)
+
+
+def paper_like() -> dict[str, np.ndarray]:
+    """Fig. 7's order: FNN best, Neural < Nomi, MLP > Neural (AdapFNN a little above FNN)."""
+    return {"Nomi": runs(0.5), "Neural": runs(0.3), "MLP": runs(0.4), "FB": runs(0.2), "AdapNN": runs(0.15),
+            "FNN": runs(0.1), "AdapFNN": runs(0.11)}
+
+
+def test_q1_passes_on_converging_members_and_fails_on_a_stalled_one() -> None:
+    loss = np.outer(np.exp(-np.linspace(0, 10, 51)), np.ones(5)) + 0.01  # flat at the end
+    assert all(q1_convergence(loss).checks.values())
+    stalled = loss.copy()
+    stalled[:, 2] = 1.0  # never learns
+    r = q1_convergence(stalled)
+    assert not r.checks["every initialisation: final <= 10 % of initial loss"]
+    assert not r.checks["initialisations agree: max/min final loss <= 2"]
+    assert not q1_convergence(loss[:, :3]).checks["at least 5 initialisations"]
+    with pytest.raises(ValueError):
+        q1_convergence(np.full((3, 5), np.nan))
+
+
+def test_q2_passes_within_10_percent_and_fails_above_or_behind_nominal() -> None:
+    good = {"neural ODE": {"p": 0.02, "v": 0.03, "Theta": 0.05, "omega": 0.08},
+            "nominal": {"p": 0.5, "v": 0.4, "Theta": 0.1, "omega": 0.2}}
+    assert all(q2_prediction(good).checks.values())
+    bad = {"neural ODE": {**good["neural ODE"], "omega": 0.2}, "nominal": {**good["nominal"], "p": 0.01}}
+    assert not any(q2_prediction(bad).checks.values())
+
+
+def test_q3_passes_the_papers_order_and_fails_when_fb_tracks_best() -> None:
+    r = q3_tracking(paper_like(), label="6 N")
+    assert all(r.checks.values()) and len(r.checks) == 7 and r.numbers["paired"]["FNN < FB"]["wins"] == S
+    swapped = {**paper_like(), "FB": runs(0.05)}
+    r = q3_tracking(swapped, label="6 N")
+    assert not r.checks[f"6 N: FNN beats FB (paired, >= {S - 1} of {S})"]
+    assert r.checks[f"6 N: FNN beats Nomi (paired, >= {S - 1} of {S})"]
+
+
+def test_q3_fails_a_gap_smaller_than_the_spread() -> None:
+    tied = {**paper_like(), "Neural": runs(0.5, 0.05), "Nomi": runs(0.5, 0.05)}
+    assert not q3_tracking(tied, label="x").checks[f"x: Neural beats Nomi (paired, >= {S - 1} of {S})"]
+    with pytest.raises(ValueError, match="paired"):
+        q3_tracking({**paper_like(), "FNN": runs(0.1)[:3]}, label="x")
+
+
+def test_q4_wants_fnn_best_not_just_a_feedback_model() -> None:
+    acc = {"Nomi": runs(8.0), "Neural": runs(8.0), "MLP": runs(8.0), "FB": runs(3.5), "AdapNN": runs(0.5),
+           "FNN": runs(3.2)}
+    r = q4_prediction(acc, label="as flown")
+    assert not all(r.checks.values()) and r.checks[f"as flown: FNN beats Neural (paired, >= {S - 1} of {S})"]
+    assert not r.checks[f"as flown: FNN beats AdapNN (paired, >= {S - 1} of {S})"]
+    assert all(q4_prediction({**acc, "AdapNN": runs(5.0)}, label="as flown").checks.values())
+    assert set(SIX) == set(acc)
+
+
+def test_q5_comparable_and_slightly_larger_passes_far_or_smaller_fails() -> None:
+    r = q5_adaptive(paper_like(), [1.0] * S, label="6 N")
+    assert all(r.checks.values()) and all(r.guarantees.values())
+    far = q5_adaptive({"FNN": runs(0.1), "AdapFNN": runs(0.2)}, [1.0] * S, label="6 N")
+    assert not far.checks[f"6 N: AdapFNN within 25 % of FNN (>= {S - 1} of {S})"]
+    smaller = q5_adaptive({"FNN": runs(0.1), "AdapFNN": runs(0.09, 0.001)}, [1.0] * S, label="6 N")
+    assert not smaller.checks["6 N: AdapFNN mean RMSE >= FNN's (slightly larger)"]
+    out = q5_adaptive(paper_like(), [1.0] * (S - 1) + [0.5], label="6 N")
+    assert not out.guarantees["6 N: Theorem 2 ball holds >= 95 % after the transient, every run"]
+
+
+def test_q6_counts_the_feedback_objects_parameters() -> None:
+    fixed = torch.eye(3)
+    learnable = torch.nn.Parameter(torch.eye(3))
+    assert count_trainable([fixed]) == 0 and count_trainable([fixed, learnable]) == 9
+    assert q6_training_cost(count_trainable([fixed]), 120.0).checks == {
+        "linear feedback has no trainable parameter (counted on the feedback object)": True}
+    r = q6_training_cost(count_trainable([learnable]), 120.0)
+    assert not any(r.checks.values()) and r.numbers["trainable_feedback_parameters"] == 9
+    with pytest.raises(ValueError):
+        q6_training_cost(0, float("nan"))
