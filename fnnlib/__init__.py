@@ -35,6 +35,7 @@ from fnnlib.feedback import (
     spectral_radius,
 )
 from fnnlib.observers import (
+    disturbance_drift_variance,
     ExtendedKalmanObserver,
     KalmanObserver,
     LinearFeedback,
@@ -94,7 +95,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
-    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model",
+    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
     "tune_gains",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",

@@ -107,6 +107,7 @@ def _observers(p: Mapping[str, Any]) -> None:
     _horizon(p, p["N"])
     _at_least(p, 1, "repeats")
     _at_least(p, 0, "settle")
+    _at_least(p, 2, "kf_tuning_cases")
 
 
 def _neural_feedback(p: Mapping[str, Any]) -> None:

@@ -13,8 +13,9 @@ from fnnlib.observers.kalman import ExtendedKalmanObserver, KalmanObserver, Stea
 from fnnlib.observers.linear import LinearFeedback
 from fnnlib.observers.luenberger import LuenbergerObserver, linear_feedback_gain, place_observer_gain
 from fnnlib.observers.neural import NeuralFeedbackObserver, feedback_rollout
+from fnnlib.observers.tuning import disturbance_drift_variance
 
 __all__ = ["AugmentedObserver", "DisturbanceEstimate", "ExtendedKalmanObserver", "KalmanObserver", "LinearFeedback",
            "LuenbergerObserver", "NeuralFeedbackObserver", "Observer", "ObserverReport", "SteadyState",
-           "augmented_matrices", "constant_gain_filter", "evaluate_observer", "feedback_rollout", "linear_feedback_gain",
+           "augmented_matrices", "constant_gain_filter", "disturbance_drift_variance", "evaluate_observer", "feedback_rollout", "linear_feedback_gain",
            "metrics_table", "place_observer_gain", "rollout_corrected", "steady_state_gain"]
