@@ -146,7 +146,7 @@ def _quadrotor_learning(p: Mapping[str, Any]) -> None:
 
 
 def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
-    Ts = p["Ts"] if "Ts" in p else p["dt"]
+    Ts = p["Ts"]
     check_gain(p["L"], 12, Ts)
     if not p["u_max"] or min(p["u_max"]) <= 0:
         raise ValueError(f"u_max must list positive thrust bounds, got {p['u_max']}")

@@ -22,7 +22,7 @@ n_waypoints = 3
 val_flights = 3
 val_nodes = 500
 val_waypoints = 6
-dt = 0.02
+Ts = 0.02
 truth_drag = [0.7, 0.7, 0.2]
 truth_substeps = 4
 hidden = [36, 36]
@@ -72,9 +72,9 @@ draws = {"box": PAPER_FLIGHT_DATA["box"], "max_speed": PAPER_FLIGHT_DATA["max_sp
 
 # %%
 tic = time.perf_counter()
-train = make_flights(n_flights, n_nodes, Ts=dt, seed=seed, truth=truth, controller=controller, n_waypoints=n_waypoints,
+train = make_flights(n_flights, n_nodes, Ts=Ts, seed=seed, truth=truth, controller=controller, n_waypoints=n_waypoints,
                      substeps=truth_substeps, **draws)
-val = make_flights(val_flights, val_nodes, Ts=dt, seed=seed + 1, truth=truth, controller=controller,
+val = make_flights(val_flights, val_nodes, Ts=Ts, seed=seed + 1, truth=truth, controller=controller,
                    n_waypoints=val_waypoints, substeps=truth_substeps, **draws)
 save_flights(out / "flights_train.npz", train, {"seed": seed, "drag": truth_drag})
 save_flights(out / "flights_val.npz", val, {"seed": seed + 1, "drag": truth_drag})
@@ -175,7 +175,7 @@ for name, r in rel.items():
 
 # %%
 labels = {"p": ["x", "y", "z"], "v": ["vx", "vy", "vz"], "Theta": ["roll", "pitch", "yaw"], "omega": ["wx", "wy", "wz"]}
-t_val = np.arange(val.n_steps + 1) * dt
+t_val = np.arange(val.n_steps + 1) * Ts
 for k in range(val.n_flights):
     fig, axes = F.new_figure(4, 3, sharex=True)
     for r, (g, sl) in enumerate(STATE_GROUPS.items()):
@@ -195,7 +195,7 @@ for k in range(val.n_flights):
 
 # %% [tags: nbval-check-output]
 final, first = member_loss[-1], member_loss[0]
-feedback = FeedbackCascadeModel(PredictionModel("Neural", model_plant, residual, Ts=dt), PAPER_L, PAPER_BETA, PAPER_HORIZON)
+feedback = FeedbackCascadeModel(PredictionModel("Neural", model_plant, residual, Ts=Ts), PAPER_L, PAPER_BETA, PAPER_HORIZON)
 n_feedback_params = rules.count_trainable(t for t in vars(feedback).values() if isinstance(t, torch.Tensor))
 r1, r2 = rules.q1_convergence(member_loss), rules.q2_prediction(rel)
 r6 = rules.q6_training_cost(n_feedback_params, per_model_s * 50 / epochs)

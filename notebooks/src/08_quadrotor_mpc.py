@@ -19,7 +19,7 @@ out_dir = "outputs/manual/quadrotor_mpc"
 upstream_dirs = {"quadrotor_learning": "outputs/manual/quadrotor_learning"}
 steps = 300
 N = 10
-dt = 0.02
+Ts = 0.02
 Q = [100.0, 100.0, 100.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.0, 1.0, 1.0]
 R = [1.0, 1.0, 1.0, 1.0]
 costs = ["as_written", "as_flown"]
@@ -91,10 +91,10 @@ if u_max_judged not in u_max:
 test_params = TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
                                  force_disturbance=tuple(disturbance))
 forces = disturbance_realisations(disturbance, disturbance_draws, seed=disturbance_seed, spread=disturbance_spread)
-x_r, u_r = lissajous_reference(steps, N, Ts=dt, params=NOMINAL, curve=PAPER_LISSAJOUS)
-tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=f)), x_r, u_r, steps=steps, Ts=dt,
+x_r, u_r = lissajous_reference(steps, N, Ts=Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
+tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=f)), x_r, u_r, steps=steps, Ts=Ts,
                     substeps=truth_substeps, backend=backend, linearize_method=linearize_method) for f in forces]
-models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=dt)
+models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)
 
 
 def make_qp(cost, umax):
@@ -138,7 +138,7 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # %%
 compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
 val_truth = Quadrotor(validation_vehicle(TRAINING_TRUTH, test_params, validation_vehicle_fraction))
-val_refs = validation_references(validation_flights, validation_steps, N, seed=validation_seed, Ts=dt,
+val_refs = validation_references(validation_flights, validation_steps, N, seed=validation_seed, Ts=Ts,
                                  n_waypoints=validation_waypoints, box=PAPER_FLIGHT_DATA["box"],
                                  max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
 gamma_sel = {cost: adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_refs, val_truth,
@@ -175,7 +175,7 @@ context = {}
 for umax in (u for u in u_max if u != u_max_judged):
     for cost in costs:
         ms = paper_models(residual, mlp, **models_kw)
-        ms[[m.name for m in ms].index("AdapNN")] = adapnn_model(residual, gamma_sel[cost].value, Ts=dt)
+        ms[[m.name for m in ms].index("AdapNN")] = adapnn_model(residual, gamma_sel[cost].value, Ts=Ts)
         context[(cost, umax)] = {m.name: tests[0].fly(m, make_qp(cost, umax)) for m in ms}
 
 # %%
@@ -189,7 +189,7 @@ for k, fl in tables.items():
         print(f"  {n:8s} {v['mean_axis']:20.3f} {v['z']:6.3f} {v['acc_pred_rmse']:8.3f} {v['fallbacks']:6d} {fallback_note(r)}")
 
 # %%
-t_grid = np.arange(steps + 1) * dt
+t_grid = np.arange(steps + 1) * Ts
 for cost, fl in main.items():
     fig, axes = F.new_figure(1, 2)
     axes = axes[0]
@@ -268,7 +268,7 @@ print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['re
 # not a check that counts.
 
 # %%
-transient = int(round(transient_s / dt))
+transient = int(round(transient_s / Ts))
 thm2 = {cost: [theorem2_check(r, L, transient) for r in g["AdapFNN"]] for cost, g in grid.items()}
 fig, ax = F.new_figure()
 for cost, fl in main.items():

@@ -167,7 +167,7 @@ def test_adapnn_gain_on_validation_flies_the_validation_vehicle_not_the_test() -
 def test_mpc_settings_are_checked_before_any_flight(change: dict, match: str) -> None:
     from fnnlib.settings import check_notebook_settings
 
-    good = {"dt": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
+    good = {"Ts": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
             "steps": 300, "N": 10, "truth_substeps": 1, "validation_flights": 2, "validation_steps": 300,
             "disturbance_draws": 2}
     check_notebook_settings("quadrotor_mpc", good)
