@@ -31,16 +31,6 @@ fb_batch_size = 100
 fb_lr = 0.01
 fb_optimizer = "rmsprop"
 refresh_every = 10
-hidden = [50, 50]
-activation = "relu"
-iterations = 400
-batch_size = 20
-batch_time = 10
-lr = 0.001
-method = "dopri5"
-adjoint = True
-rtol = 1e-5
-atol = 1e-6
 N = 50
 L = 20.0
 beta = 0.02
@@ -83,9 +73,6 @@ out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
 model, meta = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt", expected_kind="NeuralODE")
-if model.config["hidden"] != list(hidden) or model.config["activation"] != activation:
-    raise ValueError(f"the domain-randomized neural ODE must mirror the nominal one ({model.config}); "
-                     f"got hidden={hidden}, activation={activation!r}")
 if "recipe" not in meta:
     raise ValueError("the spiral checkpoint carries no training recipe; rerun the spiral task")
 recipe = F.ODERecipe(**meta["recipe"])  # the nominal model's recipe, read from its checkpoint
