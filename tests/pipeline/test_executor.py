@@ -25,9 +25,20 @@ from fnnbook.cli import main
 
 from .nbfactory import CHILD_BODY, CHILD_PARAMS, LEAF_BODY, LEAF_PARAMS, MakePipeline, child_task, leaf_task, write_notebook
 
-# A leaf that records when it ran (wall clock) and sleeps `nap` seconds in between.
-TIMED_PARAMS = LEAF_PARAMS + "nap = 0.0\n"
-TIMED_BODY = "import json, time\nstart = time.time()\ntime.sleep(nap)\n" + LEAF_BODY + """\
+# A leaf that records when it ran (wall clock) and sleeps `nap` seconds in between. With `meet_within` > 0 it
+# also waits (that long at most) until another timed task of the run has started: two tasks that run at the
+# same time always overlap, however slowly a loaded machine starts their kernels.
+TIMED_PARAMS = LEAF_PARAMS + "nap = 0.0\nmeet_within = 0.0\n"
+TIMED_BODY = """\
+import json, pathlib, time
+start = time.time()
+meet = pathlib.Path(out_dir).parent.parent / "started"
+meet.mkdir(exist_ok=True)
+(meet / pathlib.Path(out_dir).name).write_text("x")
+while time.time() - start < meet_within and len(list(meet.iterdir())) < 2:
+    time.sleep(0.05)
+time.sleep(nap)
+""" + LEAF_BODY + """\
 (out / "times.json").write_text(json.dumps([start, time.time()]))
 """
 CHILD_TIMED_BODY = "import json, time\nstart = time.time()\n" + CHILD_BODY + """\
@@ -77,6 +88,8 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
         make_pipeline: MakePipeline, tmp_path: Path) -> None:
     tasks = _tasks(tmp_path)
     del tasks["other"]
+    for name in ("leaf", "pt"):  # each independent task waits (up to 60 s) for another to start beside it
+        tasks[name]["parameters"]["smoke"]["meet_within"] = 60.0
     spec = load_spec(make_pipeline(tasks, parts=[{"title": "P", "tasks": list(tasks)}]))
     assert spec.grids == {"pt": ("pt__value_1", "pt__value_2")}
     lines: list[str] = []
@@ -101,6 +114,10 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
 
     # the serial path gives the same results.json
     serial = spec.with_paths(output_root=tmp_path / "serial")
+    met = serial.output_root / "smoke" / "started"  # alone on purpose: nothing to wait for
+    met.mkdir(parents=True)
+    for name in ("a", "b"):
+        (met / name).write_text("x")
     assert run(serial, "smoke", ["leaf"], workers=1, progress_bar=False, echo=lambda _: None).ok
     for task in ("leaf",):
         assert (serial.output_dir("smoke", task) / "results.json").read_bytes() == (
