@@ -31,6 +31,8 @@ NOISE = re.compile(r"ERROR in osqp|Problem data validation|\bWarning\b|Traceback
 @pytest.fixture(scope="session")
 def smoke_book(smoke_outputs) -> Path:
     """The book built from this run's smoke outputs (once for all xdist workers); its ``_build/html``."""
+    if not smoke_outputs.spec.claims_file.is_file():  # the scoreboard lists the claims of the shared CLAIMS.md
+        pytest.skip(f"no claims file at {smoke_outputs.spec.claims_file}: the book cannot be built here")
     book = smoke_outputs.spec.output_root.parent / "smoke-book"
     html = book / "_build" / "html"
     report = smoke_outputs.run()  # every task (each under its own lock), before taking the book's
