@@ -2,7 +2,10 @@
 
 Each notebook has one code cell tagged ``parameters`` that holds plain
 literal assignments (``seed = 0``, ``hidden = [50, 50]``).  Those are the
-names a task may set, and their values fix the types it may pass.  The
+names a task may set, and their values fix the types it may pass.  A value
+the paper shares between notebooks is written once, in a preset: the cell
+says ``L = None`` and the runner fills in the preset
+(:data:`fnnlib.settings.NOTEBOOK_PRESETS`), whose type then applies.  The
 runner also injects ``profile`` and ``out_dir`` (always), ``data_dir`` and
 ``upstream_dirs`` (where declared).
 """
@@ -18,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from fnnbook.spec import PipelineError, PipelineSpec, Task
+from fnnlib.settings import fill_presets, notebook_presets
 
 __all__ = ["INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters"]
 
@@ -116,7 +120,8 @@ def _type_name(value: Any) -> str:
 def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any]) -> None:
     """Check one task's parameters for one profile against its notebook's defaults.
 
-    Types: a ``None`` default accepts anything; a float default accepts int
+    Types: a ``None`` default of a preset parameter takes the preset's type, any other ``None`` default
+    accepts anything; a float default accepts int
     or float; a bool is accepted only where the default is a bool; a list
     (or tuple) default accepts a list whose every element passes this rule
     against some element of the default (an empty default accepts any
@@ -149,6 +154,7 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
         raise PipelineError(f"task {task.name!r} has no parameters for profile {profile!r} "
                             f"(it has: {', '.join(task.parameters)})")
     choices = [n for n in declared if n not in INJECTED]
+    presets = notebook_presets(task.notebook.stem)
     for name, value in task.parameters[profile].items():
         where = f"task {task.name!r}, profile {profile!r}, parameter {name!r}"
         if name in INJECTED:
@@ -158,9 +164,11 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
             close = difflib.get_close_matches(name, choices, n=3)
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
             raise PipelineError(f"{where}: not declared in the parameters cell of {nb}{hint}")
-        if not _type_ok(declared[name], value):
+        default = presets.get(name) if declared[name] is None else declared[name]
+        if not _type_ok(default, value):
+            source = "paper preset" if declared[name] is None else "default"
             raise PipelineError(f"{where}: got {_type_name(value)} {value!r}, but the notebook's "
-                                f"default is {_type_name(declared[name])} {declared[name]!r}")
+                                f"{source} is {_type_name(default)} {default!r}")
     for name in INJECTED:
         if name in declared and declared[name] is not None:
             expected: Any = {} if name == "upstream_dirs" else ""
@@ -180,7 +188,9 @@ def resolve_parameters(
 ) -> dict[str, Any]:
     """Return the parameters papermill injects into ``task``'s notebook.
 
-    Every default of the notebook's parameters cell, updated by the task's
+    Every default of the notebook's parameters cell (a ``None`` default of a
+    preset parameter filled with its paper value,
+    :data:`fnnlib.settings.NOTEBOOK_PRESETS`), updated by the task's
     profile overrides (so the executed notebook shows every value the run
     used), plus ``profile``, ``out_dir``, and where
     the notebook declares them ``data_dir`` (a string) and ``upstream_dirs``
@@ -194,6 +204,7 @@ def resolve_parameters(
         it does not exist.
     """
     params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
+    fill_presets(task.notebook.stem, params)
     params.update(task.parameters[profile])
     params["profile"] = profile
     params["out_dir"] = str(out_dir)

@@ -18,15 +18,20 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, MutableMapping
+from types import MappingProxyType
 from pathlib import Path
 from typing import Any
 
+from fnnlib import quadrotor_presets as QP
+from fnnlib import spiral_presets as SP
 from fnnlib.data.bottle import BOTTLE_FILES, TS as BOTTLE_TS, DataError
 from fnnlib.feedback import GainWarning, check_gain, decayed_gains
 from fnnlib.sweeps import colon_range
+from fnnlib.systems.quadrotor import TEST_TRUTH, TRAINING_TRUTH
+from fnnlib.training import PAPER_BOTTLE_RECIPE, PAPER_SPIRAL_RECIPE
 
-__all__ = ["MissingDataError", "check_notebook_settings"]
+__all__ = ["NOTEBOOK_PRESETS", "MissingDataError", "check_notebook_settings", "fill_presets", "notebook_presets"]
 
 
 class MissingDataError(DataError):
@@ -174,6 +179,75 @@ def _own_system(p: Mapping[str, Any]) -> None:
         check_gain(p["spiral_L"], 2, p["spiral_Ts"], N=p["spiral_N"], beta=p["spiral_beta"])
 
 
+# -- the paper values the notebooks share, each written once (in the preset modules and the recipes)
+def _recipe(recipe: Any, *names: str) -> dict[str, Any]:
+    return {name: getattr(recipe, name) for name in names}
+
+
+_SPIRAL_DATA = {"Ts": SP.SPIRAL_TS, "n_samples": SP.SPIRAL_SAMPLES, "x0": SP.SPIRAL_X0}
+_SPIRAL_FEEDBACK = {"L": SP.PAPER_SPIRAL_L, "beta": SP.PAPER_SPIRAL_BETA, "N": SP.PAPER_SPIRAL_N}
+
+NOTEBOOK_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
+    "spiral": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, "test": SP.SPIRAL_TEST,
+               "hidden": SP.PAPER_SPIRAL_HIDDEN, "activation": SP.SPIRAL_ACTIVATION,
+               **_recipe(PAPER_SPIRAL_RECIPE, "iterations", "batch_size", "batch_time", "lr", "method", "adjoint",
+                         "rtol", "atol"),
+               **_SPIRAL_FEEDBACK, "noise_std": SP.SPIRAL_NOISE_STD},
+    "theory": {**_SPIRAL_DATA, "test": SP.SPIRAL_TEST, "L": SP.PAPER_SPIRAL_L},
+    "ablations": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, "test": SP.SPIRAL_TEST, **_SPIRAL_FEEDBACK,
+                  "noise_std": SP.SPIRAL_NOISE_STD, "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID,
+                  "before": SP.SPIRAL_TEST},
+    "observers": {**_SPIRAL_DATA, "test": SP.SPIRAL_TEST, **_SPIRAL_FEEDBACK, "noise_std": SP.SPIRAL_NOISE_STD,
+                  **SP.KALMAN_SETTINGS},
+    "neural_feedback": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, **_SPIRAL_FEEDBACK,
+                        "fb_hidden": SP.PAPER_SPIRAL_HIDDEN, "fb_activation": SP.SPIRAL_ACTIVATION,
+                        "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID},
+    "bottle": _recipe(PAPER_BOTTLE_RECIPE, "iterations", "batch_size", "batch_time", "lr", "method", "adjoint"),
+    "quadrotor_learning": {
+        "Ts": QP.PAPER_TS, "n_waypoints": QP.PAPER_FLIGHT_DATA["n_waypoints"],
+        "truth_drag": TRAINING_TRUTH.drag, "truth_substeps": QP.PAPER_FLIGHT_DATA["substeps"],
+        **{k: QP.PAPER_RESIDUAL_RECIPE[k] for k in ("hidden", "activation", "epochs", "segment_length",
+                                                    "batch_size", "lr")},
+        "mlp_epochs": QP.PAPER_MLP_RECIPE["epochs"], "mlp_lr": QP.PAPER_MLP_RECIPE["lr"]},
+    "quadrotor_mpc": {
+        "N": QP.PAPER_HORIZON, "Ts": QP.PAPER_TS, **QP.PAPER_MPC_WEIGHTS, "theta_max": QP.PAPER_THETA_MAX,
+        "L": QP.PAPER_L, "beta": QP.PAPER_BETA, "Gamma": QP.PAPER_GAMMA, "truth_mass": TEST_TRUTH.mass,
+        "truth_inertia": TEST_TRUTH.inertia, "truth_drag": TEST_TRUTH.drag,
+        "disturbance": TEST_TRUTH.force_disturbance},
+    "own_system": {
+        "L_hand": SP.PAPER_SPIRAL_L, "beta_hand": SP.PAPER_SPIRAL_BETA, **SP.KALMAN_SETTINGS,
+        "spiral_n_samples": SP.SPIRAL_SAMPLES, "spiral_Ts": SP.SPIRAL_TS, "spiral_test": SP.SPIRAL_TEST,
+        "spiral_x0": SP.SPIRAL_X0, "spiral_N": SP.PAPER_SPIRAL_N, "spiral_noise_std": SP.SPIRAL_NOISE_STD,
+        "spiral_L": SP.PAPER_SPIRAL_L, "spiral_beta": SP.PAPER_SPIRAL_BETA},
+})
+"""Per notebook: the parameters its ``parameters`` cell leaves at ``None``, and the paper value each takes.
+
+A value several notebooks (or a notebook and the library) share is written once, in
+:mod:`fnnlib.spiral_presets`, :mod:`fnnlib.quadrotor_presets`, the vehicles of :mod:`fnnlib.systems.quadrotor`
+or the training recipes; this table only says which parameter takes which. A profile may override any of them."""
+
+
+def _plain(value: Any) -> Any:
+    """Tuples (the presets' read-only sequences) as lists, the type a notebook parameter has."""
+    return [_plain(v) for v in value] if isinstance(value, (tuple, list)) else value
+
+
+def notebook_presets(notebook: str) -> dict[str, Any]:
+    """The presets of one notebook (``"spiral"``; a leading ``"03_"`` or a suffix is ignored), as plain values."""
+    name = re.sub(r"^\d+_", "", Path(notebook).stem)
+    return {k: _plain(v) for k, v in NOTEBOOK_PRESETS.get(name, {}).items()}
+
+
+def fill_presets(notebook: str, settings: MutableMapping[str, Any]) -> dict[str, Any]:
+    """Fill, in place, every preset parameter of ``settings`` that is ``None`` (or absent) with its paper value.
+
+    Returns the values filled (empty when the runner already injected every value).
+    """
+    filled = {k: v for k, v in notebook_presets(notebook).items() if settings.get(k) is None}
+    settings.update(filled)
+    return filled
+
+
 _CHECKS: dict[str, Callable[[Mapping[str, Any]], None]] = {
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
@@ -182,7 +256,7 @@ _CHECKS: dict[str, Callable[[Mapping[str, Any]], None]] = {
 
 
 def check_notebook_settings(notebook: str, settings: Mapping[str, Any]) -> None:
-    """Check a notebook's settings before any work; raise on the first bad value.
+    """Fill a notebook's ``None`` settings with the paper presets, then check them; raise on the first bad value.
 
     Parameters
     ----------
@@ -190,17 +264,25 @@ def check_notebook_settings(notebook: str, settings: Mapping[str, Any]) -> None:
         The notebook's name (``"spiral"``; a leading ``"03_"`` or a
         ``.ipynb`` suffix is ignored). A notebook without checks passes.
     settings : mapping
-        Its parameters, e.g. ``globals()`` right after the parameters cell.
+        Its parameters, e.g. ``globals()`` right after the parameters cell. A mutable mapping gets its
+        ``None`` presets filled in place (:func:`fill_presets`; a run by hand, the runner injects them) and
+        the filled values are printed; a read-only one is checked with them.
 
     Raises
     ------
     ValueError
         A value the notebook cannot use (:class:`~fnnlib.observers.GainError`
-        for an unstable gain).
+        for an unstable gain), or a setting left ``None`` that has no preset.
     MissingDataError
         Data files the settings need are not in ``data_dir``.
     """
     name = re.sub(r"^\d+_", "", Path(notebook).stem)
+    if isinstance(settings, MutableMapping):
+        filled = fill_presets(name, settings)
+        if filled:
+            print("paper presets: " + ", ".join(f"{k} = {v!r}" for k, v in filled.items()))
+    else:
+        settings = {**settings, **{k: v for k, v in notebook_presets(name).items() if settings.get(k) is None}}
     check = _CHECKS.get(name)
     if check is not None:
         try:

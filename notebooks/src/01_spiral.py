@@ -12,29 +12,30 @@
 # one ensemble, and is judged per seed, paired (`fnnbook.rules.sec3`).
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/spiral"
 seeds = [0, 1, 2, 3, 4]
-n_samples = 1000
-Ts = 0.01
-nominal = [2.0, 0.1, 0.0]
-test = [3.0, 0.05, 10.0]
-x0 = [9.0, 0.0]
-hidden = [50, 50]
-activation = "relu"
-iterations = 400
-batch_size = 20
-batch_time = 10
-lr = 0.001
-method = "dopri5"
-adjoint = True
-rtol = 1e-5
-atol = 1e-6
-L = 20.0
-beta = 0.02
-N = 50
+n_samples = None
+Ts = None
+nominal = None
+test = None
+x0 = None
+hidden = None
+activation = None
+iterations = None
+batch_size = None
+batch_time = None
+lr = None
+method = None
+adjoint = None
+rtol = None
+atol = None
+L = None
+beta = None
+N = None
 N_max = 100
-noise_std = 0.01
+noise_std = None
 noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 
 # %%

@@ -12,15 +12,16 @@
 # variant, App. A.6) belongs to the quadrotor section.
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/theory"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
 seed = 0
-n_samples = 1000
-Ts = 0.01
-test = [3.0, 0.05, 10.0]
-x0 = [9.0, 0.0]
-L = 20.0
+n_samples = None
+Ts = None
+test = None
+x0 = None
+L = None
 L_sweep = [5.0, 10.0, 20.0, 40.0, 80.0]
 transient_time_constants = 5.0
 conservative_ratio = 2.0

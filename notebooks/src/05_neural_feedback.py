@@ -11,33 +11,34 @@
 # beats the neural ODE at the 12 residual levels of S8 (Fig. S10), shown beside the linear feedback.
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/neural_feedback"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
 seed = 0
-x0 = [9.0, 0.0]
-nominal = [2.0, 0.1, 0.0]
-n_samples = 1000
-Ts = 0.01
+x0 = None
+nominal = None
+n_samples = None
+Ts = None
 dr_omega_range = [0.8, 0.12, 3.08]
 dr_eta_range = [0.04, 0.005, 0.135]
 dr_eps_range = [-24.0, 2.4, 21.6]
 dr_n_samples = 1000
 dr_Ts = 0.02
-fb_hidden = [50, 50]
-fb_activation = "relu"
+fb_hidden = None
+fb_activation = None
 fb_iterations = 2000
 fb_batch_size = 100
 fb_lr = 0.01
 fb_optimizer = "rmsprop"
 refresh_every = 10
-N = 50
-L = 20.0
-beta = 0.02
-residual_base = [2.0, 0.1, 0.0]
-domega_range = [-0.72, 0.12, 0.6]
-deta_range = [-0.03, 0.005, 0.025]
-deps_range = [-14.4, 2.4, 12.0]
+N = None
+L = None
+beta = None
+residual_base = None
+domega_range = None
+deta_range = None
+deps_range = None
 d1_factor = 1.5
 d2_factor = 1.5
 d3_ratio = 0.5

@@ -11,6 +11,7 @@
 # and every comparison is judged per throw and per seed, paired (`fnnbook.rules.bottle`).
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/bottle"
 data_dir = "data"
@@ -18,12 +19,12 @@ data = "real"
 seeds = [0, 1, 2, 3, 4]
 hidden = [100, 100, 100]
 activation = "relu"
-iterations = 1000
-batch_size = 20
-batch_time = 10
-lr = 0.001
-method = "dopri5"
-adjoint = False
+iterations = None
+batch_size = None
+batch_time = None
+lr = None
+method = None
+adjoint = None
 L = 5.0
 beta = 0.02
 N = 500

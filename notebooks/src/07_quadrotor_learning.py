@@ -12,28 +12,29 @@
 # than the training ones) and **Q6** (training cost).
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_learning"
 seed = 0
 seeds = [0, 1, 2, 3, 4]
 n_flights = 40
 n_nodes = 200
-n_waypoints = 3
+n_waypoints = None
 val_flights = 3
 val_nodes = 500
 val_waypoints = 6
-Ts = 0.02
-truth_drag = [0.7, 0.7, 0.2]
-truth_substeps = 4
-hidden = [36, 36]
-activation = "tanh"
-epochs = 50
-segment_length = 20
-batch_size = 80
-lr = 0.005
+Ts = None
+truth_drag = None
+truth_substeps = None
+hidden = None
+activation = None
+epochs = None
+segment_length = None
+batch_size = None
+lr = None
 val_every = 10
-mlp_epochs = 300
-mlp_lr = 0.001
+mlp_epochs = None
+mlp_lr = None
 
 # %%
 import fnnlib as F

@@ -14,21 +14,22 @@
 # last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_mpc"
 upstream_dirs = {"quadrotor_learning": "outputs/manual/quadrotor_learning"}
 steps = 300
-N = 10
-Ts = 0.02
-Q = [100.0, 100.0, 100.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.0, 1.0, 1.0]
-R = [1.0, 1.0, 1.0, 1.0]
+N = None
+Ts = None
+Q = None
+R = None
 costs = ["as_written", "as_flown"]
 u_max = [4.0, 6.0]
 u_max_judged = 6.0
-theta_max = 1.5707963267948966
-L = 3.0
-beta = 0.1
-Gamma = 8.0
+theta_max = None
+L = None
+beta = None
+Gamma = None
 Gamma_adapnn_grid = [0.04, 0.16, 0.64, 2.56]
 Gamma_rtol = 0.05
 validation_flights = 2
@@ -36,10 +37,10 @@ validation_steps = 300
 validation_waypoints = 4
 validation_seed = 1000
 validation_vehicle_fraction = 0.5
-truth_mass = 1.33
-truth_inertia = [0.005, 0.005, 0.004]
-truth_drag = [0.6, 0.6, 0.15]
-disturbance = [0.3, 0.3, 0.3]
+truth_mass = None
+truth_inertia = None
+truth_drag = None
+disturbance = None
 disturbance_draws = 2
 disturbance_spread = 0.5
 disturbance_seed = 11

@@ -13,6 +13,7 @@
 # seeds and compared pair by pair.
 
 # %% tags=["parameters"]
+# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/own_system"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -28,25 +29,25 @@ activation = "tanh"
 iterations = 300
 noise_std = 0.01
 N = 30
-L_hand = 20.0
-beta_hand = 0.02
+L_hand = None
+beta_hand = None
 L0 = 5.0
 beta0 = 0.05
 tune_iterations = 60
 tune_lr = 0.1
-kf_q_x = 1e-8
+kf_q_x = None
 kf_q_d = 0.01
-kf_p0_d = 100.0
-spiral_n_samples = 1000
-spiral_Ts = 0.01
-spiral_test = [3.0, 0.05, 10.0]
-spiral_x0 = [9.0, 0.0]
+kf_p0_d = None
+spiral_n_samples = None
+spiral_Ts = None
+spiral_test = None
+spiral_x0 = None
 spiral_tune_x0 = [0.0, 9.0]
 spiral_tune_samples = 400
-spiral_N = 50
-spiral_noise_std = 0.01
-spiral_L = 20.0
-spiral_beta = 0.02
+spiral_N = None
+spiral_noise_std = None
+spiral_L = None
+spiral_beta = None
 spiral_tune_iterations = 40
 
 # %%

@@ -199,3 +199,18 @@ def test_unknown_claim_id_is_an_error(make_pipeline: MakePipeline) -> None:
     spec = load_spec(make_pipeline({"leaf": task}))
     with pytest.raises(PipelineError, match=r"task 'leaf' declares claim 'S9', which is not in CLAIMS.md"):
         check(spec, "smoke")
+
+
+def test_a_none_preset_is_filled_and_typed_by_its_paper_value(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    """A cell leaves a shared paper value at None; the runner injects the preset and checks overrides by its type."""
+    write_notebook(tmp_path / "notebooks" / "02_theory.ipynb",
+                   'profile = ""\nout_dir = ""\nL = None\nTs = None\nL_sweep = [5.0]\n', "pass")
+    task = {**leaf_task(), "notebook": "notebooks/02_theory.ipynb",
+            "parameters": {"paper": {}, "smoke": {"L": 10}}}
+    spec = load_spec(make_pipeline({"theory": task}))
+    assert {k: check(spec, "paper").parameters["theory"][k] for k in ("L", "Ts")} == {"L": 20.0, "Ts": 0.01}
+    assert check(spec, "smoke").parameters["theory"]["L"] == 10
+    bad = {**task, "parameters": {"paper": {}, "smoke": {"Ts": "fast"}}}
+    with pytest.raises(PipelineError, match=r"parameter 'Ts': got str 'fast', but the notebook's paper preset "
+                                            r"is float 0.01"):
+        check(load_spec(make_pipeline({"theory": bad})), "smoke")
