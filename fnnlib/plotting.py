@@ -12,6 +12,8 @@ from matplotlib.figure import Figure
 #: width, height in inches per panel; figures are panels * this size
 PANEL_SIZE = (4.0, 3.2)
 DPI = 150
+#: pixels per inch at which a notebook shows a saved figure (the inline backend's size)
+SHOW_DPI = 100
 
 COLORS = {
     "truth": "0.35",
@@ -24,15 +26,32 @@ COLORS = {
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, **subplot_kw) -> tuple[Figure, object]:
-    """A figure of ``nrows x ncols`` panels at the fixed panel size."""
+    """A figure of ``nrows x ncols`` panels at the fixed panel size.
+
+    The figure is not registered with pyplot, so a notebook shows it once, complete, when
+    :func:`save_figure` saves it (the inline backend would show it at the end of the cell that created
+    it, without the panels later cells draw).
+    """
     w, h = PANEL_SIZE
-    fig, axes = plt.subplots(nrows, ncols, figsize=(w * ncols, h * nrows), squeeze=False,
-                             layout="constrained", **subplot_kw)
+    fig = Figure(figsize=(w * ncols, h * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, **subplot_kw)
     return fig, (axes[0, 0] if nrows == ncols == 1 else axes)
+
+
+def _in_kernel() -> bool:
+    """Whether this runs in a Jupyter kernel (papermill, nbval, a notebook)."""
+    try:
+        from IPython import get_ipython  # noqa: PLC0415 (IPython is there whenever a kernel is)
+    except ImportError:
+        return False
+    return getattr(get_ipython(), "kernel", None) is not None
 
 
 def save_figure(fig: Figure, out_dir: str | Path, name: str) -> str:
     """Save ``fig`` as ``<out_dir>/figures/<name>.png`` and ``.pdf``.
+
+    In a Jupyter kernel the saved PNG is also what the notebook shows, at :data:`SHOW_DPI` pixels per
+    inch (one drawing fewer than the inline backend's).
 
     Returns the PNG path relative to ``out_dir`` (what a results JSON records).
     """
@@ -42,6 +61,10 @@ def save_figure(fig: Figure, out_dir: str | Path, name: str) -> str:
     fig_dir.mkdir(parents=True, exist_ok=True)
     fig.savefig(fig_dir / f"{name}.png", dpi=DPI)
     fig.savefig(fig_dir / f"{name}.pdf")
+    if _in_kernel():
+        from IPython.display import Image, display  # noqa: PLC0415
+
+        display(Image(filename=str(fig_dir / f"{name}.png"), width=round(fig.get_figwidth() * SHOW_DPI)))
     return f"figures/{name}.png"
 
 
