@@ -52,14 +52,46 @@ TASK_THREADS = 1
 _END_MARKERS = ("\n--- ok after ", "\n--- FAILED")
 
 
+#: Run once in each kernel before the first cell: torch gets its threads the moment the notebook imports it
+#: (a meta-path hook), so a kernel whose notebook never imports torch does not pay ~2 s of CPU for it.
+_TORCH_THREADS_HOOK = """
+def _fnn_torch_threads(threads):
+    import sys
+    from importlib.machinery import PathFinder
+
+    class SetTorchThreads:
+        def find_spec(self, name, path=None, target=None):
+            if name != "torch":
+                return None
+            sys.meta_path.remove(self)
+            spec = PathFinder.find_spec(name, path)
+            run = spec.loader.exec_module
+
+            def exec_module(module):
+                run(module)
+                module.set_num_threads(threads)
+
+            spec.loader.exec_module = exec_module
+            return spec
+
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
+    else:
+        sys.meta_path.insert(0, SetTorchThreads())
+
+
+_fnn_torch_threads(%d)
+del _fnn_torch_threads
+"""
+
+
 def _kernel_arguments(threads: int) -> list[str]:
-    """ipykernel options: set torch's threads before the notebook's first cell; keep the kernel's own log quiet.
+    """ipykernel options: torch's threads set when the notebook imports torch; the kernel's own log quiet.
 
     (The kernel's log goes to the terminal, not to the task's log: messages such as a reply that cannot be
     sent while Ctrl-C shuts it down. The notebook's output and errors still reach the task's log.)
     """
-    return [f"--IPKernelApp.exec_lines=['import torch', 'torch.set_num_threads({int(threads)})']",
-            "--IPKernelApp.log_level=CRITICAL"]
+    return [f"--IPKernelApp.exec_lines={[_TORCH_THREADS_HOOK % int(threads)]!r}", "--IPKernelApp.log_level=CRITICAL"]
 
 
 @dataclass(frozen=True)

@@ -135,3 +135,13 @@ def test_kernel_gets_the_torch_threads_asked_for(make_pipeline: MakePipeline, tm
     assert _quiet(spec, threads=threads).ok
     assert (spec.output_dir("smoke", "leaf") / "threads.txt").read_text() == str(threads)
     assert f"torch threads: {threads}" in (spec.output_root / "smoke" / "_logs" / "leaf.log").read_text()
+
+
+def test_a_kernel_that_never_imports_torch_does_not_load_it(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    """The threads are set by an import hook, so a notebook without torch starts without it (and quickly)."""
+    write_notebook(tmp_path / "notebooks" / "leaf.ipynb", 'profile = ""\nout_dir = ""\n',
+                   "import pathlib, sys\n(pathlib.Path(out_dir) / 'threads.txt').write_text(str('torch' in sys.modules))")
+    spec = load_spec(make_pipeline({"leaf": {**leaf_task(), "products": ["threads.txt"],
+                                             "parameters": {"smoke": {}}}}))
+    assert _quiet(spec, threads=1).ok
+    assert (spec.output_dir("smoke", "leaf") / "threads.txt").read_text() == "False"
