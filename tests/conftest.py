@@ -17,6 +17,7 @@ from types import ModuleType
 from pathlib import Path
 
 import pytest
+import torch
 from filelock import FileLock
 
 import fnnlib
@@ -31,6 +32,17 @@ SMOKE = "smoke"
 def pytest_configure(config):
     """The tests compute with one torch thread, as the notebooks do (importing fnnlib does not set it)."""
     fnnlib.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def f():
+    """A small random vector field f(t, x) on R^2: a float64 tanh MLP 2-8-2 drawn with seed 0 (the Sec. 3
+    kernels' tests; one per test module)."""
+    from fnnlib.models import mlp  # noqa: PLC0415
+
+    torch.manual_seed(0)
+    net = mlp(2, 2, (8,), "tanh").double()
+    return lambda t, x: net(x)
 
 
 def load_nbbuild() -> ModuleType:

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict, mlp
+from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict
 from fnnlib._scan import linear_recurrence
 from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
@@ -21,13 +21,6 @@ from fnnlib.sweeps import (
 
 F64 = torch.float64
 TS = 0.05
-
-
-@pytest.fixture(scope="module")
-def f():
-    torch.manual_seed(0)
-    net = mlp(2, 2, (8,), "tanh").double()
-    return lambda t, x: net(x)
 
 
 @pytest.fixture(scope="module")

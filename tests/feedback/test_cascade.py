@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import Spiral, cascade_predict, cascade_predict_loop, mlp, rollout_predict
+from fnnlib import Spiral, cascade_predict, cascade_predict_loop, rollout_predict
 
 F64 = torch.float64
 TS = 0.1
@@ -17,13 +17,6 @@ GAINS = {
     "vector": torch.tensor([1.0, 3.0], dtype=F64),
     "full_spd": torch.tensor([[3.0, 1.0], [1.0, 2.0]], dtype=F64),
 }
-
-
-@pytest.fixture(scope="module")
-def f():
-    torch.manual_seed(0)
-    net = mlp(2, 2, (8,), "tanh").double()
-    return lambda t, x: net(x)
 
 
 @pytest.fixture(scope="module")
