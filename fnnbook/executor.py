@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterator, Mapping
 import dask
 import psutil
 from distributed import Client, Future, LocalCluster, wait
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from fnnbook.runner import (Plan, TaskOutcome, logs_dir, staging_dir, cpu_count, execute_task, kill_kernels,
                             mark_killed)

@@ -347,15 +347,30 @@ def _swap(staging: Path, final: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def _point_to_final(executed: Path, staging: Path, final: Path) -> None:
-    """Make the executed notebook name the final output folder wherever it names staging.
+def _point_to_final(executed: Path, staging: Path, final: Path, root: Path) -> None:
+    """Make the executed notebook name the final output folder wherever it names staging, and write the
+    repository's absolute path out of the cells' outputs.
 
-    (The injected ``out_dir``, papermill's metadata, printed paths.)
+    (Staging: the injected ``out_dir``, papermill's metadata, printed paths. The repository root: a warning's
+    ``/abs/repo/fnnlib/...:92`` reads ``fnnlib/...:92``; sources and metadata keep it, for a rerun.)
     """
     old, new = json.dumps(str(staging))[1:-1], json.dumps(str(final))[1:-1]
-    text = executed.read_text(encoding="utf-8")
-    if old in text:
-        executed.write_text(text.replace(old, new), encoding="utf-8")
+    nb = json.loads(executed.read_text(encoding="utf-8").replace(old, new))
+    prefix = str(root).rstrip(os.sep) + os.sep
+
+    def relative(value: Any) -> Any:
+        if isinstance(value, str):
+            return value.replace(prefix, "")
+        if isinstance(value, list):
+            return [relative(v) for v in value]
+        if isinstance(value, dict):
+            return {k: v if k.startswith("image/") else relative(v) for k, v in value.items()}
+        return value
+
+    for cell in nb.get("cells", []):
+        if "outputs" in cell:
+            cell["outputs"] = relative(cell["outputs"])
+    executed.write_text(json.dumps(nb, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
 def mark_killed(log: Path, why: str) -> None:
@@ -434,7 +449,7 @@ def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
             if missing:
                 raise PipelineError(f"the notebook finished but did not write these products: "
                                     f"{', '.join(missing)} (into out_dir)")
-            _point_to_final(executed, staging, final)
+            _point_to_final(executed, staging, final, spec.root)
             record = {"fingerprint": plan.fingerprints[name], "task": name, "profile": plan.profile,
                       "parameters": {k: v for k, v in params.items() if k not in INJECTED or k == "profile"},
                       "run_id": uuid.uuid4().hex,

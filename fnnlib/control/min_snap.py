@@ -589,7 +589,7 @@ def random_min_snap_flights(
 
     flights: Iterable[int] = range(n_f)
     if progress:
-        from tqdm.auto import tqdm
+        from tqdm import tqdm
 
         flights = tqdm(flights, desc="min-snap flights")
     for i in flights:

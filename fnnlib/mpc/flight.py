@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 from torch import Tensor
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.control.flatness import flat_reference
