@@ -163,7 +163,7 @@ gamma_sel = {cost: adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_re
                                              make_qp(cost, u_max_judged), steps=validation_steps, Ts=Ts,
                                              substeps=truth_substeps, backend=backend,
                                              linearize_method=linearize_method, rtol=Gamma_rtol) for cost in costs}
-print(f"{len(val_vehicles)} validation vehicles x {len(val_refs)} references: mass "
+print(f"validation flights: {len(val_vehicles)} vehicle(s) x {len(val_refs)} reference(s); masses "
       + ", ".join(f"{v.mass:.2f}" for v in val_vehicles) + " kg; |force| "
       + ", ".join(f"{np.linalg.norm(v.force_disturbance):.2f}" for v in val_vehicles) + " N")
 for cost, sel in gamma_sel.items():
@@ -186,8 +186,9 @@ for cost, runs in oracle.items():
         f"{g}: {tracking_rmse(r.x, r.x_ref)['mean_axis']:.3f} {fallback_note(r)}" for g, r in runs.items())
           + f" -> oracle Gamma = {best} (validation chose {gamma_sel[cost].value})")
 test_in_range = randomization_coordinates(test_params, TRAINING_TRUTH, **VALIDATION_RANDOMIZATION)
-print("test vehicle in the validation ranges (half-widths): " + "; ".join(
-    f"{k} " + ", ".join(f"{c:+.2f}" for c in v) for k, v in test_in_range.items()))
+print("test vehicle in the validation ranges, in half-widths (outside beyond +-1): " + "; ".join(
+    f"{k} " + ", ".join(f"{c:+.2f}" for c in v) + (" (outside)" if max(map(abs, v)) > 1 else "")
+    for k, v in test_in_range.items()))
 
 # %% [markdown]
 # **Other baseline settings.** No other baseline setting is chosen by a flight. Nomi has none; Neural and MLP are
