@@ -16,6 +16,8 @@ fnnlib.feedback.gains.GainError: ...
 
 from __future__ import annotations
 
+import math
+
 import re
 import warnings
 from collections.abc import Callable, Mapping, MutableMapping
@@ -159,8 +161,13 @@ def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
         raise ValueError(f"u_max_judged = {p['u_max_judged']} must be one of u_max = {p['u_max']}")
     if not p["costs"] or any(c not in ("as_written", "as_flown") for c in p["costs"]):
         raise ValueError(f"costs must list 'as_written' and/or 'as_flown', got {p['costs']}")
-    _at_least(p, 1, "steps", "N", "truth_substeps", "validation_flights", "validation_steps")
+    _at_least(p, 1, "steps", "N", "truth_substeps", "validation_flights", "validation_steps", "validation_vehicles")
     _at_least(p, 0, "disturbance_draws")
+    grid = p.get("Gamma_adapnn_grid", [1.0])  # AdapNN's validation grid and tie tolerance (fnnlib.mpc.tuning)
+    if not grid or len(set(grid)) != len(grid) or any(not (math.isfinite(g) and g > 0) for g in grid):
+        raise ValueError(f"Gamma_adapnn_grid must list distinct finite gains > 0, got {grid}")
+    if not (math.isfinite(p.get("Gamma_rtol", 0.0)) and p.get("Gamma_rtol", 0.0) >= 0):
+        raise ValueError(f"Gamma_rtol must be finite and >= 0, got {p['Gamma_rtol']}")
 
 
 def _own_system(p: Mapping[str, Any]) -> None:

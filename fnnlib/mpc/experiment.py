@@ -2,15 +2,15 @@ r"""The flight test of Sec. 5.2.2 (App. A.5.3-A.5.4, A.9): seven prediction mode
 
 What the ``quadrotor_mpc`` notebook computes, as functions: the QP with the paper's boxes, the flight
 settings shared by every flight (:class:`FlightTest`), the per-model table, the AdapNN gain sweep, the
-speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), the validation
-vehicle and the disturbance realisations, and the flights paired over trained networks x disturbances that
+speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), AdapNN's gain chosen
+on validation flights, the disturbance realisations, and the flights paired over trained networks x disturbances that
 the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,7 +43,6 @@ __all__ = [
     "speed_runs",
     "speed_summary",
     "theorem2_check",
-    "validation_vehicle",
 ]
 
 QP_CLASSES: dict[str, type[OSQPMPC] | type[LinearizedMPC]] = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
@@ -91,24 +90,6 @@ def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int,
     rng = np.random.default_rng(seed)
     drawn = F0 * (1.0 + spread * rng.uniform(-1.0, 1.0, size=(int(n_drawn), 3)))
     return [tuple(float(f) for f in F0)] + [tuple(float(f) for f in row) for row in drawn]
-
-
-def validation_vehicle(train: QuadrotorParams, test: QuadrotorParams, fraction: float) -> QuadrotorParams:
-    """A vehicle between the training and the test vehicle: mass, inertia, drag and force interpolated.
-
-    ``fraction`` 0 is the training vehicle, 1 the test one; it must lie strictly between, so the validation
-    flights neither repeat the training data's vehicle (on which the adaptation has nothing to do) nor fly
-    the test vehicle (which would tune on the test).
-    """
-    if not 0 < fraction < 1:
-        raise ValueError(f"fraction must lie strictly between 0 and 1, got {fraction}")
-
-    def mix(a: Any, b: Any) -> Any:
-        return float((1 - fraction) * a + fraction * b) if np.isscalar(a) else tuple(
-            float((1 - fraction) * ai + fraction * bi) for ai, bi in zip(a, b))
-
-    return train.replace(**{k: mix(getattr(train, k), getattr(test, k))
-                            for k in ("mass", "inertia", "drag", "force_disturbance")})
 
 
 @dataclass(frozen=True)
@@ -165,17 +146,23 @@ def adapnn_flights(residual: nn.Module, gammas: Iterable[float], mpc: MPC, test:
 
 
 def adapnn_gain_on_validation(residual: nn.Module, grid: Sequence[float], refs: Sequence[tuple[Tensor, Tensor]],
-                              truth: Quadrotor, mpc: MPC, *, like: FlightTest, steps: int, rtol: float) -> GainSelection:
+                              vehicles: Sequence[QuadrotorParams], mpc: MPC, *, steps: int, Ts: float, substeps: int,
+                              backend: str, linearize_method: str | None, rtol: float) -> GainSelection:
     """AdapNN's gain chosen on validation flights (:func:`~fnnlib.mpc.tuning.select_gain_on_validation`).
 
-    Every reference of ``refs`` is flown for ``steps`` steps on ``truth`` (not the test vehicle) with the loop
-    settings of ``like``; the test flight is never seen.
+    Every vehicle of ``vehicles`` (e.g. :func:`~fnnlib.mpc.tuning.randomized_vehicles` around the training
+    vehicle) flies every reference of ``refs`` (e.g. :func:`~fnnlib.mpc.tuning.validation_references`) for
+    ``steps`` steps at every gain of ``grid``, with the loop settings of :func:`~fnnlib.mpc.flight.fly`. The
+    flights are in the order vehicle, then reference. Nothing of the test flight is an argument: the choice
+    cannot depend on it.
     """
-    def fly_fn(gain: float, x_r: Tensor, u_r: Tensor) -> FlightResult:
-        test = replace(like, truth=truth, x_r=x_r, u_r=u_r, steps=int(steps))
-        return test.fly(adapnn_model(residual, gain, Ts=like.Ts), mpc)
+    cases = [(Quadrotor(v), x_r, u_r) for v in vehicles for x_r, u_r in refs]
 
-    return select_gain_on_validation(fly_fn, grid, refs, rtol=rtol)
+    def fly_fn(gain: float, truth: Quadrotor, x_r: Tensor, u_r: Tensor) -> FlightResult:
+        return fly(adapnn_model(residual, gain, Ts=Ts), mpc, truth, x_r, u_r, steps=int(steps), Ts=Ts,
+                   substeps=substeps, linearize_method=linearize_method, backend=backend)
+
+    return select_gain_on_validation(fly_fn, grid, cases, rtol=rtol)
 
 
 def speed_runs(models: Iterable[PredictionModel], mpc: MPC, test: FlightTest, repeats: int) -> dict[str, dict[str, Any]]:

@@ -12,10 +12,11 @@ from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightTest, acc_pred_rmse, adapnn_flights,
                                    adapnn_gain_on_validation, adapnn_model,
                                    disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
-                                   pooled_speed, speed_runs, speed_summary, theorem2_check, validation_vehicle)
-from fnnlib.mpc.flight import FlightResult, lissajous_reference
+                                   pooled_speed, speed_runs, speed_summary, theorem2_check)
+from fnnlib.mpc.flight import FlightResult, fly, lissajous_reference
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
+from fnnlib.mpc.tuning import randomized_vehicles
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
 
 
@@ -74,16 +75,6 @@ def test_disturbances_start_with_the_papers_and_vary_size_and_direction():
     assert d == disturbance_realisations((0.3, 0.3, 0.3), 3, seed=5, spread=0.5)
     with pytest.raises(ValueError):
         disturbance_realisations((0.3, 0.3), 3, seed=5, spread=0.5)
-
-
-def test_validation_vehicle_lies_between_training_and_test():
-    v = validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, 0.5)
-    assert v.mass == pytest.approx((TRAINING_TRUTH.mass + TEST_TRUTH.mass) / 2)
-    assert v.drag == pytest.approx(tuple((a + b) / 2 for a, b in zip(TRAINING_TRUTH.drag, TEST_TRUTH.drag)))
-    assert v.force_disturbance == pytest.approx((0.15, 0.15, 0.15)) and v != TEST_TRUTH
-    for bad in (0.0, 1.0):
-        with pytest.raises(ValueError, match="strictly between"):
-            validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, bad)
 
 
 def test_speed_summary_is_met_only_when_the_worst_model_meets_both_targets():
@@ -150,26 +141,36 @@ def test_paired_grid_pairs_every_model_over_networks_and_tests():
         paired_grid([], nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
 
 
-def test_adapnn_gain_on_validation_flies_the_validation_vehicle_not_the_test() -> None:
+def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> None:
     N, steps = 3, 4
-    net, test, mpc = _tiny(steps, N)
-    x_v, u_v = lissajous_reference(steps + 2, N, Ts=0.02, params=NOMINAL, curve={**PAPER_LISSAJOUS, "r_x": 1.0})
-    val = Quadrotor(validation_vehicle(TRAINING_TRUTH, TEST_TRUTH, 0.5))
-    sel = adapnn_gain_on_validation(net, [0.04, 0.16], [(x_v, u_v)], val, mpc, like=test, steps=steps + 2, rtol=0.0)
+    net, _, mpc = _tiny(steps, N)
+    refs = [lissajous_reference(steps + 2, N, Ts=0.02, params=NOMINAL, curve={**PAPER_LISSAJOUS, "r_x": r})
+            for r in (1.0, 2.0)]
+    vehicles = randomized_vehicles(TRAINING_TRUTH, 2, seed=3, **VALIDATION_RANDOMIZATION)
+    loop = dict(Ts=0.02, substeps=1, backend="torch", linearize_method="forward")
+    sel = adapnn_gain_on_validation(net, [0.04, 0.16], refs, vehicles, mpc, steps=steps + 2, rtol=0.0, **loop)
     assert sel.value in (0.04, 0.16) and set(sel.table) == {0.04, 0.16}
-    flown = FlightTest(val, x_v, u_v, steps=steps + 2, Ts=0.02, substeps=1, backend="torch",
-                       linearize_method="forward").fly(adapnn_model(net, 0.16, Ts=0.02), mpc)
-    assert sel.table[0.16]["rmse_per_flight"] == [pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)]
+    per_flight = sel.table[0.16]["rmse_per_flight"]
+    assert len(per_flight) == 4 and len(set(per_flight)) == 4  # 2 vehicles x 2 references, all different
+    # the order is vehicle, then reference; each entry is that vehicle flying that reference
+    v, (x_v, u_v) = vehicles[1], refs[0]
+    flown = fly(adapnn_model(net, 0.16, Ts=0.02), mpc, Quadrotor(v), x_v, u_v, steps=steps + 2, **loop)
+    assert per_flight[2] == pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)
+    assert sel.table[0.16]["rmse"] == pytest.approx(float(np.median(per_flight)))
 
 
 @pytest.mark.parametrize(("change", "match"), [({"u_max_judged": 5.0}, "u_max_judged"), ({"costs": ["paper"]}, "costs"),
-                                               ({"validation_flights": 0}, "validation_flights")])
+                                               ({"validation_flights": 0}, "validation_flights"),
+                                               ({"validation_vehicles": 0}, "validation_vehicles"),
+                                               ({"Gamma_adapnn_grid": [0.16, 0.16]}, "Gamma_adapnn_grid"),
+                                               ({"Gamma_adapnn_grid": [0.0]}, "Gamma_adapnn_grid"),
+                                               ({"Gamma_rtol": -0.01}, "Gamma_rtol")])
 def test_mpc_settings_are_checked_before_any_flight(change: dict, match: str) -> None:
     from fnnlib.settings import check_notebook_settings
 
     good = {"Ts": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
             "steps": 300, "N": 10, "truth_substeps": 1, "validation_flights": 2, "validation_steps": 300,
-            "disturbance_draws": 2}
+            "validation_vehicles": 4, "Gamma_adapnn_grid": [0.04, 0.16], "Gamma_rtol": 0.05, "disturbance_draws": 2}
     check_notebook_settings("quadrotor_mpc", good)
     with pytest.raises(ValueError, match=match):
         check_notebook_settings("quadrotor_mpc", {**good, **change})
