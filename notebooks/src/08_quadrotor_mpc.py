@@ -36,7 +36,6 @@ validation_flights = 2
 validation_steps = 300
 validation_waypoints = 4
 validation_seed = 1000
-validation_vehicle_fraction = 0.5
 truth_mass = None
 truth_inertia = None
 truth_drag = None
