@@ -59,6 +59,30 @@ class NeuralODEEnsemble(nn.Module):
             nn.Parameter(torch.stack([ls[i].bias.detach()[None].clone() for ls in linears])) for i in range(len(linears[0])))
         self.act = ACTIVATIONS[activation]()
 
+    @classmethod
+    def from_members(cls, models: Sequence[NeuralODE], seeds: Sequence[int]) -> NeuralODEEnsemble:
+        """The ensemble of trained :class:`NeuralODE` ``models`` (weights copied), the inverse of :meth:`member`.
+
+        ``seeds[e]`` names the seed ``models[e]`` was trained from; every model must share one architecture
+        (state dimension, hidden widths, activation) and take no external input.
+        """
+        models = list(models)
+        if not models or len(models) != len(seeds):
+            raise ValueError(f"need one member per seed, got {len(models)} members for seeds {list(seeds)}")
+        if not all(isinstance(m, NeuralODE) for m in models):
+            raise TypeError("every member must be a NeuralODE")
+        configs = [m.config for m in models]
+        if any(c != configs[0] for c in configs) or configs[0]["n_input"]:
+            raise ValueError(f"the members must share one architecture, without inputs; got {configs}")
+        ens = cls(configs[0]["n_state"], configs[0]["hidden"], configs[0]["activation"], seeds)
+        ens = ens.to(next(models[0].parameters()).dtype)
+        with torch.no_grad():
+            for e, m in enumerate(models):
+                for i, lin in enumerate(x for x in m.net if isinstance(x, nn.Linear)):
+                    ens.weights[i][e].copy_(lin.weight.T)
+                    ens.biases[i][e, 0].copy_(lin.bias)
+        return ens
+
     @property
     def size(self) -> int:
         """Number of members E."""
