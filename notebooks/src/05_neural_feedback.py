@@ -296,9 +296,10 @@ for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N
         ax.bar(idx + 0.27 * (j - 1), mean, 0.27, color=colors[key], label=key.replace("_", " "),
                yerr=[mean - v.min(0), v.max(0) - mean], error_kw={"lw": 0.8, "capsize": 1.5})
     ax.set_yscale("log")
-    ax.set(xlabel="residual level j", ylabel=name, title=f"(S10) {name} (mean, min-max over {E} seeds)")
+    ax.set(xlabel="residual level j", ylabel=name, title=f"(S10) {name}")
     ax.set_xticks(idx)
     ax.legend(fontsize=8)
+fig.suptitle(f"bars: mean over {E} seeds; whiskers: min-max", fontsize=9)
 fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
 
 # %%
