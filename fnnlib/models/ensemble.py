@@ -51,37 +51,41 @@ class NeuralODEEnsemble(nn.Module):
         for s in seeds:
             seed_everything(s)
             members.append(NeuralODE(n_state, hidden, activation))
+        self._stack(members)
+
+    @classmethod
+    def from_members(cls, members: Sequence[NeuralODE], seeds: Sequence[int]) -> NeuralODEEnsemble:
+        """The ensemble of trained networks (weights copied), e.g. one per seed loaded by
+        :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
+
+        Every member must be an autonomous :class:`NeuralODE` of one architecture and dtype.
+        """
+        seeds = [int(s) for s in seeds]
+        if not members or len(members) != len(seeds) or len(set(seeds)) != len(seeds):
+            raise ValueError(f"need one member per seed and no repeated seed, got {len(members)} members "
+                             f"for seeds {seeds}")
+        first = members[0]
+        if not all(isinstance(m, NeuralODE) for m in members):
+            raise TypeError("every member must be a NeuralODE")
+        dtypes = {next(m.parameters()).dtype for m in members}
+        if any(m.config != first.config for m in members) or first.n_input or len(dtypes) > 1:
+            raise ValueError("the members must share one architecture and dtype, without inputs; got "
+                             f"{[m.config for m in members]}, dtypes {sorted(map(str, dtypes))}")
+        ens = cls.__new__(cls)
+        nn.Module.__init__(ens)
+        ens.n_state, ens.hidden, ens.activation, ens.seeds = first.n_state, first.hidden, first.activation, seeds
+        ens._stack(members)
+        return ens
+
+    def _stack(self, members: Sequence[NeuralODE]) -> None:
+        """Stack the members' layers on an ensemble axis of the weights."""
         linears = [[m for m in member.net if isinstance(m, nn.Linear)] for member in members]
         # weight l: (E, in, out), bias l: (E, 1, out) -- y = x W + b per member
         self.weights = nn.ParameterList(
             nn.Parameter(torch.stack([ls[i].weight.detach().T.clone() for ls in linears])) for i in range(len(linears[0])))
         self.biases = nn.ParameterList(
             nn.Parameter(torch.stack([ls[i].bias.detach()[None].clone() for ls in linears])) for i in range(len(linears[0])))
-        self.act = ACTIVATIONS[activation]()
-
-    @classmethod
-    def from_members(cls, models: Sequence[NeuralODE], seeds: Sequence[int]) -> NeuralODEEnsemble:
-        """The ensemble of trained :class:`NeuralODE` ``models`` (weights copied), the inverse of :meth:`member`.
-
-        ``seeds[e]`` names the seed ``models[e]`` was trained from; every model must share one architecture
-        (state dimension, hidden widths, activation) and take no external input.
-        """
-        models = list(models)
-        if not models or len(models) != len(seeds):
-            raise ValueError(f"need one member per seed, got {len(models)} members for seeds {list(seeds)}")
-        if not all(isinstance(m, NeuralODE) for m in models):
-            raise TypeError("every member must be a NeuralODE")
-        configs = [m.config for m in models]
-        if any(c != configs[0] for c in configs) or configs[0]["n_input"]:
-            raise ValueError(f"the members must share one architecture, without inputs; got {configs}")
-        ens = cls(configs[0]["n_state"], configs[0]["hidden"], configs[0]["activation"], seeds)
-        ens = ens.to(next(models[0].parameters()).dtype)
-        with torch.no_grad():
-            for e, m in enumerate(models):
-                for i, lin in enumerate(x for x in m.net if isinstance(x, nn.Linear)):
-                    ens.weights[i][e].copy_(lin.weight.T)
-                    ens.biases[i][e, 0].copy_(lin.bias)
-        return ens
+        self.act = ACTIVATIONS[self.activation]()
 
     @property
     def size(self) -> int:
