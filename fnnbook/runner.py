@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import glob
 import hashlib
 import json
 import os
@@ -309,6 +310,27 @@ def _stored(spec: PipelineSpec, profile: str, task: str) -> dict[str, Any]:
     return stored if isinstance(stored, dict) else {}
 
 
+def product_files(products: Sequence[str], directory: Path) -> tuple[list[str], list[str]]:
+    """The product files in ``directory`` and the products missing there: ``(files, missing)``.
+
+    A product with a glob wildcard (``neural_ode_seed*.pt``: one file per seed, as many as the profile's seeds)
+    stands for every file it matches, and is missing when it matches none.
+    """
+    files: list[str] = []
+    missing: list[str] = []
+    for product in products:
+        if glob.has_magic(product):
+            matches = sorted(p.relative_to(directory).as_posix() for p in directory.glob(product) if p.is_file())
+            files += matches
+            if not matches:
+                missing.append(product)
+        elif (directory / product).exists():
+            files.append(product)
+        else:
+            missing.append(product)
+    return files, missing
+
+
 def is_up_to_date(spec: PipelineSpec, plan: Plan, task: str) -> bool:
     """Whether ``task``'s last good output is current.
 
@@ -326,7 +348,8 @@ def is_up_to_date(spec: PipelineSpec, plan: Plan, task: str) -> bool:
     if stored.get("upstream_runs") != runs:
         return False
     products = stored.get("products")
-    if not isinstance(products, dict) or set(products) != set(spec.tasks[task].products):
+    files, missing = product_files(spec.tasks[task].products, out) if out.is_dir() else ([], ["*"])
+    if not isinstance(products, dict) or missing or set(products) != set(files):
         return False
     return all((out / p).is_file() and file_sha256(out / p) == digest for p, digest in products.items())
 
@@ -445,7 +468,7 @@ def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
                 cwd=str(spec.root), progress_bar=progress_bar, stdout_file=fh, stderr_file=fh,
                 config=_kernel_config(sockets), extra_arguments=_kernel_arguments(threads),
             )
-            missing = [p for p in task.products if not (staging / p).exists()]
+            products, missing = product_files(task.products, staging)
             if missing:
                 raise PipelineError(f"the notebook finished but did not write these products: "
                                     f"{', '.join(missing)} (into out_dir)")
@@ -455,7 +478,7 @@ def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
                       "run_id": uuid.uuid4().hex,
                       "upstream_runs": {u: _stored(spec, plan.profile, u).get("run_id")
                                         for u in task.upstream},
-                      "products": {p: file_sha256(staging / p) for p in task.products}}
+                      "products": {p: file_sha256(staging / p) for p in products}}
             (staging / FINGERPRINT_FILE).write_text(json.dumps(record, indent=2, sort_keys=True) + "\n",
                                                     encoding="utf-8")
             _swap(staging, final)

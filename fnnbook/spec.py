@@ -53,7 +53,8 @@ class Task:
     upstream : tuple of str
         Tasks whose outputs this task reads.
     products : tuple of str
-        Files (relative to the task's output folder) a successful run leaves.
+        Files (relative to the task's output folder) a successful run leaves; a glob pattern
+        (``neural_ode_seed*.pt``) stands for every file it matches and must match at least one.
     parameters : mapping of str to mapping
         Profile name -> parameter name -> value.
     """

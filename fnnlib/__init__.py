@@ -9,7 +9,7 @@ from fnnlib._threads import set_num_threads
 from fnnlib.data import load_bottle, synthetic_throws
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.stats import paired_win
-from fnnlib.models import MODELS, NeuralFeedback, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
+from fnnlib.models import MODELS, NeuralFeedback, NeuralFeedbackEnsemble, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
 from fnnlib.feedback import (
     NOISE_AMPLIFICATION_LIMIT,
     CascadeGains,
@@ -84,9 +84,11 @@ from fnnlib.training import (
     ODERecipe,
     TrainHistory,
     load_checkpoint,
+    load_seed_checkpoints,
     randomized_cases,
     register_model,
     save_checkpoint,
+    seed_checkpoint_name,
     train_neural_feedback,
     train_neural_ode,
 )
@@ -106,9 +108,9 @@ __all__ = [
     "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
     "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
-    "NeuralODEEnsemble", "split_members", "stack_members", "paired_win",
+    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
     "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
-    "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint",
+    "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

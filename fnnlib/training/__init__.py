@@ -1,7 +1,14 @@
 """Training neural ODEs and neural feedback parts, and saving them."""
 
 from fnnlib.training.external import adjoint_gradient, train_with_inputs
-from fnnlib.training.checkpoint import CheckpointError, load_checkpoint, register_model, save_checkpoint
+from fnnlib.training.checkpoint import (
+    CheckpointError,
+    load_checkpoint,
+    load_seed_checkpoints,
+    register_model,
+    save_checkpoint,
+    seed_checkpoint_name,
+)
 from fnnlib.training.feedback import (
     PAPER_FEEDBACK_RECIPE,
     FeedbackRecipe,
@@ -11,6 +18,6 @@ from fnnlib.training.feedback import (
 )
 from fnnlib.training.neural_ode import PAPER_BOTTLE_RECIPE, PAPER_SPIRAL_RECIPE, QUICK_RECIPE, ODERecipe, TrainHistory, sample_segments, train_neural_ode
 
-__all__ = ["CheckpointError", "adjoint_gradient", "train_with_inputs", "TrainHistory", "feedback_loss", "load_checkpoint", "sample_segments", "save_checkpoint",
+__all__ = ["CheckpointError", "adjoint_gradient", "train_with_inputs", "TrainHistory", "feedback_loss", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name", "sample_segments", "save_checkpoint",
            "train_neural_feedback", "train_neural_ode", "FeedbackRecipe", "ODERecipe", "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE",
            "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model"]

@@ -111,3 +111,54 @@ def load_checkpoint(path: str | os.PathLike[str], *, expected_config: Mapping[st
     except RuntimeError as exc:
         raise CheckpointError(f"checkpoint {path} weights do not fit its config: {exc}") from exc
     return model, dict(payload.get("meta") or {})
+
+
+def seed_checkpoint_name(seed: int, stem: str = "neural_ode") -> str:
+    """The file name of one seed's checkpoint, ``{stem}_seed{seed}.pt`` (read by :func:`load_seed_checkpoints`)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"a seed is a non-negative int, got {seed!r}")
+    return f"{stem}_seed{seed}.pt"
+
+
+def load_seed_checkpoints(directory: str | os.PathLike[str], stem: str = "neural_ode",
+                          expected_kind: str | None = "NeuralODE") -> list[tuple[int, nn.Module, dict[str, Any]]]:
+    """Load every seed's checkpoint ``{stem}_seed{s}.pt`` in ``directory``; return ``[(seed, model, meta), ...]``.
+
+    The list is in ascending seed order. Each file is read by :func:`load_checkpoint` (checksum, kind), its
+    ``meta["seed"]`` must name the seed of its file name, and when the files record the run's ``meta["seeds"]``
+    they must agree and name exactly the files present (so a missing or stale seed file is refused).
+
+    Raises
+    ------
+    CheckpointError
+        If ``directory`` holds no such file, or any file is corrupt, of another kind, or inconsistent.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise CheckpointError(f"checkpoint directory {directory} does not exist (run the task that trains it first)")
+    prefix = f"{stem}_seed"
+    found: dict[int, Path] = {}
+    for path in directory.glob(f"{prefix}*.pt"):
+        digits = path.name[len(prefix):-len(".pt")]
+        if digits.isdigit() and path.name == seed_checkpoint_name(int(digits), stem):
+            found[int(digits)] = path
+    if not found:
+        raise CheckpointError(f"no per-seed checkpoints {stem}_seed<s>.pt in {directory} "
+                              f"(run the task that trains them first)")
+    loaded = []
+    run_seeds: list[int] | None = None
+    for seed in sorted(found):
+        model, meta = load_checkpoint(found[seed], expected_kind=expected_kind)
+        if meta.get("seed") != seed:
+            raise CheckpointError(f"checkpoint {found[seed]} records seed {meta.get('seed')!r}, its name says {seed}")
+        if "seeds" in meta:
+            if run_seeds is None:
+                run_seeds = list(meta["seeds"])
+            elif list(meta["seeds"]) != run_seeds:
+                raise CheckpointError(f"checkpoint {found[seed]} comes from another run (seeds {meta['seeds']}, "
+                                      f"the others {run_seeds})")
+        loaded.append((seed, model, meta))
+    if run_seeds is not None and sorted(run_seeds) != sorted(found):
+        raise CheckpointError(f"{directory} holds the seeds {sorted(found)} but the run trained {run_seeds}: "
+                              f"a seed's checkpoint is missing or stale")
+    return loaded

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 from torch import Tensor, nn
 from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
+from fnnlib.models.ensemble import stack_members
 from fnnlib.observers.neural import feedback_rollout
 from fnnlib.training.neural_ode import OPTIMIZERS, Recipe, TrainHistory
 
@@ -78,15 +79,33 @@ def randomized_cases(make_system, low: Sequence[float], high: Sequence[float], n
     return X, params
 
 
-def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float) -> Tensor:
-    r"""Eq. (12) on a mini-batch: mean of :math:`\|x^*_j - x_j\|` over the batch.
+def feedback_loss(h: nn.Module, x_prev: Tensor, fx_prev: Tensor, e_prev: Tensor, x_next: Tensor, Ts: float, *,
+                  members: int = 1) -> Tensor:
+    r"""Eq. (12) on a mini-batch: mean of :math:`\|x^*_j - x_j\|` over the batch, one value per member.
 
     The one-step Euler prediction is
     :math:`x_j = x_{j-1} + T_s (f_{neural}(x_{j-1}) + h_{neural}(x_{j-1} - \hat x_{j-1}))`;
-    ``x_prev``, ``fx_prev``, ``e_prev = x_{j-1} - x_hat_{j-1}`` and the label ``x_next`` are (batch, n).
+    ``x_prev``, ``fx_prev``, ``e_prev = x_{j-1} - x_hat_{j-1}`` and the label ``x_next`` are (batch, E n):
+    the stacked states of ``members`` = E feedbacks side by side (a
+    :class:`~fnnlib.models.NeuralFeedbackEnsemble`; E = 1 for one :class:`~fnnlib.models.NeuralFeedback`).
+    Returns the E losses, shape (E,); member e's depends on member e's columns only.
     """
     x_pred = x_prev + Ts * (fx_prev + h(e_prev))
-    return torch.linalg.vector_norm(x_next - x_pred, dim=-1).mean()
+    diff = (x_next - x_pred).reshape(x_next.shape[0], int(members), -1)
+    return torch.linalg.vector_norm(diff, dim=-1).T.contiguous().mean(-1)  # each member's mean in one contiguous pass
+
+
+@dataclass
+class FeedbackHistory(TrainHistory):
+    """What Alg. 1 did: ``loss`` (the members' mean, per iteration), ``member_loss`` (per iteration, one per
+    member, in the order of ``seeds``) and the wall time."""
+
+    member_loss: list[list[float]] = field(default_factory=list)
+    seeds: list[int] = field(default_factory=list)
+
+    def member(self, e: int) -> list[float]:
+        """Member ``e``'s Eq. (12) loss per iteration."""
+        return [row[e] for row in self.member_loss]
 
 
 def train_neural_feedback(
@@ -96,9 +115,9 @@ def train_neural_feedback(
     X: Tensor,
     recipe: FeedbackRecipe,
     *,
-    seed: int,
+    seed: int | Sequence[int],
     progress: bool = True,
-) -> TrainHistory:
+) -> FeedbackHistory:
     r"""Train the feedback ``h`` on randomized cases with the neural ODE ``f`` frozen (Alg. 1).
 
     Repeat: run the feedback network (``f`` + current ``h``, Eq. (8)) over all cases at once,
@@ -106,37 +125,49 @@ def train_neural_feedback(
     :math:`\{x_{i,j-1}, \hat x_{i,j-1}, x^*_{i,j}\}`; minimise Eq. (12) on random mini-batches drawn
     from all cases. The rollout is refreshed every ``refresh_every`` iterations.
 
+    Several seeds train side by side: with ``seed`` a list of E seeds, ``f`` and ``h`` act on the stacked
+    state (batch, E n) (a :class:`~fnnlib.models.NeuralODEEnsemble` of the frozen models and a
+    :class:`~fnnlib.models.NeuralFeedbackEnsemble`), every member sees the same cases ``X``, and member e
+    draws its own mini-batches from ``seed[e]``. The members' losses add up and their gradients never
+    mix, so member e trains bitwise as it would alone (a one-member ensemble with ``seed=[seed[e]]``).
+
     ``f`` is frozen: it gets no optimizer, ``requires_grad`` is off while training (and restored
     afterwards), and it is evaluated once on ``X``; its parameters are left bitwise unchanged.
 
     Parameters
     ----------
     f : nn.Module
-        Trained neural ODE ``f(t, x)``, ``x`` (batch, n).
+        Trained neural ODE ``f(t, x)``, ``x`` (batch, E n).
     h : nn.Module
-        Feedback ``h(e)``, ``e`` (batch, n), e.g. :class:`~fnnlib.models.NeuralFeedback`.
+        Feedback ``h(e)``, ``e`` (batch, E n), e.g. :class:`~fnnlib.models.NeuralFeedback` (E = 1).
     t : Tensor, shape (T,)
         Uniform sample times (step ``Ts``).
     X : Tensor, shape (n_case, T, n)
-        One trajectory per randomized case.
+        One trajectory per randomized case (shared by every member).
     recipe : FeedbackRecipe
         Every training setting, e.g. ``PAPER_FEEDBACK_RECIPE.replace(refresh_every=10)``.
-    seed, progress
+    seed : int or sequence of int
+        Seed of the mini-batch draws; one per member (E = its length; an int is one member).
+    progress : bool
         As :func:`~fnnlib.training.neural_ode.train_neural_ode`.
 
     Returns
     -------
-    TrainHistory
-        The Eq. (12) loss per iteration and the wall time.
+    FeedbackHistory
+        The Eq. (12) loss per iteration (per member and their mean) and the wall time.
     """
     if not isinstance(recipe, FeedbackRecipe):
         raise TypeError(f"recipe must be a FeedbackRecipe (e.g. PAPER_FEEDBACK_RECIPE), got {type(recipe).__name__}")
     iterations, batch_size, lr, optimizer = recipe.iterations, recipe.batch_size, recipe.lr, recipe.optimizer
     refresh_every = recipe.refresh_every
+    seeds = [seed] if isinstance(seed, int) else list(seed)
+    if not seeds or not all(isinstance(s, int) for s in seeds) or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seed must be an int or a list of distinct ints, got {seed!r}")
     if not isinstance(X, Tensor) or X.ndim != 3:
         raise ValueError(f"X must have shape (n_case, T, n), got {tuple(getattr(X, 'shape', ()))}")
     X = as_trajectory(X, name="X")
     n_case, T, n = X.shape
+    E, width = len(seeds), len(seeds) * X.shape[-1]
     Ts = check_uniform_grid(t)
     if t.numel() != T:
         raise ValueError(f"t has {t.numel()} points but X has {T} samples per case")
@@ -153,35 +184,46 @@ def train_neural_feedback(
     check_positive(lr, name="lr")
     if any(p is q for p in f.parameters() for q in h.parameters()):
         raise ValueError("f and h share parameters; the neural ODE must stay frozen")
-
     dtype = next(h.parameters()).dtype
-    X = X.to(dtype)
+    need = f"{E} seed(s) of states of dimension {n} need h to map (batch, {width}) to itself"
+    try:
+        with torch.no_grad():
+            probe = h(torch.zeros(1, width, dtype=dtype))
+    except (ValueError, RuntimeError) as exc:
+        raise ValueError(f"{need}: {exc}") from exc
+    if probe.shape != (1, width):
+        raise ValueError(f"{need}, got {tuple(probe.shape)}")
+
+    X = stack_members(X.to(dtype), E)  # (n_case, T, E n): every member sees the same cases
     flags = [p.requires_grad for p in f.parameters()]
-    history = TrainHistory()
+    history = FeedbackHistory(seeds=seeds)
     start = time.perf_counter()
     try:
         for p in f.parameters():
             p.requires_grad_(False)
         with torch.no_grad():
             fdtype = next(f.parameters(), X).dtype
-            fx = f(0.0, X.to(fdtype).reshape(-1, n)).to(dtype).reshape(n_case, T, n)  # frozen: evaluated once
-        x_prev, fx_prev = X[:, :-1].reshape(-1, n), fx[:, :-1].reshape(-1, n)
-        x_next = X[:, 1:].reshape(-1, n)  # the labels x*_{i,j}
+            fx = f(0.0, X.to(fdtype).reshape(-1, width)).to(dtype).reshape(n_case, T, width)  # frozen: evaluated once
+        x_prev, fx_prev = X[:, :-1].reshape(pool, E, n), fx[:, :-1].reshape(pool, E, n)
+        x_next = X[:, 1:].reshape(pool, E, n)  # the labels x*_{i,j}
         opt = OPTIMIZERS[optimizer](h.parameters(), lr=float(lr))
-        gen = torch.Generator().manual_seed(int(seed))
+        gens = [torch.Generator().manual_seed(s) for s in seeds]
+        members = torch.arange(E)
         e_prev = None
         bar = tqdm(range(int(iterations)), desc="train neural feedback", disable=not progress, leave=False)
         for it in bar:
             if it % int(refresh_every) == 0:
                 with torch.no_grad():  # Alg. 1: run the feedback network over all cases, build the data sets
                     x_hat = feedback_rollout(fx, X, h, Ts).x_hat
-                e_prev = (X[:, :-1] - x_hat[:, :-1]).reshape(-1, n)
-            pick = torch.randperm(pool, generator=gen)[: int(batch_size)]
+                e_prev = (X[:, :-1] - x_hat[:, :-1]).reshape(pool, E, n)
+            pick = torch.stack([torch.randperm(pool, generator=g)[: int(batch_size)] for g in gens], dim=1)  # (B, E)
+            batch = [a[pick, members].reshape(-1, width) for a in (x_prev, fx_prev, e_prev, x_next)]  # own draws
             opt.zero_grad()
-            value = feedback_loss(h, x_prev[pick], fx_prev[pick], e_prev[pick], x_next[pick], Ts)
-            value.backward()
+            value = feedback_loss(h, *batch[:3], batch[3], Ts, members=E)
+            value.sum().backward()
             opt.step()
-            history.loss.append(value.item())
+            history.member_loss.append(value.tolist())
+            history.loss.append(sum(history.member_loss[-1]) / E)
             bar.set_postfix(loss=f"{history.loss[-1]:.4f}", refresh=False)
     finally:
         for p, flag in zip(f.parameters(), flags):

@@ -98,10 +98,12 @@ fig_ab = F.save_figure(fig, out, "fig4ab_spirals")
 # %%
 ens = F.NeuralODEEnsemble(2, hidden, activation, seeds)
 history = F.train_neural_ode(ens, t.float(), F.stack_members(x_nom, E), recipe, seed=seeds[0])
-model = ens.member(0)  # the first seed's network: the one the downstream tasks load
-F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0], "seeds": seeds, "iterations": iterations,
-                                                "method": method, "adjoint": adjoint, "final_loss": history.loss[-1],
-                                                "recipe": recipe.as_dict()})
+train_meta = {"seeds": seeds, "iterations": iterations, "method": method, "adjoint": adjoint,
+              "final_loss": history.loss[-1], "recipe": recipe.as_dict()}
+for e, s in enumerate(seeds):  # one checkpoint per seed: the Sec. 3 tasks downstream compare over every seed
+    F.save_checkpoint(out / F.seed_checkpoint_name(s), ens.member(e), {"seed": s} | train_meta)
+model = ens.member(0)  # the first seed's network, also saved alone for the tasks that use one network
+F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)
 
 
 def per_seed(z):

@@ -157,3 +157,22 @@ def test_interrupted_swap_is_recovered(make_pipeline: MakePipeline) -> None:
     report, _ = _run(spec)
     assert report.outcome("leaf").status == "skipped"
     assert out.is_dir() and not aside.exists()
+
+
+def test_glob_product_matches_every_file_and_must_match_one(make_pipeline: MakePipeline) -> None:
+    leaf = leaf_task()
+    leaf["products"] = ["results.json", "value*.txt"]  # the leaf writes value.txt
+    spec = load_spec(make_pipeline({"leaf": leaf}))
+    report, _ = _run(spec)
+    assert report.outcome("leaf").status == "ok"
+    record = json.loads((spec.output_dir("smoke", "leaf") / FINGERPRINT_FILE).read_text())
+    assert sorted(record["products"]) == ["results.json", "value.txt"]  # the pattern recorded as its files
+    assert _run(spec)[0].outcome("leaf").status == "skipped"
+    (spec.output_dir("smoke", "leaf") / "value.txt").unlink()  # a matched file gone: stale, runs again
+    assert _run(spec)[0].outcome("leaf").status == "ok"
+
+    leaf["products"] = ["results.json", "model_seed*.pt"]
+    spec = load_spec(make_pipeline({"leaf": leaf}))
+    report, _ = _run(spec, force=True)
+    assert report.outcome("leaf").status == "failed"
+    assert "did not write these products: model_seed*.pt" in report.outcome("leaf").message

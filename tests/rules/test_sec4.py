@@ -18,6 +18,10 @@ def test_d1() -> None:
     assert verdict("D1", sec4.d1(rel_dr=[0.2, 0.3, 0.25, 0.2, 0.22], rel_nominal=[0.01] * 5)) == "reproduced"
     # worse by only 1.2x in most seeds
     assert verdict("D1", sec4.d1(rel_dr=[0.012, 0.3, 0.012, 0.012, 0.2], rel_nominal=[0.01] * 5)) == "not reproduced"
+    # paired per seed: 4 of 5 seeds past 1.5x passes, 3 of 5 fails even though the mean gap is large
+    nominal = [0.01, 0.02, 0.01, 0.03, 0.01]
+    assert verdict("D1", sec4.d1(rel_dr=[0.2, 0.25, 0.2, 0.04, 0.3], rel_nominal=nominal)) == "reproduced"
+    assert verdict("D1", sec4.d1(rel_dr=[0.2, 0.025, 0.9, 0.04, 0.3], rel_nominal=nominal)) == "not reproduced"
 
 
 def test_d2() -> None:
@@ -27,12 +31,29 @@ def test_d2() -> None:
     assert verdict("D2", sec4.d2(rel_feedback=0.095, rel_nominal=0.01, frozen_unchanged=True)) == "not reproduced"
     with pytest.raises(GuaranteeFailed, match="frozen_neural_ode_unchanged"):
         claim_result("D2", **sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=False), numbers={})
+    # per seed (a threshold: >= S-1 of S seeds): one seed off passes, two seeds off fail
+    nominal = [0.01] * 5
+    r = sec4.d2(rel_feedback=[0.012, 0.014, 0.03, 0.01, 0.011], rel_nominal=nominal, frozen_unchanged=[True] * 5)
+    assert verdict("D2", r) == "reproduced" and "4 of 5 seeds" in r["rule"]
+    r = sec4.d2(rel_feedback=[0.012, 0.02, 0.03, 0.01, 0.011], rel_nominal=nominal, frozen_unchanged=[True] * 5)
+    assert verdict("D2", r) == "not reproduced"
+    # one seed's frozen model changed: the guarantee stops the notebook
+    with pytest.raises(GuaranteeFailed, match="frozen_neural_ode_unchanged"):
+        claim_result("D2", **sec4.d2(rel_feedback=[0.012] * 5, rel_nominal=nominal,
+                                     frozen_unchanged=[True, True, False, True, True]), numbers={})
+    with pytest.raises(ValueError, match="one bool per seed"):
+        sec4.d2(rel_feedback=[0.012] * 5, rel_nominal=nominal, frozen_unchanged=[])
 
 
 def test_d3() -> None:
     assert verdict("D3", sec4.d3(ratio=[0.1] * 5, trend=[0.01, -0.02, 0.0, 0.05, 0.03])) == "reproduced"
     assert verdict("D3", sec4.d3(ratio=0.1, trend=0.3)) == "partly"  # still falling at the end
     assert verdict("D3", sec4.d3(ratio=0.9, trend=0.3)) == "not reproduced"
+    # per seed (thresholds: >= S-1 of S seeds): one seed not converged passes, two fail
+    assert verdict("D3", sec4.d3(ratio=[0.1, 0.1, 0.7, 0.1, 0.1], trend=[0.01, 0.3, 0.0, 0.0, 0.0])) == "reproduced"
+    r = sec4.d3(ratio=[0.1, 0.6, 0.7, 0.1, 0.1], trend=[0.01, 0.3, 0.2, 0.0, 0.0])
+    assert r["checks"] == {"last_below_ratio_of_first": False, "last_window_flat": False}
+    assert verdict("D3", r) == "not reproduced" and ">= 4 of 5 seeds" in r["rule"]
 
 
 def d4_numbers(**over):
@@ -60,3 +81,17 @@ def test_d4() -> None:
     r = sec4.d4(**d4_numbers(rate_neural_feedback=seeds, rate_neural_ode=np.full((12, 5), 0.2),
                              err_N_neural_feedback=np.full((12, 5), 0.1), err_N_neural_ode=np.full((12, 5), 0.2)))
     assert r["checks"]["all_12_S8_levels"] is False and "5 seeds" in r["rule"]
+    # per seed: every level won in 4 of 5 seeds with a clear mean gap passes; a level won in 3 of 5 fails
+    lo = np.tile([0.1, 0.1, 0.1, 0.1, 0.25], (12, 1))
+    r = sec4.d4(**d4_numbers(rate_neural_feedback=lo, rate_neural_ode=np.full((12, 5), 0.2),
+                             err_N_neural_feedback=lo, err_N_neural_ode=np.full((12, 5), 0.2),
+                             heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=np.full((6, 5), 0.2),
+                             heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=np.full((6, 5), 0.2)))
+    assert verdict("D4", r) == "reproduced"
+    three = lo.copy()
+    three[2] = [0.1, 0.1, 0.1, 0.25, 0.25]
+    r = sec4.d4(**d4_numbers(rate_neural_feedback=lo, rate_neural_ode=np.full((12, 5), 0.2),
+                             err_N_neural_feedback=three, err_N_neural_ode=np.full((12, 5), 0.2),
+                             heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=np.full((6, 5), 0.2),
+                             heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=np.full((6, 5), 0.2)))
+    assert r["checks"] == {"all_12_S8_levels": False, "all_6_heldout_levels": True} and "11 of 12" in r["rule"]

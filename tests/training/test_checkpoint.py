@@ -8,7 +8,7 @@ import pytest
 import torch
 from torch import nn
 
-from fnnlib import CheckpointError, NeuralODE, load_checkpoint, save_checkpoint
+from fnnlib import CheckpointError, NeuralODE, load_checkpoint, load_seed_checkpoints, save_checkpoint, seed_checkpoint_name
 
 META = {"seed": 3, "final_loss": 0.0123, "method": "dopri5", "losses": [1.0, 0.5], "settings": {"lr": 1e-3}}
 
@@ -135,3 +135,67 @@ def test_unknown_model_type_refuses_to_save(tmp_path):
                                         r"fnnlib.register_model\(Linear\).*known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
         save_checkpoint(tmp_path / "lin.pt", nn.Linear(2, 2))
     assert not (tmp_path / "lin.pt").exists()
+
+
+def _save_seeds(directory, seeds, run_seeds=None):
+    models = {}
+    for s in seeds:
+        torch.manual_seed(s)
+        models[s] = NeuralODE(2, (4,), "relu")
+        save_checkpoint(directory / seed_checkpoint_name(s), models[s],
+                        {"seed": s, "seeds": list(run_seeds if run_seeds is not None else seeds)})
+    return models
+
+
+def test_seed_checkpoints_round_trip_in_seed_order(tmp_path):
+    models = _save_seeds(tmp_path, [10, 2, 0], run_seeds=[10, 2, 0])
+    (tmp_path / "neural_ode.pt").write_bytes(b"")           # other files beside them are ignored
+    (tmp_path / "neural_ode_seedx.pt").write_bytes(b"")
+    loaded = load_seed_checkpoints(tmp_path)
+    assert [s for s, _, _ in loaded] == [0, 2, 10]
+    x = torch.randn(7, 2)
+    for s, model, meta in loaded:
+        assert meta == {"seed": s, "seeds": [10, 2, 0]}
+        assert torch.equal(model(0.0, x), models[s](0.0, x))
+    assert not torch.equal(loaded[0][1](0.0, x), loaded[1][1](0.0, x))  # different seeds, different networks
+
+
+def test_seed_checkpoint_name():
+    assert seed_checkpoint_name(3) == "neural_ode_seed3.pt"
+    assert seed_checkpoint_name(0, "fb") == "fb_seed0.pt"
+    with pytest.raises(ValueError, match="non-negative int"):
+        seed_checkpoint_name(-1)
+
+
+def test_seed_checkpoints_none(tmp_path):
+    save_checkpoint(tmp_path / "neural_ode.pt", NeuralODE(2, (4,), "relu"), {"seed": 0})
+    with pytest.raises(CheckpointError, match=r"no per-seed checkpoints neural_ode_seed<s>.pt in"):
+        load_seed_checkpoints(tmp_path)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_seed_checkpoints(tmp_path / "nope")
+
+
+def test_seed_checkpoints_corrupt_one(tmp_path):
+    _save_seeds(tmp_path, [0, 1])
+    path = tmp_path / "neural_ode_seed1.pt"
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(CheckpointError, match=r"neural_ode_seed1.pt is corrupt"):
+        load_seed_checkpoints(tmp_path)
+
+
+def test_seed_checkpoints_wrong_kind_or_seed(tmp_path):
+    _save_seeds(tmp_path, [0])
+    with pytest.raises(CheckpointError, match="holds a NeuralODE, expected a FeedbackNet"):
+        load_seed_checkpoints(tmp_path, expected_kind="FeedbackNet")
+    save_checkpoint(tmp_path / "neural_ode_seed1.pt", NeuralODE(2, (4,), "relu"), {"seed": 0, "seeds": [0]})
+    with pytest.raises(CheckpointError, match="records seed 0, its name says 1"):
+        load_seed_checkpoints(tmp_path)
+
+
+def test_seed_checkpoints_missing_or_stale_seed(tmp_path):
+    _save_seeds(tmp_path, [0, 2], run_seeds=[0, 1, 2])
+    with pytest.raises(CheckpointError, match=r"holds the seeds \[0, 2\] but the run trained \[0, 1, 2\]"):
+        load_seed_checkpoints(tmp_path)
+    _save_seeds(tmp_path, [1], run_seeds=[0, 1])
+    with pytest.raises(CheckpointError, match="comes from another run"):
+        load_seed_checkpoints(tmp_path)
