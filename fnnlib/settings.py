@@ -126,6 +126,18 @@ def _neural_feedback(p: Mapping[str, Any]) -> None:
     _sizes(p, "hidden", "fb_hidden")
 
 
+def _bottle_data(data: str, data_dir: str | None, name: str = "data") -> None:
+    """``data`` is ``"real"`` (then the throws must be in ``data_dir``) or ``"synthetic"``."""
+    if data not in ("real", "synthetic"):
+        raise ValueError(f"{name} must be 'real' or 'synthetic', got {data!r}")
+    if data == "real":
+        folder = Path(data_dir or ".") / "bottle"
+        missing = [f for f in BOTTLE_FILES if not (folder / f).is_file()]
+        if missing:
+            raise MissingDataError(f"data missing: {', '.join(missing)} not in {folder}. Get the authors' "
+                                   "published throws with `fnn-pipeline data fetch` (see data/README.md).")
+
+
 def _bottle(p: Mapping[str, Any]) -> None:
     if p["data"] not in ("real", "synthetic"):
         raise ValueError(f"data must be 'real' or 'synthetic', got {p['data']!r}")
@@ -133,12 +145,7 @@ def _bottle(p: Mapping[str, Any]) -> None:
     _at_least(p, 1, "iterations", "batch_size", "batch_time")
     _sizes(p, "hidden")
     _seeds(p)
-    if p["data"] == "real":
-        folder = Path(p.get("data_dir") or ".") / "bottle"
-        missing = [name for name in BOTTLE_FILES if not (folder / name).is_file()]
-        if missing:
-            raise MissingDataError(f"data missing: {', '.join(missing)} not in {folder}. Get the authors' "
-                                   "published throws with `fnn-pipeline data fetch` (see data/README.md).")
+    _bottle_data(p["data"], p.get("data_dir"))
 
 
 def _quadrotor_learning(p: Mapping[str, Any]) -> None:
@@ -186,6 +193,29 @@ def _own_system(p: Mapping[str, Any]) -> None:
         check_gain(p["spiral_L"], 2, p["spiral_Ts"], N=p["spiral_N"], beta=p["spiral_beta"])
 
 
+def _tuned_gains(p: Mapping[str, Any]) -> None:
+    _at_least(p, 1, "bottle_N", "bottle_iterations", "bottle_batch_size", "bottle_batch_time", "bottle_tune_throws",
+              "bottle_tune_iterations", "quad_N", "quad_tune_flights", "quad_tune_iterations", "steps",
+              "truth_substeps")
+    _sizes(p, "bottle_hidden")
+    if not 1 <= p["bottle_N"] < p["bottle_synthetic_sizes"][2]:
+        raise ValueError(f"need 1 <= bottle_N < the throws' samples, got bottle_N={p['bottle_N']}")
+    if p["bottle_tune_throws"] > p["bottle_synthetic_sizes"][0] and p["bottle_data"] == "synthetic":
+        raise ValueError(f"bottle_tune_throws = {p['bottle_tune_throws']} exceeds the "
+                         f"{p['bottle_synthetic_sizes'][0]} synthetic training throws")
+    for name in ("bottle_tune_lr", "quad_tune_lr", "quad_Ts", "u_max_judged"):
+        if not p[name] > 0:
+            raise ValueError(f"{name} must be > 0, got {p[name]!r}")
+    # the paper's gains start the tuning: they must be admissible (Theorem 1, Eq. (25)) and inside the
+    # tuning's bound L < 1/Ts (fnnlib.feedback.tuning.CascadeGains)
+    decayed_gains(check_gain(p["bottle_L"], 6, BOTTLE_TS), p["bottle_N"], p["bottle_beta"])
+    decayed_gains(check_gain(p["quad_L"], 12, p["quad_Ts"]), p["quad_N"], p["quad_beta"])
+    for name, Ts in (("bottle_L", BOTTLE_TS), ("quad_L", p["quad_Ts"])):
+        if not p[name] < 1.0 / Ts:
+            raise ValueError(f"{name} = {p[name]} must be below 1/Ts = {1.0 / Ts:g}, the tuned gains' bound")
+    if p["backend"] not in ("torch", "numba"):
+        raise ValueError(f"backend must be 'torch' or 'numba', got {p['backend']!r}")
+    _bottle_data(p["bottle_data"], p.get("data_dir"), "bottle_data")
 # -- the paper values the notebooks share, each written once (in the preset modules and the recipes)
 def _recipe(recipe: Any, *names: str) -> dict[str, Any]:
     return {name: getattr(recipe, name) for name in names}
@@ -258,7 +288,7 @@ def fill_presets(notebook: str, settings: MutableMapping[str, Any]) -> dict[str,
 _CHECKS: dict[str, Callable[[Mapping[str, Any]], None]] = {
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
-    "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system,
+    "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system, "tuned_gains": _tuned_gains,
 }
 
 

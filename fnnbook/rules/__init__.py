@@ -5,5 +5,5 @@ Each rule returns ``{"checks": ..., "guarantees": ..., "rule": ...}``, ready to 
 ``checks`` decide the verdict and can each fail on a plausible run; ``guarantees`` hold by construction,
 by a theorem with constants measured on the same run, or by self-consistency, and never count.
 
-Modules: ``sec3`` (S1-S11), ``sec4`` (D1-D4), ``bottle`` (O1-O2), ``quadrotor`` (Q1-Q6).
+Modules: ``sec3`` (S1-S11), ``sec4`` (D1-D4), ``bottle`` (O1-O2), ``quadrotor`` (Q1-Q6), ``beyond`` (B1).
 """

@@ -24,7 +24,7 @@ from fnnlib.feedback.types import VectorField
 
 
 def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float, *, diagonal: bool | None = None,
-                return_all: bool = False, u: Tensor | None = None) -> Tensor:
+                return_all: bool = False, u: Tensor | None = None, rows: int | None = None) -> Tensor:
     """The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
 
     ``x`` (..., T, n); returns :math:`z^{(N)}` of the same shape, or with
@@ -32,11 +32,23 @@ def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float,
     With inputs ``u`` (..., T, m), layer ``i`` evaluates ``f(t, z, u)`` with row k's input
     ``u_{k+i}`` (:func:`~fnnlib.feedback.layer.shift_inputs`). Differentiable: gradients flow to
     the gains in ``L_stack``, to ``f``'s parameters and to ``x``.
+
+    ``rows`` (1..T) computes only the first ``rows`` start times, (..., rows, n): every layer is causal
+    in time (row k of its output reads rows <= k of its input, and the inputs ``u_{k+i}`` of the full
+    sequence), so these rows are those of the whole run, at ``rows / T`` of its cost. Tuning against
+    targets N samples later needs only the first ``T - N`` (:func:`~fnnlib.feedback.tuning.tune_gains`).
     """
-    z = x
+    if rows is not None:
+        if not 1 <= int(rows) <= x.shape[-2]:
+            raise ValueError(f"rows must lie in 1..{x.shape[-2]} (the samples of x), got {rows!r}")
+        rows = int(rows)
+    z = x if rows is None else x[..., :rows, :]
     depths = [z] if return_all else None
     for i, L_i in enumerate(L_stack):
-        _, f_hat = feedback_layer(eval_field(f, z, shift_inputs(u, i)), z, L_i, Ts, diagonal=diagonal)
+        u_i = shift_inputs(u, i)
+        if u_i is not None and rows is not None:
+            u_i = u_i[..., :rows, :]  # shifted on the whole sequence first: row k keeps u_{k+i}
+        _, f_hat = feedback_layer(eval_field(f, z, u_i), z, L_i, Ts, diagonal=diagonal)
         z = z + Ts * f_hat  # z^{(i+1)} = z^{(i)} + Ts * f_hat^{(i)}
         if depths is not None:
             depths.append(z)

@@ -104,13 +104,14 @@ class CascadeGains(nn.Module):
 
 
 def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: CascadeGains, *, u: Tensor | None = None,
-                    return_all: bool = False) -> Tensor:
+                    return_all: bool = False, rows: int | None = None) -> Tensor:
     r"""The N-step cascade of Sec. 3.3 with the gains of ``gains``, differentiable in ``gains``, ``f`` and ``x``.
 
     The layers and their order of operations are those of
     :func:`~fnnlib.feedback.cascade.cascade_predict` (same math; ``cascade_predict`` runs without a
     graph and checks a fixed gain instead). ``x`` (..., T, n), ``u`` (..., T, m) optional;
-    returns (..., T, n), row k predicting :math:`x(t_{k+N})`.
+    returns (..., T, n), row k predicting :math:`x(t_{k+N})`; with ``rows``, only the first ``rows``
+    of them (see :func:`~fnnlib.feedback.cascade.run_cascade`).
     """
     x, Ts, N = _checked(x, Ts, N)
     if x.shape[-1] != gains.n:
@@ -118,7 +119,8 @@ def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: Cascade
     check_model_dtype(f, x)
     if u is not None:
         check_inputs(u, x)
-    return run_cascade(f, x, gains.L_stack(N, x.dtype), Ts, diagonal=not gains.full, return_all=return_all, u=u)
+    return run_cascade(f, x, gains.L_stack(N, x.dtype), Ts, diagonal=not gains.full, return_all=return_all, u=u,
+                       rows=rows)
 
 
 @dataclass
@@ -189,7 +191,8 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
             p.requires_grad_(False)
         for _ in range(int(iterations)):
             opt.zero_grad()
-            loss = prediction_loss(cascade_forward(f, x, Ts, N, gains, u=u), x, N)
+            # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
+            loss = prediction_loss(cascade_forward(f, x, Ts, N, gains, u=u, rows=x.shape[-2] - N), x, N)
             loss.backward()
             opt.step()
             result.loss.append(loss.item())

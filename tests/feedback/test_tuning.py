@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from fnnlib import (CascadeGains, GainWarning, LinearSystem, NeuralODE, add_measurement_noise, cascade_forward,
                     cascade_predict, check_gain, make_generator, n_step_errors, spectral_radius, tune_gains)
+from fnnlib.feedback.tuning import prediction_loss
 
 F64 = torch.float64
 
@@ -114,3 +115,42 @@ def test_frozen_model_is_left_without_gradients():
     assert all(torch.equal(a, b) for a, b in zip(before, model.parameters()))
     assert all(p.grad is None and p.requires_grad for p in model.parameters())
     check_gain(torch.tensor([1.0, 2.0]), None, 0.05)  # n implied by L
+
+
+@pytest.mark.parametrize("with_inputs", [False, True], ids=["autonomous", "inputs"])
+def test_rows_are_the_first_rows_of_the_whole_cascade(with_inputs):
+    """``rows`` runs only the first start times; by causality they equal the whole run's, inputs included."""
+    gen = torch.Generator().manual_seed(4)
+    Ts, N, T, rows = 0.05, 5, 30, 12
+    x = torch.randn(2, T, 2, dtype=F64, generator=gen)
+    if with_inputs:
+        torch.manual_seed(0)
+        model, u = NeuralODE(2, [6], "tanh", n_input=1).double(), torch.randn(2, T, 1, dtype=F64, generator=gen)
+    else:
+        model, u = _model(), None
+    gains = CascadeGains(2, Ts, L0=torch.tensor([3.0, 6.0]), beta0=0.1)
+    whole = cascade_forward(model, x, Ts, N, gains, u=u)
+    first = cascade_forward(model, x, Ts, N, gains, u=u, rows=rows)
+    assert first.shape == (2, rows, 2)
+    torch.testing.assert_close(first, whole[:, :rows], rtol=0, atol=1e-14)
+    with pytest.raises(ValueError, match="rows must lie in 1..30"):
+        cascade_forward(model, x, Ts, N, gains, rows=T + 1)
+
+
+def test_tune_gains_equals_descent_on_the_whole_cascade():
+    """tune_gains runs the T - N rows with a target only; the same Adam steps on the whole cascade agree."""
+    model, Ts, N = _model(), 0.05, 4
+    y = torch.randn(3, 25, 2, dtype=F64, generator=torch.Generator().manual_seed(5))
+    tuned = tune_gains(model, y, Ts, N, L0=2.0, beta0=0.1, iterations=3, lr=0.2)
+    gains = CascadeGains(2, Ts, L0=2.0, beta0=0.1)
+    opt = torch.optim.Adam(gains.parameters(), lr=0.2)
+    ref = []
+    for _ in range(3):
+        opt.zero_grad()
+        loss = prediction_loss(cascade_forward(model, y, Ts, N, gains), y, N)
+        loss.backward()
+        opt.step()
+        ref.append(loss.item())
+    assert tuned.loss == pytest.approx(ref, rel=1e-12)
+    assert tuned.L == pytest.approx(gains.values()["L"], rel=1e-12)
+    assert tuned.beta == pytest.approx(gains.values()["beta"], rel=1e-12)

@@ -1,0 +1,101 @@
+r"""The rule of claim B1 (beyond the paper: gains tuned from data), fixed before any of its numbers exist.
+
+B1: the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11), learned from training data by
+gradient descent through the differentiable cascade (``fnnlib.tune_gains``), predict (or fly) better than
+the paper's hand-tuned values on data the tuning never saw. It is judged per *setting* -- the pendulum and
+the noisy spiral of ``own_system`` (the S3 setting), the real bottle throws (the O1 setting), the quadrotor
+FNN-MPC flight at the judged thrust bound (the Q3 setting, one setting per cost variant) -- on *units* that
+pair the predictors: seeds, test throws, or trained networks x disturbances, as the notebook says.
+
+Per setting, with ``errors[setting][predictor]`` one error per unit (lower is better):
+
+1. ``tuned_beats_hand``: the tuned gains win over the paper's hand-tuned ones;
+2. ``tuned_beats_open_loop`` (where an open-loop prediction is given): the tuned gains win over the
+   model without feedback;
+3. ``tuned_within_2x_kalman`` (where a Kalman filter is given): tuned <= 2 x Kalman in all units but one.
+
+A *win* of A over B is :func:`fnnlib.stats.paired_win`: A is lower in at least S - 1 of S units **and**
+the 90 % t-interval of the mean paired difference lies below 0. All checks true: *reproduced*; some:
+*partly*; none: *not reproduced* (:func:`fnnlib.claim_result`). B1 has no guarantee.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from fnnlib.stats import paired_win
+
+__all__ = ["KALMAN_FACTOR", "PREDICTORS", "b1", "b1_paired"]
+
+KALMAN_FACTOR = 2.0
+"""How much worse than the Kalman filter the tuned gains may be, unit by unit (check 3)."""
+
+PREDICTORS = ("tuned", "hand", "open_loop", "kalman")
+"""The predictors a setting may give: ``tuned`` and ``hand`` always, the other two where measured."""
+
+Errors = Mapping[str, Mapping[str, Sequence[float]]]
+
+
+def _checked(errors: Errors) -> dict[str, dict[str, np.ndarray]]:
+    """Every setting's errors as float arrays, all checked before any statistic."""
+    if not errors:
+        raise ValueError("B1 needs at least one setting")
+    out = {}
+    for setting, e in errors.items():
+        for need in ("tuned", "hand"):
+            if need not in e:
+                raise ValueError(f"B1 setting {setting!r} has no {need!r} errors (it has {sorted(e)})")
+        unknown = set(e) - set(PREDICTORS)
+        if unknown:
+            raise ValueError(f"B1 setting {setting!r}: unknown predictors {sorted(unknown)}; expected {PREDICTORS}")
+        arr = {k: np.asarray(v, dtype=float) for k, v in e.items()}
+        S = arr["tuned"].shape
+        for k, v in arr.items():
+            if v.ndim != 1 or v.shape != S or v.size < 2:
+                raise ValueError(f"B1 setting {setting!r}: every predictor needs one error per unit, at least 2 "
+                                 f"units and as many as 'tuned' ({S}); {k!r} has shape {v.shape}")
+            if not np.isfinite(v).all():
+                raise ValueError(f"B1 setting {setting!r}: {k!r} has non-finite errors {v.tolist()}")
+        out[setting] = arr
+    return out
+
+
+def b1(errors: Errors) -> dict[str, Any]:
+    """B1's checks (see the module docstring), ready for :func:`fnnlib.claim_result` (``**b1(errors)``).
+
+    Parameters
+    ----------
+    errors : mapping
+        ``errors[setting][predictor]``: one error per unit, paired by position across predictors;
+        ``predictor`` in :data:`PREDICTORS` (``tuned`` and ``hand`` required).
+
+    Returns
+    -------
+    dict
+        ``checks`` (``"<setting>: tuned beats hand"``, ``"<setting>: tuned beats open loop"``,
+        ``"<setting>: tuned within 2x Kalman"``, the last two where that predictor is given),
+        ``guarantees`` (none) and ``rule`` (the rule in words).
+    """
+    checks = {}
+    for setting, e in _checked(errors).items():
+        checks[f"{setting}: tuned beats hand"] = paired_win(e["tuned"], e["hand"])["win"]
+        if "open_loop" in e:
+            checks[f"{setting}: tuned beats open loop"] = paired_win(e["tuned"], e["open_loop"])["win"]
+        if "kalman" in e:
+            S = e["tuned"].size
+            checks[f"{setting}: tuned within {KALMAN_FACTOR:g}x Kalman"] = (
+                int((e["tuned"] <= KALMAN_FACTOR * e["kalman"]).sum()) >= S - 1)
+    return {"checks": checks, "guarantees": {},
+            "rule": ("per setting: the tuned (L, beta) win (lower in >= S-1 of S paired units and the 90 % interval "
+                     "of the mean paired difference below 0) over the hand-tuned gains and, where given, over the "
+                     f"open-loop model; where a Kalman filter is given, tuned <= {KALMAN_FACTOR:g}x its error in all "
+                     "units but one")}
+
+
+def b1_paired(errors: Errors) -> dict[str, dict]:
+    """The paired statistics behind :func:`b1`: ``"<setting>: tuned vs <other>"`` -> :func:`~fnnlib.stats.paired_win`."""
+    return {f"{setting}: tuned vs {other}": paired_win(e["tuned"], e[other])
+            for setting, e in _checked(errors).items() for other in PREDICTORS[1:] if other in e}
