@@ -23,9 +23,12 @@ from typing import Any
 from fnnbook.spec import PipelineError, PipelineSpec, Task
 from fnnlib.settings import fill_presets, notebook_presets
 
-__all__ = ["INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters"]
+__all__ = ["FINGERPRINT_FILE", "INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters",
+           "upstream_parameters"]
 
 INJECTED = ("profile", "out_dir", "data_dir", "upstream_dirs")
+#: the record the runner writes beside a task's products: its fingerprint and the parameters it ran with
+FINGERPRINT_FILE = ".fingerprint.json"
 _REQUIRED_DECLARED = ("profile", "out_dir")
 
 
@@ -218,3 +221,23 @@ def resolve_parameters(
     if "upstream_dirs" in declared:
         params["upstream_dirs"] = {up: str(spec.output_dir(profile, up)) for up in task.upstream}
     return params
+
+
+def upstream_parameters(upstream_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """The parameters an upstream task's last good run used, from the record the runner keeps beside its outputs.
+
+    A downstream notebook that must do what its upstream did (fly the same flight, read the same data) takes
+    the values from here rather than declaring them again.
+
+    Raises
+    ------
+    PipelineError
+        If ``upstream_dir`` has no readable run record (the task was not run by ``fnn-pipeline``).
+    """
+    path = Path(upstream_dir) / FINGERPRINT_FILE
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+        return dict(record["parameters"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise PipelineError(f"{path}: no run record with the upstream task's parameters ({exc}); run the "
+                            "upstream task with fnn-pipeline first") from exc

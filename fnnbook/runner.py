@@ -35,7 +35,7 @@ import papermill
 import psutil
 
 import fnnlib
-from fnnbook.params import INJECTED, check_task_parameters, read_parameters, resolve_parameters
+from fnnbook.params import FINGERPRINT_FILE, INJECTED, check_task_parameters, read_parameters, resolve_parameters
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
 from fnnlib.io import atomic_write, file_sha256
@@ -44,7 +44,6 @@ from fnnlib.settings import MissingDataError, check_notebook_settings
 __all__ = ["Plan", "RunReport", "TaskOutcome", "check", "decide", "execute_task", "is_up_to_date", "summary",
            "write_status"]
 
-FINGERPRINT_FILE = ".fingerprint.json"
 STATUS_FILE = "_status.json"
 KERNEL = "python3"
 #: torch intra-op threads in each notebook's kernel when run in-process with one core (importing fnnlib

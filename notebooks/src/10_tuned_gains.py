@@ -25,42 +25,12 @@ data_dir = "data"
 upstream_dirs = {"own_system": "outputs/manual/own_system", "bottle": "outputs/manual/bottle",
                  "quadrotor_learning": "outputs/manual/quadrotor_learning",
                  "quadrotor_mpc": "outputs/manual/quadrotor_mpc"}
-bottle_data = "real"
-bottle_synthetic_sizes = [21, 9, 1058]
-bottle_hidden = [100, 100, 100]
-bottle_activation = "relu"
-bottle_iterations = 1000
-bottle_batch_size = 20
-bottle_batch_time = 10
-bottle_lr = 0.001
-bottle_method = "dopri5"
-bottle_adjoint = False
-bottle_L = 5.0
-bottle_beta = 0.02
-bottle_N = 500
 bottle_tune_throws = 2
 bottle_tune_iterations = 3
 bottle_tune_lr = 0.3
-quad_L = 3.0
-quad_beta = 0.1
-quad_N = 10
-quad_Ts = 0.02
 quad_tune_flights = 8
 quad_tune_iterations = 8
 quad_tune_lr = 0.2
-steps = 300
-Q = [100.0, 100.0, 100.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.0, 1.0, 1.0]
-R = [1.0, 1.0, 1.0, 1.0]
-u_max_judged = 6.0
-theta_max = 1.5707963267948966
-truth_mass = 1.33
-truth_inertia = [0.005, 0.005, 0.004]
-truth_drag = [0.6, 0.6, 0.15]
-truth_substeps = 1
-solver = "OSQP"
-qp = "osqp"
-linearize_method = "forward"
-backend = "numba"
 
 # %%
 import fnnlib as F
@@ -75,12 +45,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fnnbook.params import upstream_parameters
 from fnnbook.rules import beyond as rules
 
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
 upstream = {k: json.loads((up[k] / "results.json").read_text()) for k in ("own_system", "bottle", "quadrotor_mpc")}
+ran = {k: upstream_parameters(up[k]) for k in ("bottle", "quadrotor_mpc")}  # what those tasks ran with: their
+# data, hand-tuned gains and flight settings are used as they were, never declared again here
 t_start = time.perf_counter()
 seconds: dict[str, float] = {}
 
@@ -95,10 +68,10 @@ seconds: dict[str, float] = {}
 
 # %% [markdown]
 # ## The bottle throws (the O1 setting)
-# `bottle` saves one of its neural ODEs; the five are trained again here with its recipe and seeds (the
-# same deterministic run: the first member is checked equal, weight for weight, to the saved one, so the
-# `bottle` task's hand-tuned and open-loop errors are those of these networks). Each network's
-# $L$ (diagonal, 6 entries) and $\beta$ start at the paper's $L = 5$, $\beta = 0.02$ and take
+# The five neural ODEs of `bottle` are loaded (one checkpoint per seed), so that task's hand-tuned and
+# open-loop errors are those of these very networks. Each network's
+# $L$ (diagonal, 6 entries) and $\beta$ start at the hand-tuned values `bottle` ran with (the paper's $L = 5$,
+# $\beta = 0.02$) and take
 # `bottle_tune_iterations` Adam steps on the 0.5 s ($N = 500$) error from every start of
 # `bottle_tune_throws` **training** throws drawn with the network's seed: the O1 error itself, on training
 # data. The tuned gains are then evaluated on the 9 test throws as O1 is (every start, Euler steps of
@@ -106,31 +79,25 @@ seconds: dict[str, float] = {}
 # networks (O1's "per throw").
 
 # %% [tags: hide-input]
-b_results = upstream["bottle"]
-b_seeds = b_results["metrics"]["seeds"]
+b_results, b_ran = upstream["bottle"], ran["bottle"]
 o1 = next(c for c in b_results["claims"] if c["id"] == "O1")["numbers"]
-if bottle_data == "real":
+if b_ran["data"] == "real":
     b_train, b_test = F.load_bottle(data_dir)
-else:
-    n_tr, n_te, n_s = bottle_synthetic_sizes
-    b_train = F.synthetic_throws(n_tr, n_s, seed=b_seeds[0])
-    b_test = F.synthetic_throws(n_te, n_s, seed=b_seeds[0] + 1)
-if o1["data"] != bottle_data:
-    raise ValueError(f"bottle ran on {o1['data']!r} throws, this chapter is set to {bottle_data!r}: set bottle_data")
-b_Ts, bN, E = b_train.Ts, bottle_N, len(b_seeds)
+else:  # the bottle task's synthetic throws, drawn as it draws them
+    n_tr, n_te, n_s = b_ran["synthetic_sizes"]
+    b_train = F.synthetic_throws(n_tr, n_s, seed=b_ran["seeds"][0])
+    b_test = F.synthetic_throws(n_te, n_s, seed=b_ran["seeds"][0] + 1)
+if not 1 <= bottle_tune_throws <= b_train.state.shape[0]:
+    raise ValueError(f"bottle_tune_throws must lie in 1..{b_train.state.shape[0]} (the training throws), "
+                     f"got {bottle_tune_throws}")
+b_Ts, bN, bottle_L, bottle_beta = b_train.Ts, b_ran["N"], b_ran["L"], b_ran["beta"]
 x_b_train, x_b_test = b_train.state.float(), b_test.state.float()
-
-t0 = time.perf_counter()
-recipe = F.PAPER_BOTTLE_RECIPE.replace(iterations=bottle_iterations, batch_size=bottle_batch_size,
-                                       batch_time=bottle_batch_time, lr=bottle_lr, method=bottle_method,
-                                       adjoint=bottle_adjoint)
-ens = F.NeuralODEEnsemble(6, bottle_hidden, bottle_activation, b_seeds)
-F.train_neural_ode(ens, b_train.t.float(), F.stack_members(x_b_train, E), recipe, seed=b_seeds[0], progress=False)
-saved, _ = F.load_checkpoint(up["bottle"] / "neural_ode.pt", expected_kind="NeuralODE")
-b_nets = [ens.member(e) for e in range(E)]
-same = all(torch.equal(a, b) for a, b in zip(b_nets[0].state_dict().values(), saved.state_dict().values()))
-seconds["bottle_retrain"] = time.perf_counter() - t0
-print(f"{E} neural ODEs trained again in {seconds['bottle_retrain']:.1f} s; the first equals bottle's saved one: {same}")
+b_loaded = F.load_seed_checkpoints(up["bottle"], "neural_ode", expected_kind="NeuralODE")
+b_seeds, b_nets = [s for s, _, _ in b_loaded], [net for _, net, _ in b_loaded]
+if b_seeds != b_ran["seeds"]:
+    raise ValueError(f"bottle's checkpoints hold seeds {b_seeds}, its run used {b_ran['seeds']}")
+print(f"{len(b_nets)} neural ODEs of bottle loaded (seeds {b_seeds}); hand-tuned L = {bottle_L:g}, "
+      f"beta = {bottle_beta:g}, N = {bN}")
 
 # %%
 def bottle_tune(seed: int, net) -> F.TunedGains:
@@ -152,12 +119,7 @@ t0 = time.perf_counter()
 starts = x_b_test[:, :-bN]  # the cascade is causal: the first T - N rows are those of the whole run
 tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, torch.tensor(r.L), r.beta))
                               for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
-if same:  # the bottle task's own errors of these networks
-    hand, open_loop = o1["per_throw_m"]["feedback"], o1["per_throw_m"]["neural ODE"]
-else:  # another run (e.g. another thread count): measure the paper's gains on these networks too
-    print("the networks differ from bottle's run: the hand-tuned and open-loop errors are measured here")
-    hand = torch.stack([o1_errors(F.cascade_predict(n, starts, b_Ts, bN, bottle_L, bottle_beta)) for n in b_nets]).mean(0).tolist()
-    open_loop = torch.stack([o1_errors(F.rollout_predict(n, x_b_test, b_Ts, bN)[:, :-bN]) for n in b_nets]).mean(0).tolist()
+hand, open_loop = o1["per_throw_m"]["feedback"], o1["per_throw_m"]["neural ODE"]  # bottle's, same networks
 seconds["bottle_eval"] = time.perf_counter() - t0
 errors = {"bottle": {"tuned": tuned_per_seed.mean(0).tolist(), "hand": hand, "open_loop": open_loop}}
 tuned_values = {"bottle": [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, b_tuned)]}
@@ -189,7 +151,8 @@ from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
-q_mpc = upstream["quadrotor_mpc"]["metrics"]
+q_mpc, m = upstream["quadrotor_mpc"]["metrics"], ran["quadrotor_mpc"]  # m: the flight settings it flew
+quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
 q_rmse, forces = q_mpc["paired_mean_axis_rmse_m"], q_mpc["disturbances"]
 costs = list(q_rmse)
 member_files = json.loads((up["quadrotor_learning"] / "results.json").read_text())["metrics"]["member_checkpoints"]
@@ -197,13 +160,14 @@ members = [(int(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up["quadrotor_learning"] / f, expected_kind="AeroResidual") for f in member_files)]
 flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
 plant = Quadrotor(NOMINAL)
-test_params = TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag))
-x_r, u_r = lissajous_reference(steps, quad_N, Ts=quad_Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
-tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=tuple(f))), x_r, u_r, steps=steps, Ts=quad_Ts,
-                    substeps=truth_substeps, backend=backend, linearize_method=linearize_method) for f in forces]
-mpcs = {cost: make_mpc(qp, quad_N, Q, R, cost=cost, u_max=u_max_judged, theta_max=theta_max, solver=solver)
-        for cost in costs}
-seconds["quad_compile"] = warm_up(*[net for _, net in members]) if backend == "numba" else 0.0
+test_params = TEST_TRUTH.replace(mass=m["truth_mass"], inertia=tuple(m["truth_inertia"]), drag=tuple(m["truth_drag"]))
+x_r, u_r = lissajous_reference(m["steps"], quad_N, Ts=quad_Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
+tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=tuple(f))), x_r, u_r, steps=m["steps"],
+                    Ts=quad_Ts, substeps=m["truth_substeps"], backend=m["backend"],
+                    linearize_method=m["linearize_method"]) for f in forces]
+mpcs = {cost: make_mpc(m["qp"], quad_N, m["Q"], m["R"], cost=cost, u_max=m["u_max_judged"], theta_max=m["theta_max"],
+                       solver=m["solver"]) for cost in costs}
+seconds["quad_compile"] = warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 
 
 def fnn_flight(net, L, beta, test: FlightTest, cost: str) -> dict:
@@ -282,7 +246,7 @@ paired = rules.b1_paired(errors)
 claims = [F.claim_result("B1", **rule, figure=fig_b1, title="L and beta tuned from data",
                          numbers={"errors": errors, "paired": paired, "tuned": tuned_values,
                                   "bottle_tuned_per_seed": tuned_per_seed.tolist(),
-                                  "bottle_networks_as_in_bottle": same, "quadrotor_tuned_flights": tuned_flights},
+                                  "quadrotor_tuned_flights": tuned_flights},
                          headline=F.headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
                                                     float(np.mean(errors["bottle"]["tuned"]) /
                                                           np.mean(errors["bottle"]["hand"]))),

@@ -176,3 +176,17 @@ def test_glob_product_matches_every_file_and_must_match_one(make_pipeline: MakeP
     report, _ = _run(spec, force=True)
     assert report.outcome("leaf").status == "failed"
     assert "did not write these products: model_seed*.pt" in report.outcome("leaf").message
+
+
+def test_a_downstream_notebook_reads_what_its_upstream_ran_with(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    """upstream_parameters: the parameters of the upstream's last good run (profile overrides included)."""
+    from fnnbook.params import upstream_parameters  # noqa: PLC0415
+
+    spec = load_spec(make_pipeline({"leaf": leaf_task(value=7)}))
+    with pytest.raises(PipelineError, match="no run record"):
+        upstream_parameters(spec.output_dir("smoke", "leaf"))
+    assert _run(spec)[0].ok
+    ran = upstream_parameters(spec.output_dir("smoke", "leaf"))
+    assert {k: ran[k] for k in ("value", "scale", "fail", "profile")} == {"value": 7, "scale": 1.0, "fail": False,
+                                                                        "profile": "smoke"}
+    assert "out_dir" not in ran  # no machine paths
