@@ -51,13 +51,41 @@ class NeuralODEEnsemble(nn.Module):
         for s in seeds:
             seed_everything(s)
             members.append(NeuralODE(n_state, hidden, activation))
+        self._stack(members)
+
+    @classmethod
+    def from_members(cls, members: Sequence[NeuralODE], seeds: Sequence[int]) -> NeuralODEEnsemble:
+        """The ensemble of trained networks (weights copied), e.g. one per seed loaded by
+        :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
+
+        Every member must be an autonomous :class:`NeuralODE` of one architecture and dtype.
+        """
+        seeds = [int(s) for s in seeds]
+        if not members or len(members) != len(seeds) or len(set(seeds)) != len(seeds):
+            raise ValueError(f"need one member per seed and no repeated seed, got {len(members)} members "
+                             f"for seeds {seeds}")
+        first = members[0]
+        if not all(isinstance(m, NeuralODE) for m in members):
+            raise TypeError("every member must be a NeuralODE")
+        dtypes = {next(m.parameters()).dtype for m in members}
+        if any(m.config != first.config for m in members) or first.n_input or len(dtypes) > 1:
+            raise ValueError("the members must share one architecture and dtype, without inputs; got "
+                             f"{[m.config for m in members]}, dtypes {sorted(map(str, dtypes))}")
+        ens = cls.__new__(cls)
+        nn.Module.__init__(ens)
+        ens.n_state, ens.hidden, ens.activation, ens.seeds = first.n_state, first.hidden, first.activation, seeds
+        ens._stack(members)
+        return ens
+
+    def _stack(self, members: Sequence[NeuralODE]) -> None:
+        """Stack the members' layers on an ensemble axis of the weights."""
         linears = [[m for m in member.net if isinstance(m, nn.Linear)] for member in members]
         # weight l: (E, in, out), bias l: (E, 1, out) -- y = x W + b per member
         self.weights = nn.ParameterList(
             nn.Parameter(torch.stack([ls[i].weight.detach().T.clone() for ls in linears])) for i in range(len(linears[0])))
         self.biases = nn.ParameterList(
             nn.Parameter(torch.stack([ls[i].bias.detach()[None].clone() for ls in linears])) for i in range(len(linears[0])))
-        self.act = ACTIVATIONS[activation]()
+        self.act = ACTIVATIONS[self.activation]()
 
     @property
     def size(self) -> int:
