@@ -2,10 +2,10 @@
 
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.controlled import LinearSystem, Pendulum
-from fnnlib.systems.noise import add_measurement_noise
+from fnnlib.systems.noise import add_measurement_noise, add_member_noise
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
 from fnnlib.systems.spiral import Spiral
 from fnnlib.systems.switched import SwitchedSystem
 
 __all__ = ["NOMINAL", "TEST_TRUTH", "TRAINING_TRUTH", "DynamicalSystem", "LinearSystem", "Pendulum", "Quadrotor", "QuadrotorParams", "Spiral",
-           "SwitchedSystem", "add_measurement_noise"]
+           "SwitchedSystem", "add_measurement_noise", "add_member_noise"]
