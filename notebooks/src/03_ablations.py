@@ -126,12 +126,22 @@ print(f"{S} networks (seeds {seeds}) from the spiral task")
 centre = int((levels - torch.tensor(nominal, dtype=torch.float64)).abs().sum(-1).argmin())
 nominal_is_a_level = bool(torch.allclose(levels[centre], torch.tensor(nominal, dtype=torch.float64), atol=1e-9))
 x_lv = F.simulate_levels([F.Spiral(*row) for row in levels.tolist()], torch.tensor(x0), t).float()  # (U, T, 2)
-z = split(F.cascade_sweep(ens, F.stack_members(x_lv, S), Ts, N, gains, beta))  # (S, G, U, T, 2)
-err_clean = F.n_step_errors(z, x_lv, N).mean(-1)  # (S, G, U)
+xs_lv = F.stack_members(x_lv, S)  # (U, T, 2S)
 x_lv_noisy = F.add_member_noise(x_lv, noise_std, gens, draws=noise_draws)  # (draws, U, T, 2S): own noise per seed
-err_noisy = F.n_step_errors(split(F.cascade_sweep(ens, x_lv_noisy, Ts, N, gains, beta)), x_lv, N)
-err_noisy = err_noisy.mean(-1).mean(2)  # (S, G, draws, U) -> (S, G, U)
-del z
+
+
+def map_errors(z_in, u):
+    """Mean N-step error (S, G) at level ``u`` from measurements ``z_in`` (T, 2S): every seed and gain in one cascade.
+
+    One level and noise draw at a time: a (gains, T, 2S) batch stays small enough for the cache; all levels
+    and draws at once run several times slower.
+    """
+    return F.n_step_errors(split(F.cascade_sweep(ens, z_in, Ts, N, gains, beta)), x_lv[u], N).mean(-1)
+
+
+err_clean = torch.stack([map_errors(xs_lv[u], u) for u in range(len(levels))], dim=-1)  # (S, G, U)
+err_noisy = torch.stack([torch.stack([map_errors(x_lv_noisy[d, u], u) for d in range(noise_draws)]).mean(0)
+                         for u in range(len(levels))], dim=-1)  # (S, G, U): the mean over the draws
 
 # %%
 frac_clean = F.outward_increase_fraction(err_clean, centre)  # (S, G): per seed, per gain
