@@ -163,8 +163,7 @@ for v, style, color, label in [(ball_sweep, "o:", "0.3", r"ball $\gamma/L$"),
     ax.fill_between(L_sweep, v.amin(1), v.amax(1), color=color, alpha=0.25, lw=0)
 ax.set_xticks(L_sweep, [f"{g:g}" for g in L_sweep], minor=False)
 ax.set_xticks([], minor=True)
-ax.set(xlabel="L", ylabel=r"$\|\tilde x\|$ over the last half", title=f"(c) the ball is regulated by L (band: min-max "
-                                                                    f"over {S} seeds)")
+ax.set(xlabel="L", ylabel=r"$\|\tilde x\|$ over the last half", title=f"(c) the ball follows L (min-max of {S} seeds)")
 ax.legend(fontsize=8)
 fig_s1 = F.save_figure(fig, out, "figS1_bounds")
 

@@ -180,7 +180,7 @@ ax = axes[0, 2]
 for i in range(len(levels)):
     band(ax, gains, err_noisy[:, :, i], plt.cm.viridis(i / max(1, len(levels) - 1)), None)
 ax.set(xlabel="gain L", ylabel=f"mean {N}-step error", yscale="log",
-       title=f"(c) noisy error against gain, per level (band: min-max over {S} seeds)")
+       title=f"(c) noisy error vs gain per level (min-max of {S} seeds)")
 fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
 
 # %% [markdown]
@@ -271,7 +271,7 @@ ax = axes[0, 0]
 band(ax, betas, rmse9, F.plotting.COLORS["feedback"], f"noise std {noise_std}")
 band(ax, betas, rmse9_clean, "0.4", "noise-free", style="s--")
 ax.set(xlabel=r"decay rate $\beta$", ylabel=f"{N}-step RMSE", yscale="log",
-       title=f"(S11) the paper's grid (band: min-max over {S} seeds)")
+       title=f"(S11) the paper's grid (min-max of {S} seeds)")
 ax.legend(fontsize=8)
 ax = axes[0, 1]
 band(ax, betas_ext, rmse9_ext, F.plotting.COLORS["feedback"], None)
