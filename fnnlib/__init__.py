@@ -72,7 +72,7 @@ from fnnlib.sweeps import (
     simulate_levels,
 )
 from fnnlib.stats import paired_win
-from fnnlib.systems import DynamicalSystem, LinearSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise
+from fnnlib.systems import DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
 from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
     PAPER_BOTTLE_RECIPE,
@@ -109,7 +109,8 @@ __all__ = [
     "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
-    "Spiral", "TrainHistory", "add_measurement_noise", "cascade_predict", "cascade_predict_loop",
+    "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
+    "cascade_predict_loop",
     "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",

@@ -119,3 +119,21 @@ class DynamicalSystem:
             return self(t, x.reshape(-1, self.n)).reshape(x.shape)
         u = torch.as_tensor(u, dtype=x.dtype).expand(*x.shape[:-1], self.m)
         return self(t, x.reshape(-1, self.n), u.reshape(-1, self.m)).reshape(x.shape)
+
+
+class StackedSystem(DynamicalSystem):
+    """``E`` copies of an autonomous system on the stacked state (..., E n), the layout of
+    :class:`fnnlib.NeuralODEEnsemble`: one integration runs a true system beside every member of an ensemble
+    (e.g. Theorem 1's continuous observer for every seed's network, :func:`fnnlib.observe_continuous`)."""
+
+    def __init__(self, system: DynamicalSystem, E: int) -> None:
+        if getattr(system, "m", 0):
+            raise ValueError(f"StackedSystem takes an autonomous system, {type(system).__name__} has inputs")
+        if int(E) != E or int(E) < 1:
+            raise ValueError(f"need a number of copies E >= 1, got {E!r}")
+        self.system, self.E, self.n = system, int(E), int(E) * system.n
+
+    def __call__(self, t: Tensor | float, x: Tensor) -> Tensor:
+        """dx/dt of every copy: ``x`` (batch, E n) -> (batch, E n)."""
+        n = self.system.n
+        return self.system(t, x.reshape(-1, n)).reshape(x.shape)

@@ -33,3 +33,16 @@ def add_measurement_noise(x: Tensor, std: float, generator: torch.Generator | No
         return x.expand(shape).clone()
     w = torch.randn(shape, generator=generator, dtype=x.dtype)
     return x + std * w
+
+
+def add_member_noise(x: Tensor, std: float, generators: list[torch.Generator], *,
+                     draws: int | None = None) -> Tensor:
+    """Noisy measurements of ``x`` for every member of an ensemble (one network per seed), on the stacked state.
+
+    Member ``e`` sees ``add_measurement_noise(x, std, generators[e], draws=draws)`` -- its own noise draw,
+    from its own generator (seed it from the member's seed) -- and the members are concatenated along the
+    last axis, the layout of :class:`fnnlib.NeuralODEEnsemble`: shape (..., T, E n), or (draws, ..., T, E n).
+    """
+    if not generators:
+        raise ValueError("need one generator per ensemble member, got none")
+    return torch.cat([add_measurement_noise(x, std, g, draws=draws) for g in generators], dim=-1)

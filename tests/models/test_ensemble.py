@@ -46,3 +46,38 @@ def test_bad_seeds_are_refused(seeds: list[int]) -> None:
 def test_wrong_state_width_is_refused() -> None:
     with pytest.raises(ValueError, match=r"\(batch, 4\)"):
         F.NeuralODEEnsemble(2, [4], "relu", [0, 1])(0.0, torch.randn(3, 2))
+
+
+def test_from_members_rebuilds_the_trained_networks_side_by_side() -> None:
+    torch.manual_seed(0)
+    members = [F.NeuralODE(2, [8, 8], "relu").double() for _ in range(3)]
+    ens = F.NeuralODEEnsemble.from_members(members, [4, 1, 9])
+    assert ens.seeds == [4, 1, 9] and ens.size == 3 and next(ens.parameters()).dtype == torch.float64
+    x = torch.randn(30, 2, dtype=torch.float64)
+    out = F.split_members(ens(0.0, F.stack_members(x, 3)), 3)
+    for e, m in enumerate(members):
+        torch.testing.assert_close(out[e], m(0.0, x))
+        torch.testing.assert_close(ens.member(e)(0.0, x), m(0.0, x))
+    with pytest.raises(ValueError, match="one member per seed"):
+        F.NeuralODEEnsemble.from_members(members, [0, 1])
+    with pytest.raises(ValueError, match="share one architecture"):
+        F.NeuralODEEnsemble.from_members([members[0], F.NeuralODE(2, [4], "relu").double()], [0, 1])
+    with pytest.raises(ValueError, match="share one architecture and dtype"):
+        F.NeuralODEEnsemble.from_members([members[0], F.NeuralODE(2, [8, 8], "relu")], [0, 1])
+
+
+def test_continuous_observer_of_every_member_in_one_integration() -> None:
+    torch.manual_seed(1)
+    members = [F.NeuralODE(2, [8], "tanh").double() for _ in range(2)]
+    ens = F.NeuralODEEnsemble.from_members(members, [0, 1])
+    spiral, x0, t = F.Spiral(3.0, 0.05, 10.0), torch.tensor([9.0, 0.0], dtype=torch.float64), torch.arange(60) * 0.01
+    stacked = F.StackedSystem(spiral, 2)
+    assert stacked.n == 4
+    x, est = F.observe_continuous(stacked, ens, 20.0, F.stack_members(x0, 2), t)
+    for e, m in enumerate(members):
+        x_e, est_e = F.observe_continuous(spiral, m, 20.0, x0, t)
+        torch.testing.assert_close(F.split_members(x, 2)[e], x_e, rtol=1e-7, atol=1e-7)
+        torch.testing.assert_close(F.split_members(est.x_hat, 2)[e], est_e.x_hat, rtol=1e-7, atol=1e-7)
+        torch.testing.assert_close(F.split_members(est.f_hat, 2)[e], est_e.f_hat, rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match="E >= 1"):
+        F.StackedSystem(spiral, 0)

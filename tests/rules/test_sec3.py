@@ -183,3 +183,149 @@ def test_s11() -> None:
     with pytest.raises(AssertionError, match="luenberger_poles_as_placed"):
         design = s11_numbers()["design"] | {"luenberger_pole_err": 1e-3}
         claim_result("S11", **sec3.s11(**s11_numbers(design=design)), numbers={})
+
+
+# ---- S5-S11 over seeds: threshold checks hold in >= S-1 of S seeds, wins are paired (fnnlib.stats.paired_win)
+
+def test_most_seeds_and_every_seed() -> None:
+    assert sec3.most_seeds([True, True, True, True, False]) and not sec3.most_seeds([True, True, True, False, False])
+    assert sec3.most_seeds([True]) and not sec3.most_seeds([False])  # one run: that run, never vacuous
+    assert sec3.most_seeds([True, False]) and not sec3.most_seeds([False, False])
+    assert sec3.every_seed([True] * 5) and not sec3.every_seed([True] * 4 + [False])
+
+
+def s5_seeds(**over):
+    base = dict(ball_x=[1.0] * 5, ball_f=[21.0] * 5, feedback_x=[0.3] * 5, feedback_f=[6.0] * 5,
+                continuous_x=[0.3] * 5, continuous_f=[6.0] * 5, ratio_x=[3.0, 2.5, 3.1, 2.2, 2.9],
+                ratio_f=[3.5] * 5, L_sweep=[5.0, 10.0, 20.0], limit_x=[[1.0] * 5, [0.5] * 5, [0.25] * 5],
+                ball_x_sweep=[[4.0] * 5, [2.0] * 5, [1.0] * 5])
+    return base | over
+
+
+def test_s5_over_seeds() -> None:
+    r = sec3.s5(**s5_seeds())
+    assert verdict("S5", r) == "reproduced" and "5 seeds" in r["rule"]
+    # one seed not conservative: still holds (4 of 5); two seeds: fails
+    assert sec3.s5(**s5_seeds(ratio_x=[3.0, 1.5, 3.1, 2.2, 2.9]))["checks"]["conservative_ratio>=2"] is True
+    r = sec3.s5(**s5_seeds(ratio_x=[3.0, 1.5, 1.1, 2.2, 2.9]))
+    assert r["checks"]["conservative_ratio>=2"] is False and verdict("S5", r) == "partly"
+    lim = [[1.0] * 5, [0.5, 0.5, 1.2, 1.1, 0.5], [0.25] * 5]  # not decreasing in two seeds
+    assert sec3.s5(**s5_seeds(limit_x=lim))["checks"]["limit_decreases_with_L"] is False
+    bad = sec3.s5(**s5_seeds(feedback_x=[2.0] * 5, feedback_f=[30.0] * 5, ratio_x=[0.5] * 5,
+                             limit_x=[[5.0] * 5, [6.0] * 5, [7.0] * 5]))
+    assert verdict("S5", bad) == "not reproduced"
+    # Theorem 1 must hold in every seed: one seed outside the ball stops the run
+    with pytest.raises(AssertionError, match="Theorem 1"):
+        claim_result("S5", **sec3.s5(**s5_seeds(continuous_x=[0.3] * 4 + [2.0])), numbers={})
+    with pytest.raises(ValueError, match="same seeds"):
+        sec3.s5(**s5_seeds(ratio_f=[3.5] * 4))
+
+
+def s6_seeds(**over):
+    one = s6_numbers()
+    col = lambda v: [[x] * 5 for x in v]  # noqa: E731 -- the same run in every seed
+    base = dict(rho=one["rho"], diverges=col(one["diverges"]), max_err=col(one["max_err"]),
+                iss_bound=col(one["iss_bound"]), switches=[1] * 5, rho_lo=[1.0] * 5, rho_hi=[1.01] * 5,
+                rate=col(one["rate"]))
+    return base | over
+
+
+def test_s6_over_seeds() -> None:
+    assert verdict("S6", sec3.s6(**s6_seeds())) == "reproduced"
+    # two seeds switch twice along rho: the transition check fails
+    r = sec3.s6(**s6_seeds(switches=[1, 2, 1, 2, 1]))
+    assert r["checks"]["transition_at_rho_1"] is False and verdict("S6", r) == "partly"
+    assert sec3.s6(**s6_seeds(switches=[1, 2, 1, 1, 1]))["checks"]["transition_at_rho_1"] is True
+    div = [[True] * 5] * 4 + [[False] * 5] * 2
+    none = sec3.s6(**s6_seeds(diverges=div, switches=[3] * 5, rho_lo=[1.5] * 5, rho_hi=[0.5] * 5))
+    assert verdict("S6", none) == "not reproduced"
+    err = s6_seeds()["max_err"]
+    err[1] = [0.1, 0.1, 0.1, 0.1, 0.3]  # one seed over its ISS bound: the guarantee fails
+    with pytest.raises(AssertionError, match="under_iss_bound"):
+        claim_result("S6", **sec3.s6(**s6_seeds(max_err=err)), numbers={})
+
+
+def s7_seeds(**over):
+    base = dict(outward_noisy=[0.9, 0.85, 0.95, 0.9, 0.7], outward_noise_free=[0.85] * 5,
+                levels_interior_min_noisy=[8, 9, 7, 8, 8], n_levels=10,
+                best_gain_noisy=[[10.0] * 5] * 10, best_gain_noise_free=[[45.0] * 5] * 10)
+    return base | over
+
+
+def test_s7_over_seeds() -> None:
+    r = sec3.s7(**s7_seeds())
+    assert verdict("S7", r) == "reproduced" and "5 seeds" in r["rule"] and "one trained network" not in r["rule"]
+    r = sec3.s7(**s7_seeds(outward_noisy=[0.9, 0.7, 0.95, 0.9, 0.7]))  # two seeds below the trend fraction
+    assert r["checks"]["error_grows_with_uncertainty_noisy(frac>=0.8)"] is False and verdict("S7", r) == "partly"
+    r = sec3.s7(**s7_seeds(best_gain_noise_free=[[10.0] * 5] * 10))
+    assert r["checks"]["noise_lowers_the_best_gain(most_levels)"] is False
+    none = sec3.s7(**s7_seeds(outward_noisy=[0.5] * 5, outward_noise_free=[0.4] * 5,
+                              levels_interior_min_noisy=[2] * 5, best_gain_noise_free=[[5.0] * 5] * 10))
+    assert verdict("S7", none) == "not reproduced"
+
+
+def test_s8_over_seeds() -> None:
+    lo, hi = [SEEDS_WIN] * 12, [SEEDS_LOSE] * 12
+    r = sec3.s8(rate_neural_ode=hi, rate_feedback=lo, err_N_neural_ode=hi, err_N_feedback=lo)
+    assert verdict("S8", r) == "reproduced" and "5 seeds" in r["rule"]
+    # at one level the feedback wins in only 3 of 5 seeds: no paired win there
+    mixed = lo[:6] + [[0.10, 0.30, 0.09, 0.30, 0.12]] + lo[7:]
+    r = sec3.s8(rate_neural_ode=hi, rate_feedback=lo, err_N_neural_ode=hi, err_N_feedback=mixed)
+    assert r["checks"]["multistep_better_at_all_12_levels"] is False and verdict("S8", r) == "partly"
+    assert verdict("S8", sec3.s8(rate_neural_ode=lo, rate_feedback=hi, err_N_neural_ode=lo,
+                                 err_N_feedback=hi)) == "not reproduced"
+
+
+def test_s9_over_seeds() -> None:
+    beta = [0.0, 0.01, 0.02, 0.03]
+    noisy = [[3.0, 3.1, 2.9, 3.0, 3.2], [2.0, 2.1, 2.0, 1.9, 2.2], [1.5] * 5, [1.8] * 5]
+    clean = [[1.0] * 5, [1.1] * 5, [1.2] * 5, [1.3] * 5]
+    assert verdict("S9", sec3.s9(beta=beta, rmse_noisy=noisy, rmse_noise_free=clean)) == "reproduced"
+    # the fall at the second beta in only 3 of 5 seeds: no paired win
+    r = sec3.s9(beta=beta, rmse_noisy=[noisy[0], [2.0, 3.5, 2.0, 3.5, 2.2], *noisy[2:]], rmse_noise_free=clean)
+    assert r["checks"]["falls_at_first"] is False and verdict("S9", r) == "partly"
+    # the noise-free best beta equals the noisy one in two seeds: the mechanism fails
+    clean2 = [[1.0] * 5, [1.1] * 5, [1.2, 1.2, 1.2, 0.5, 0.5], [1.3] * 5]
+    assert sec3.s9(beta=beta, rmse_noisy=noisy, rmse_noise_free=clean2)["checks"]["noise_raises_the_best_beta"] is False
+    rising = [[1.0] * 5, [2.0] * 5, [3.0] * 5, [4.0] * 5]
+    assert verdict("S9", sec3.s9(beta=beta, rmse_noisy=rising, rmse_noise_free=rising)) == "not reproduced"
+
+
+def test_s10_over_seeds() -> None:
+    left = {"band": [1.0] * 5, "peak": [5.0] * 5, "time": [0.2, 0.3, 0.1, 0.2, 0.6]}  # one seed slow: still holds
+    kw = dict(rate_err_after_feedback=SEEDS_WIN, rate_err_after_neural_ode=SEEDS_LOSE)
+    r = sec3.s10(state=left, rate=left, multistep=left, **kw)
+    assert verdict("S10", r) == "reproduced" and "5 seeds" in r["rule"]
+    slow2 = left | {"time": [0.2, 0.7, 0.1, 0.2, 0.6]}  # two seeds over 0.5 s
+    r = sec3.s10(state=left, rate=left, multistep=slow2, **kw)
+    assert r["checks"]["multistep_error_leaves_band_and_returns_within_0.5s"] is False and verdict("S10", r) == "partly"
+    inside = left | {"peak": [0.9, 0.9, 5.0, 5.0, 5.0]}  # never leaves its band in two seeds
+    assert sec3.s10(state=inside, rate=left, multistep=left, **kw)["checks"][
+        "observer_error_leaves_band_and_returns_within_0.5s"] is False
+    slow = {"band": [1.0] * 5, "peak": [5.0] * 5, "time": [2.0] * 5}
+    assert verdict("S10", sec3.s10(state=slow, rate=slow, multistep=slow, rate_err_after_feedback=SEEDS_LOSE,
+                                   rate_err_after_neural_ode=SEEDS_WIN)) == "not reproduced"
+
+
+def s11_seeds(**over):
+    one = s11_numbers()
+    base = dict(design={k: [v] * 5 for k, v in one["design"].items()},
+                equiv={k: [v] * 5 for k, v in one["equiv"].items()}, same_data=True,
+                rate_settled={"neural ODE": [5.0, 5.1, 4.9, 5.0, 5.2], "linear feedback": [0.4, 0.41, 0.39, 0.4, 0.42],
+                              "Luenberger": [0.5] * 5, "Kalman": [0.3] * 5})
+    return base | over
+
+
+def test_s11_over_seeds() -> None:
+    r = sec3.s11(**s11_seeds())
+    assert verdict("S11", r) == "reproduced" and "5 seeds" in r["rule"] and "one trained network" not in r["rule"]
+    rs = s11_seeds()["rate_settled"] | {"linear feedback": [0.4, 0.7, 0.8, 0.4, 0.4]}  # > 2x Kalman in two seeds
+    assert verdict("S11", sec3.s11(**s11_seeds(rate_settled=rs))) == "partly"
+    # below the neural ODE in only 3 of 5 seeds: no paired win
+    rs = s11_seeds()["rate_settled"] | {"neural ODE": [0.3, 5.0, 0.3, 5.0, 5.0], "linear feedback": [0.4] * 5}
+    assert sec3.s11(**s11_seeds(rate_settled=rs))["checks"]["feedback_rate_beats_neural_ode"] is False
+    rs = {"neural ODE": [0.5] * 5, "linear feedback": [1.0] * 5, "Kalman": [0.3] * 5}
+    assert verdict("S11", sec3.s11(**s11_seeds(rate_settled=rs))) == "not reproduced"
+    design = s11_seeds()["design"] | {"luenberger_pole_err": [1e-12] * 4 + [1e-3]}  # one seed's design off
+    with pytest.raises(AssertionError, match="luenberger_poles_as_placed"):
+        claim_result("S11", **sec3.s11(**s11_seeds(design=design)), numbers={})

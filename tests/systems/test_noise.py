@@ -27,3 +27,16 @@ def test_zero_std_copies_and_bad_settings():
         add_measurement_noise(x, -1.0)
     with pytest.raises(ValueError, match="noise draws"):
         add_measurement_noise(x, 0.1, draws=0)
+
+
+def test_add_member_noise_gives_each_member_its_own_seeded_draw() -> None:
+    import fnnlib as F
+    x = torch.randn(50, 2)
+    z = F.add_member_noise(x, 0.1, [F.make_generator(1), F.make_generator(2)], draws=3)
+    assert z.shape == (3, 50, 4)
+    parts = F.split_members(z, 2)
+    for e, s in enumerate([1, 2]):
+        assert torch.equal(parts[e], F.add_measurement_noise(x, 0.1, F.make_generator(s), draws=3))
+    assert not torch.equal(parts[0], parts[1])
+    with pytest.raises(ValueError, match="one generator per ensemble member"):
+        F.add_member_noise(x, 0.1, [])
