@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -52,3 +53,19 @@ def seeds_note(*values: Value) -> str:
     n = max(per_seed(v).size for v in values)
     return (f"; over {n} seeds: a wins when it is lower in >= {n - 1} of {n} seeds and the 90 % interval "
             "of the mean paired difference excludes 0" if n > 1 else "; one seed (single run)")
+
+
+def most_seeds(flags: Any) -> bool:
+    """A threshold check over seeds: true in at least S-1 of the S seeds (a single run: true in it)."""
+    f = np.atleast_1d(np.asarray(flags, dtype=bool))
+    if f.ndim != 1 or f.size == 0:
+        raise ValueError(f"expected one flag per seed, got shape {np.shape(flags)}")
+    return bool(f.sum() >= max(1, f.size - 1))
+
+
+def every_seed(flags: Any) -> bool:
+    """A guarantee over seeds: true in every seed."""
+    f = np.atleast_1d(np.asarray(flags, dtype=bool))
+    if f.ndim != 1 or f.size == 0:
+        raise ValueError(f"expected one flag per seed, got shape {np.shape(flags)}")
+    return bool(f.all())

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from fnnbook.rules._compare import Value, at_most, beats, per_seed, seeds_note
+from fnnbook.rules._compare import Value, at_most, beats, every_seed, most_seeds, per_seed, seeds_note
 
 Rule = dict[str, Any]
 
@@ -32,22 +32,6 @@ def _rows(value: Any, name: str) -> np.ndarray:
     if arr.ndim != 2 or arr.size == 0 or not np.isfinite(arr).all():
         raise ValueError(f"{name}: expected finite values of shape (points,) or (points, seeds), got {arr.shape}")
     return arr
-
-
-def most_seeds(flags: Any) -> bool:
-    """A threshold check over seeds: true in at least S-1 of the S seeds (a single run: true in it)."""
-    f = np.atleast_1d(np.asarray(flags, dtype=bool))
-    if f.ndim != 1 or f.size == 0:
-        raise ValueError(f"expected one flag per seed, got shape {np.shape(flags)}")
-    return bool(f.sum() >= max(1, f.size - 1))
-
-
-def every_seed(flags: Any) -> bool:
-    """A guarantee over seeds: true in every seed."""
-    f = np.atleast_1d(np.asarray(flags, dtype=bool))
-    if f.ndim != 1 or f.size == 0:
-        raise ValueError(f"expected one flag per seed, got shape {np.shape(flags)}")
-    return bool(f.all())
 
 
 def _threshold_note(n: int) -> str:

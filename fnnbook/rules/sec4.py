@@ -11,14 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from fnnbook.rules._compare import Value, beats, per_seed, seeds_note
+from fnnbook.rules._compare import Value, beats, most_seeds, per_seed, seeds_note
 
 Rule = dict[str, Any]
-
-
-def _most_seeds(flags: np.ndarray) -> bool:
-    """A threshold check over seeds: true in at least S-1 of the S seeds (a single run: true in it)."""
-    return bool(flags.sum() >= max(1, flags.size - 1))
 
 
 def _in_most(value: Value) -> str:
@@ -51,7 +46,7 @@ def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool | Sequ
     flags = [frozen_unchanged] if isinstance(frozen_unchanged, bool) else list(frozen_unchanged)
     if not flags or not all(isinstance(f, bool) for f in flags):
         raise ValueError(f"D2: frozen_unchanged must be a bool or one bool per seed, got {frozen_unchanged!r}")
-    ok = _most_seeds(per_seed(rel_feedback) <= factor * per_seed(rel_nominal))
+    ok = most_seeds(per_seed(rel_feedback) <= factor * per_seed(rel_nominal))
     return {"checks": {"feedback_within_factor_of_nominal": ok},
             "guarantees": {"frozen_neural_ode_unchanged": all(flags)},
             "rule": f"frozen neural ODE + neural feedback relative RMSE <= {factor:g}x the nominal neural ODE's "
@@ -66,8 +61,8 @@ def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1)
     Eq. (12) loss of the last 10 % of the iterations < ``ratio_max`` x that of the first 10 %, and the last 10 %
     flat (the least-squares trend over them < ``flat`` of their mean).
     """
-    return {"checks": {"last_below_ratio_of_first": _most_seeds(per_seed(ratio) < ratio_max),
-                       "last_window_flat": _most_seeds(np.abs(per_seed(trend)) < flat)},
+    return {"checks": {"last_below_ratio_of_first": most_seeds(per_seed(ratio) < ratio_max),
+                       "last_window_flat": most_seeds(np.abs(per_seed(trend)) < flat)},
             "guarantees": {},
             "rule": f"mean loss of the last 10 % < {ratio_max:g}x that of the first 10 %, and the last 10 % change "
                     f"by < {flat:.0%} of their mean, each {_in_most(ratio)}" + seeds_note(ratio)}
