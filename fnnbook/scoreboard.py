@@ -15,13 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.results import VERDICTS, GuaranteeFailed, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, GuaranteeFailed, claim_result, headline_number, verdict_from_checks
 
-__all__ = ["NOT_RUN", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of", "plot_verdicts", "read_claims",
-           "render_scoreboard", "score_rows", "self_check", "short_title", "verdict_counts"]
+__all__ = ["NOT_RUN", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of", "plot_verdicts", "read_claims",
+           "render_scoreboard", "score_rows", "seeds_check", "self_check", "short_title", "verdict_counts"]
 
 #: the claim the scoreboard reports on itself ("the scoreboard page, computed from the runs")
 SELF_CHECK_ID = "B3"
+SEEDS_CHECK_ID = "B2"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
@@ -372,6 +373,23 @@ def render_scoreboard(
         out += [f"::::{{dropdown}} {summary}", f":name: claim-{row.claim.id.lower()}",
                 ":class-container: sb-row", "", *_details(row, fig), "::::", ""]
     return "\n".join(out) + "\n"
+
+
+def seeds_check(results: Mapping[str, Mapping[str, Any]]) -> dict[str, Any] | None:
+    """Claim B2 (every comparison over seeds, spread shown), computed from the tasks' claims by
+    :func:`fnnbook.rules.beyond.b2`; None when no task reported a claim."""
+    from fnnbook.rules import beyond  # noqa: PLC0415
+
+    headlines = {e["id"]: e.get("headline") for data in results.values() for e in data.get("claims", [])
+                 if e["id"] not in (SEEDS_CHECK_ID, SELF_CHECK_ID)}
+    if not headlines:
+        return None
+    rule = beyond.b2(headlines)
+    seeded = [k for k in rule["numbers"]["seeds_per_claim"].values() if k]
+    return claim_result(SEEDS_CHECK_ID, **rule, title="every comparison over seeds, spread shown",
+                        headline=headline_number("judged claims with a per-seed headline",
+                                                 len(seeded) / len(headlines)),
+                        paper="the paper shows single runs")
 
 
 def self_check(claims: Sequence[Claim], results: Mapping[str, Mapping[str, Any]],

@@ -1,4 +1,4 @@
-r"""The rule of claim B1 (beyond the paper: gains tuned from data), fixed before any of its numbers exist.
+r"""The rules of claims B1 (gains tuned from data) and B2 (seeds), fixed before any of their numbers exist.
 
 B1: the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11), learned from training data by
 gradient descent through the differentiable cascade (``fnnlib.tune_gains``), predict (or fly) better than
@@ -28,7 +28,7 @@ import numpy as np
 
 from fnnlib.stats import paired_win
 
-__all__ = ["KALMAN_FACTOR", "PREDICTORS", "b1", "b1_paired"]
+__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b2"]
 
 KALMAN_FACTOR = 2.0
 """How much worse than the Kalman filter the tuned gains may be, unit by unit (check 3)."""
@@ -99,3 +99,35 @@ def b1_paired(errors: Errors) -> dict[str, dict]:
     """The paired statistics behind :func:`b1`: ``"<setting>: tuned vs <other>"`` -> :func:`~fnnlib.stats.paired_win`."""
     return {f"{setting}: tuned vs {other}": paired_win(e["tuned"], e[other])
             for setting, e in _checked(errors).items() for other in PREDICTORS[1:] if other in e}
+
+
+MIN_SEEDS = 5
+"""B2's least number of independent seeds (or paired units) behind a claim's headline (issue 15: at least 5)."""
+
+
+def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MIN_SEEDS) -> dict[str, Any]:
+    """B2 (every comparison over several seeds, with spread shown), computed by the scoreboard from the runs.
+
+    ``headlines`` maps each judged claim ID (B2 and B3 aside) to its headline
+    (:func:`fnnlib.headline_number`: ``n`` values when it is per seed, with their ``spread``), or None.
+
+    Checks, each of which a plausible run fails (a profile with fewer seeds, a claim judged on one run):
+
+    1. ``per_seed_headlines_over_>=5_seeds``: every per-seed headline has ``n >= min_seeds``;
+    2. ``every_claim_shows_a_spread``: every judged claim's headline is per seed (``n >= 2``).
+
+    Guarantee (by construction of ``headline_number``): a per-seed headline carries its spread.
+    """
+    if not headlines:
+        raise ValueError("B2 needs the judged claims' headlines")
+    n = {cid: (h or {}).get("n") for cid, h in headlines.items()}
+    seeded = {cid: k for cid, k in n.items() if k is not None and k >= 2}
+    single = sorted(cid for cid in n if cid not in seeded)
+    few = sorted(cid for cid, k in seeded.items() if k < min_seeds)
+    return {"checks": {f"per_seed_headlines_over_>={min_seeds}_seeds": bool(seeded) and not few,
+                       "every_claim_shows_a_spread": not single},
+            "guarantees": {"spread_with_every_per_seed_headline":
+                           all("spread" in (headlines[cid] or {}) for cid in seeded)},
+            "numbers": {"seeds_per_claim": n, "claims_with_fewer_seeds": few, "claims_without_spread": single},
+            "rule": f"every judged claim's headline is per seed (n >= 2, with its spread) and every per-seed "
+                    f"headline rests on >= {min_seeds} seeds or paired units (computed by the scoreboard)"}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired
+from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b2
 from fnnlib.results import claim_result
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
@@ -79,3 +79,42 @@ def test_bad_input_is_refused(errors, match):
         b1(errors)
     with pytest.raises(ValueError, match=match):
         b1_paired(errors)
+
+
+def _headline(n: int | None) -> dict:
+    return {"name": "x", "value": 1.0} if n is None else {"name": "x", "value": 1.0, "spread": 0.1, "n": n}
+
+
+def test_b2_passes_when_every_claim_is_over_five_seeds_with_spread() -> None:
+    rule = b2({"S1": _headline(5), "O1": _headline(5), "Q3": _headline(15)})
+    assert all(rule["checks"].values()) and all(rule["guarantees"].values())
+
+
+@pytest.mark.parametrize(("headlines", "failing"), [
+    ({"S1": _headline(5), "O1": _headline(2)}, "per_seed_headlines_over_>=5_seeds"),  # a smoke-sized run
+    ({"S1": _headline(5), "Q6": _headline(None)}, "every_claim_shows_a_spread"),  # one claim on one run
+    ({"S1": _headline(5), "Q6": None}, "every_claim_shows_a_spread"),  # no headline at all
+])
+def test_b2_fails_on_too_few_seeds_or_a_single_run(headlines: dict, failing: str) -> None:
+    rule = b2(headlines)
+    assert rule["checks"][failing] is False
+    assert sum(rule["checks"].values()) == 1
+
+
+def test_b2_fails_entirely_when_nothing_is_over_seeds() -> None:
+    rule = b2({"S1": _headline(None), "O1": _headline(None)})
+    assert not any(rule["checks"].values())
+    with pytest.raises(ValueError, match="headlines"):
+        b2({})
+
+
+def test_b2_is_computed_by_the_scoreboard_from_the_tasks_claims() -> None:
+    from fnnbook.scoreboard import seeds_check  # noqa: PLC0415
+    from fnnlib.results import claim_result, headline_number  # noqa: PLC0415
+
+    s1 = claim_result("S1", checks={"a": True}, numbers={}, rule="r", headline=headline_number("e", [1.0] * 5))
+    q6 = claim_result("Q6", checks={"a": True}, numbers={}, rule="r", headline=headline_number("t", 2.0))
+    assert seeds_check({"spiral": {"claims": [s1]}})["verdict"] == "reproduced"
+    partly = seeds_check({"spiral": {"claims": [s1]}, "quadrotor_learning": {"claims": [q6]}})
+    assert partly["verdict"] == "partly" and partly["numbers"]["claims_without_spread"] == ["Q6"]
+    assert seeds_check({}) is None
