@@ -16,7 +16,6 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 
-import control
 import numpy as np
 import torch
 from torch import Tensor
@@ -68,6 +67,8 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
         bad = [complex(z) for z in p if abs(z) >= 1]
         raise ValueError(f"discrete observer poles must lie inside the unit disc |z| < 1; got {bad} "
                          "(the estimation error would not decay). Pass allow_unstable=True to place them anyway.")
+    import control  # noqa: PLC0415 (python-control loads matplotlib.pyplot: ~0.6 s of CPU, only for the gain)
+
     rank = np.linalg.matrix_rank(control.obsv(A, C))
     if rank < m:
         raise ValueError(f"(A, C) is not observable (observability matrix rank {rank} < {m}): "
