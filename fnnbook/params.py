@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 from fnnbook.spec import PipelineError, PipelineSpec, Task
-from fnnlib.settings import fill_presets, notebook_presets
 
 __all__ = ["FINGERPRINT_FILE", "INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters",
            "upstream_parameters"]
@@ -157,6 +156,8 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
         raise PipelineError(f"task {task.name!r} has no parameters for profile {profile!r} "
                             f"(it has: {', '.join(task.parameters)})")
     choices = [n for n in declared if n not in INJECTED]
+    from fnnlib.settings import notebook_presets  # noqa: PLC0415 (loads torch: not in the pipeline's workers)
+
     presets = notebook_presets(task.notebook.stem)
     for name, value in task.parameters[profile].items():
         where = f"task {task.name!r}, profile {profile!r}, parameter {name!r}"
@@ -207,6 +208,8 @@ def resolve_parameters(
         it does not exist.
     """
     params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
+    from fnnlib.settings import fill_presets  # noqa: PLC0415
+
     fill_presets(task.notebook.stem, params)
     params.update(task.parameters[profile])
     params["profile"] = profile

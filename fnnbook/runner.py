@@ -39,7 +39,6 @@ from fnnbook.params import FINGERPRINT_FILE, INJECTED, check_task_parameters, re
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
 from fnnlib.io import atomic_write, file_sha256
-from fnnlib.settings import MissingDataError, check_notebook_settings
 
 __all__ = ["Plan", "RunReport", "TaskOutcome", "check", "decide", "execute_task", "is_up_to_date", "summary",
            "write_status"]
@@ -215,6 +214,8 @@ def _validate(task: Task, profile: str, params: Mapping[str, Any]) -> str:
 
     Returns "" or, when only its data are missing, why it cannot run.
     """
+    from fnnlib.settings import MissingDataError, check_notebook_settings  # noqa: PLC0415 (loads torch: not in workers)
+
     settings = {k: v for k, v in params.items() if k not in ("out_dir", "upstream_dirs")}
     try:
         check_notebook_settings(task.notebook.stem, settings)

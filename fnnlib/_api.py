@@ -1,0 +1,119 @@
+"""fnnlib's flat public face, loaded on first use by :mod:`fnnlib` (PEP 562).
+
+Importing ``fnnlib`` alone loads nothing heavy; the first ``fnnlib.X`` (or ``from fnnlib import X``) imports
+this module, and with it torch and every subpackage. ``import fnnlib.io`` (what the pipeline's workers need)
+does not.
+"""
+
+
+from fnnlib._threads import set_num_threads
+from fnnlib.data import load_bottle, synthetic_throws
+from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
+from fnnlib.stats import paired_win
+from fnnlib.models import MODELS, NeuralFeedback, NeuralFeedbackEnsemble, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
+from fnnlib.feedback import (
+    NOISE_AMPLIFICATION_LIMIT,
+    CascadeGains,
+    MeasuredFeedback,
+    check_output_gain,
+    Estimate,
+    GainError,
+    GainWarning,
+    TunedGains,
+    cascade_forward,
+    noise_amplification,
+    tune_gains,
+    VectorField,
+    cascade_predict,
+    cascade_predict_loop,
+    cascade_sweep,
+    check_gain,
+    decayed_gains,
+    eval_field,
+    gain_matrix,
+    observe_gains,
+    rollout_predict,
+    spectral_radius,
+)
+from fnnlib.observers import (
+    disturbance_drift_variance,
+    ExtendedKalmanObserver,
+    KalmanObserver,
+    LinearFeedback,
+    LuenbergerObserver,
+    NeuralFeedbackObserver,
+    Observer,
+    evaluate_observer,
+    linear_feedback_gain,
+    place_observer_gain,
+    steady_state_gain,
+)
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.results import GuaranteeFailed, claim_result, headline_number, read_results, verdict_from_checks, write_results
+from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.settings import check_notebook_settings
+from fnnlib.stability import (
+    discrete_residual,
+    divergence_transition,
+    gain_eigen_bounds,
+    growth_factor,
+    iss_bound,
+    observe_continuous,
+    reconvergence,
+    scaled_error_norm,
+    settling_time,
+    theorem1_balls,
+)
+from fnnlib.sweeps import (
+    colon_range,
+    n_step_errors,
+    offset_spirals,
+    outward_increase_fraction,
+    paired_levels,
+    simulate_levels,
+)
+from fnnlib.stats import paired_win
+from fnnlib.systems import DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
+from fnnlib.systems.projectile import fit_drag
+from fnnlib.training import (
+    PAPER_BOTTLE_RECIPE,
+    PAPER_FEEDBACK_RECIPE,
+    PAPER_SPIRAL_RECIPE,
+    QUICK_RECIPE,
+    CheckpointError,
+    FeedbackRecipe,
+    ODERecipe,
+    TrainHistory,
+    load_checkpoint,
+    load_seed_checkpoints,
+    randomized_cases,
+    register_model,
+    save_checkpoint,
+    seed_checkpoint_name,
+    train_neural_feedback,
+    train_neural_ode,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
+    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
+    "tune_gains",
+    "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
+    "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
+    "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
+    "settling_time", "theorem1_balls", "divergence_transition", "scaled_error_norm", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
+    "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
+    "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
+    "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
+    "fit_drag", "load_bottle", "synthetic_throws",
+    "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
+    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
+    "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
+    "cascade_predict_loop",
+    "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
+    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
+    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "train_neural_ode", "verdict_from_checks", "write_results",
+]
