@@ -1,4 +1,4 @@
-"""One figure helper: fixed sizes, PNG + PDF, paths relative to the task output."""
+"""One figure helper: fixed sizes, PNG (PDF on request), paths relative to the task output."""
 
 from __future__ import annotations
 
@@ -47,8 +47,9 @@ def _in_kernel() -> bool:
     return getattr(get_ipython(), "kernel", None) is not None
 
 
-def save_figure(fig: Figure, out_dir: str | Path, name: str) -> str:
-    """Save ``fig`` as ``<out_dir>/figures/<name>.png`` and ``.pdf``.
+def save_figure(fig: Figure, out_dir: str | Path, name: str, *, pdf: bool = False) -> str:
+    """Save ``fig`` as ``<out_dir>/figures/<name>.png`` (at :data:`DPI`) and, with ``pdf=True``, also as a
+    vector ``.pdf`` (about as costly again as the PNG: the notebooks leave it off; the book shows the PNG).
 
     In a Jupyter kernel the saved PNG is also what the notebook shows, at :data:`SHOW_DPI` pixels per
     inch (one drawing fewer than the inline backend's).
@@ -60,7 +61,8 @@ def save_figure(fig: Figure, out_dir: str | Path, name: str) -> str:
     fig_dir = Path(out_dir) / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     fig.savefig(fig_dir / f"{name}.png", dpi=DPI)
-    fig.savefig(fig_dir / f"{name}.pdf")
+    if pdf:
+        fig.savefig(fig_dir / f"{name}.pdf")
     if _in_kernel():
         from IPython.display import Image, display  # noqa: PLC0415
 

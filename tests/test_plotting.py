@@ -20,13 +20,15 @@ def _close_figures():
     plt.close("all")
 
 
-def test_save_figure_writes_png_and_pdf(tmp_path):
+def test_save_figure_writes_png_and_pdf_on_request(tmp_path):
     fig, ax = new_figure()
     ax.plot([0, 1], [1, 0])
     rel = save_figure(fig, tmp_path, "fig4f_multistep")
     assert rel == "figures/fig4f_multistep.png"
     png, pdf = tmp_path / "figures" / "fig4f_multistep.png", tmp_path / "figures" / "fig4f_multistep.pdf"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not pdf.exists()
+    assert save_figure(fig, tmp_path, "fig4f_multistep", pdf=True) == rel
     assert pdf.read_bytes()[:5] == b"%PDF-"
     assert (tmp_path / rel) == png
 
