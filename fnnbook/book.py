@@ -32,16 +32,32 @@ _STATIC_PAGES = ("intro.md", "paper_vs_release.md", "_config.yml")
 
 #: a code cell longer than this (in lines) starts folded, like every cell that draws a figure
 FOLD_LINES = 10
+#: a text output longer than this (in lines: per-seed numbers, tables) shows in a box that scrolls
+SCROLL_LINES = 20
 _FOLD_TAGS = ("hide-input", "remove-input", "remove-cell", "hide-cell", "show-input")
 
 
+def _output_lines(cell: Any) -> int:
+    """The longest text output of a cell, in lines."""
+    longest = 0
+    for o in cell.get("outputs", []):
+        text = o.get("text") or o.get("data", {}).get("text/plain") or ""
+        longest = max(longest, len(("".join(text) if isinstance(text, list) else text).splitlines()))
+    return longest
+
+
 def _fold(cell: Any) -> None:
-    """Tag a long or plotting code cell ``hide-input``, unless its source's tags already decide.
+    """Tag a long or plotting code cell ``hide-input``, unless its source's tags already decide; give a long
+    text output a scrolling box (``scroll-output``).
 
     The reader sees prose, figures and results; the code stays one click
-    away.  The cell with the injected parameters always stays open.
+    away, and a dump of per-seed numbers does not push the page's figures
+    screens down.  The cell with the injected parameters always stays open.
     """
     tags = list(cell.metadata.get("tags", []))
+    if cell.cell_type == "code" and "scroll-output" not in tags and _output_lines(cell) > SCROLL_LINES:
+        tags.append("scroll-output")
+        cell.metadata["tags"] = tags
     if cell.cell_type != "code" or "injected-parameters" in tags or any(t in tags for t in _FOLD_TAGS):
         return
     draws = any("image/png" in o.get("data", {}) or "image/svg+xml" in o.get("data", {})

@@ -157,3 +157,21 @@ def test_assemble_needs_the_hand_written_pages(fake_outputs: PipelineSpec, tmp_p
 def test_build_needs_an_assembled_book(tmp_path: Path) -> None:
     with pytest.raises(PipelineError, match="has no _toc.yml; run assemble_book first"):
         build_book(tmp_path)
+
+
+def test_a_long_text_output_scrolls_and_a_short_one_does_not() -> None:
+    """Per-seed dumps get a scrolling box in the book (scroll-output); a few lines stay as they are."""
+    import nbformat  # noqa: PLC0415
+
+    from fnnbook.book import SCROLL_LINES, _fold  # noqa: PLC0415
+
+    def cell(lines: int) -> nbformat.NotebookNode:
+        text = "\n".join(str(i) for i in range(lines))
+        return nbformat.v4.new_code_cell("x", outputs=[nbformat.v4.new_output(
+            "execute_result", data={"text/plain": text}, execution_count=1)])
+
+    long, short = cell(SCROLL_LINES + 5), cell(3)
+    _fold(long)
+    _fold(short)
+    assert "scroll-output" in long.metadata["tags"]
+    assert "scroll-output" not in short.metadata.get("tags", [])
