@@ -126,10 +126,10 @@ def _neural_feedback(p: Mapping[str, Any]) -> None:
     _sizes(p, "hidden", "fb_hidden")
 
 
-def _bottle_data(data: str, data_dir: str | None, name: str = "data") -> None:
+def _bottle_data(data: str, data_dir: str | None) -> None:
     """``data`` is ``"real"`` (then the throws must be in ``data_dir``) or ``"synthetic"``."""
     if data not in ("real", "synthetic"):
-        raise ValueError(f"{name} must be 'real' or 'synthetic', got {data!r}")
+        raise ValueError(f"data must be 'real' or 'synthetic', got {data!r}")
     if data == "real":
         folder = Path(data_dir or ".") / "bottle"
         missing = [f for f in BOTTLE_FILES if not (folder / f).is_file()]
