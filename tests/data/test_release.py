@@ -87,14 +87,15 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _place(root: Path, key: str, monkeypatch: pytest.MonkeyPatch | None = None) -> Path:
-    """``root/release/key`` (folders made), and pin the digest of whatever the test writes there."""
+def _place(root: Path, key: str) -> Path:
+    """``root/release/key``, its folders made."""
     path = root / "release" / key
     path.parent.mkdir(parents=True, exist_ok=True)
     return path
 
 
 def _pin(monkeypatch: pytest.MonkeyPatch, root: Path, key: str) -> None:
+    """Pin the digest of the fake now at ``root/release/key`` (the loaders check every file against the table)."""
     table = dict(release.RELEASE_FILES)
     table[key] = _digest(root / "release" / key)
     monkeypatch.setattr(release, "RELEASE_FILES", table)
@@ -103,7 +104,7 @@ def _pin(monkeypatch: pytest.MonkeyPatch, root: Path, key: str) -> None:
 def _save_module(monkeypatch: pytest.MonkeyPatch, root: Path, key: str, module: nn.Module) -> Path:
     """torch.save the whole module, pickled by reference as ``__main__.<class>`` like the release's files."""
     monkeypatch.setattr(sys.modules["__main__"], type(module).__name__, type(module), raising=False)
-    path = _place(root, key, monkeypatch)
+    path = _place(root, key)
     torch.save(module, path)
     _pin(monkeypatch, root, key)
     return path
@@ -182,7 +183,7 @@ def test_residual_column_is_unpacked_column_major_and_negated(tmp_path, monkeypa
     # the release's column: per layer vec(W) column-major (CasADi), then b
     column = np.concatenate([np.concatenate([W.T.ravel(), b if b is not None else []]) for W, b in layers])[:, None]
     assert column.shape == (3024, 1)
-    np.save(_place(tmp_path, KEYS["residual"], monkeypatch), column)
+    np.save(_place(tmp_path, KEYS["residual"]), column)
     _pin(monkeypatch, tmp_path, KEYS["residual"])
     res = load_release_residual(tmp_path, RUN)
     x = torch.randn(10, 12, dtype=torch.float64)
@@ -193,7 +194,7 @@ def test_residual_column_is_unpacked_column_major_and_negated(tmp_path, monkeypa
 
 def test_mlp_state_dict_loads_negated(tmp_path, monkeypatch) -> None:
     fake = _seeded(DragMLP(), 4)
-    torch.save(fake.state_dict(), _place(tmp_path, KEYS["mlp"], monkeypatch))
+    torch.save(fake.state_dict(), _place(tmp_path, KEYS["mlp"]))
     _pin(monkeypatch, tmp_path, KEYS["mlp"])
     mlp = load_release_mlp(tmp_path, MLP_RUN)
     x = torch.randn(7, 12)
@@ -201,14 +202,14 @@ def test_mlp_state_dict_loads_negated(tmp_path, monkeypatch) -> None:
 
 
 def test_losses_are_one_per_epoch(tmp_path, monkeypatch) -> None:
-    np.save(_place(tmp_path, KEYS["losses"], monkeypatch), np.linspace(13.0, 0.9, 50)[:, None])
+    np.save(_place(tmp_path, KEYS["losses"]), np.linspace(13.0, 0.9, 50)[:, None])
     _pin(monkeypatch, tmp_path, KEYS["losses"])
     loss = load_release_losses(tmp_path, RUN)
     assert loss.shape == (50,) and loss[0] == 13.0
 
 
 def test_wrong_arrays_are_refused(tmp_path, monkeypatch) -> None:
-    np.save(_place(tmp_path, KEYS["residual"], monkeypatch), np.zeros((3000, 1)))
+    np.save(_place(tmp_path, KEYS["residual"]), np.zeros((3000, 1)))
     _pin(monkeypatch, tmp_path, KEYS["residual"])
     with pytest.raises(ReleaseError, match=r"shape \(3024, 1\)"):
         load_release_residual(tmp_path, RUN)
@@ -282,7 +283,7 @@ def _hostile(kind: str, path: Path, marker: Path) -> None:
 ])
 def test_hostile_pickles_are_refused_and_nothing_runs(tmp_path, monkeypatch, kind, message) -> None:
     marker = tmp_path / "executed"
-    path = _place(tmp_path, KEYS["ode"], monkeypatch)
+    path = _place(tmp_path, KEYS["ode"])
     _hostile(kind, path, marker)
     _pin(monkeypatch, tmp_path, KEYS["ode"])  # the checksum passes: only the unpickler stands in the way
     with pytest.raises(ReleaseError, match=message):
@@ -303,7 +304,7 @@ def test_the_weights_only_unpickler_alone_refuses_them_too(tmp_path, kind, named
 
 def test_an_object_array_is_refused_unread(tmp_path, monkeypatch) -> None:
     marker = tmp_path / "executed"
-    path = _place(tmp_path, KEYS["residual"], monkeypatch)
+    path = _place(tmp_path, KEYS["residual"])
     with path.open("wb") as fh:
         np.save(fh, np.array([_System(marker)], dtype=object), allow_pickle=True)
     _pin(monkeypatch, tmp_path, KEYS["residual"])
