@@ -362,8 +362,8 @@ def load_release_spiral_ode(data_dir: str | Path, name: str, *, mirror: bool = F
     r"""A release spiral neural ODE :math:`f_{neural}(x)` (Eq. (3), App. A.3.2) as a :class:`~fnnlib.models.NeuralODE`.
 
     The ``ite..._loss...`` files are trained on the nominal task (Fig. 4(c), S1), ``Neural_ODE_domran.pt`` by
-    domain randomisation (Fig. 5(a), D1). A 2-50-2 ReLU MLP (one hidden layer; the paper's text says 3 layers
-    of 50), float32, autonomous. ``name``: one of :data:`SPIRAL_ODE_NAMES`.
+    domain randomisation (Fig. 5(a), D1). A 2-50-2 ReLU MLP: one hidden layer (our preset reads the paper's
+    "3 layers with 50 hidden units" as two hidden layers), float32, autonomous. ``name``: one of :data:`SPIRAL_ODE_NAMES`.
 
     The network fits the release's spiral, :func:`release_spiral` (Eq. (26) with :math:`\omega` negated). With
     ``mirror=True`` it is reflected, ``S f(S x)`` with ``S = diag(1, -1)``, exactly: the release's nominal
