@@ -117,3 +117,23 @@ __all__ = [
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
 ]
+
+# -- the paper authors' released networks, read safely and mapped onto the models above (fnnlib.data.release)
+from fnnlib.data.release import (
+    ReleaseError,
+    UnsafePickleError,
+    load_release_bottle_ode,
+    load_release_losses,
+    load_release_mlp,
+    load_release_residual,
+    load_release_spiral_feedback,
+    load_release_spiral_ode,
+    read_pickled_module,
+    release_spiral,
+)
+
+__all__ += [
+    "ReleaseError", "UnsafePickleError", "load_release_bottle_ode", "load_release_losses", "load_release_mlp",
+    "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module",
+    "release_spiral",
+]
