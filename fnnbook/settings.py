@@ -137,18 +137,30 @@ _ACT = _choice(*ACTIVATIONS)
 _METHOD = _lazy_choice(_ode_methods)
 _OPTIMIZER = _choice("rmsprop", "adam")
 _SWEEP0 = partial(C.number_list, minimum=0.0, distinct=True)
-_GAINS = partial(C.number_list, minimum=0.0)  # a list of scalar gains; each is checked for stability below
+_GAINS = C.number_list  # scalar gains, each stable at the step Ts (RELATIONS)
+
+
+
+def _synthetic_sizes(name: str, value: Any) -> list[int]:
+    """``[training throws, test throws, samples per throw]`` of the synthetic stand-in: >= 1, >= 1, >= 2."""
+    if not (isinstance(value, list) and len(value) == 3):
+        raise ValueError(f"{name} must be [training throws, test throws, samples per throw], got {value!r}")
+    for what, size, minimum in zip(("training throws", "test throws", "samples per throw"), value, (1, 1, 2)):
+        C.integer(f"{name} ({what})", size, minimum=minimum)
+    return value
+
 
 _SPIRAL_TRAJ = {"n_samples": _N2, "Ts": _POS, "x0": _X0}
-_SPIRAL_FB = {"L": _POS, "beta": _NONNEG, "N": _N1}
+_GAIN = C.finite  # a gain L: stable at the step Ts (RELATIONS)
+_SPIRAL_FB = {"L": _GAIN, "beta": _NONNEG, "N": _N1}
 _ODE_FIT = {"hidden": _WIDTHS, "activation": _ACT, "iterations": _N1, "batch_size": _N1, "batch_time": _N2,
             "lr": _POS, "method": _METHOD, "adjoint": _BOOL}
 
 VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
     "spiral": {"seeds": _SEEDS2, **_SPIRAL_TRAJ, "nominal": _SPIRAL3, "test": _SPIRAL3, **_ODE_FIT,
                "rtol": _POS, "atol": _POS, **_SPIRAL_FB, "N_max": _N1, "noise_std": _POS, "noise_sweep": _SWEEP0},
-    "theory": {"seed": _SEED, **_SPIRAL_TRAJ, "test": _SPIRAL3, "L": _POS, "L_sweep": _GAINS,
-               "transient_time_constants": _POS, "conservative_ratio": _POS, "discrete_gains": _GAINS,
+    "theory": {"seed": _SEED, **_SPIRAL_TRAJ, "test": _SPIRAL3, "L": _GAIN, "L_sweep": _GAINS,
+               "transient_time_constants": _POS, "conservative_ratio": _POS, "discrete_gains": _SWEEP0,
                "growth_threshold": _POS, "rate_tolerance": _POS},
     "ablations": {"seed": _SEED, **_SPIRAL_TRAJ, "nominal": _SPIRAL3, "test": _SPIRAL3, **_SPIRAL_FB,
                   "noise_std": _POS, "noise_draws": _N1, "gain_range": _GRID, "omega_range": _GRID,
@@ -167,14 +179,14 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                         "deta_range": _GRID, "deps_range": _GRID, "d1_factor": _POS, "d2_factor": _POS,
                         "d3_ratio": _POS, "d3_flat": _POS, "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS},
     "bottle": {"data": _choice("real", "synthetic"), "seeds": _SEEDS2, **_ODE_FIT, **_SPIRAL_FB,
-               "synthetic_sizes": _vec(3)},
+               "synthetic_sizes": _synthetic_sizes},
     "quadrotor_learning": {"seed": _SEED, "seeds": _SEEDS1, "n_flights": _N1, "n_nodes": _N2, "n_waypoints": _N2,
                            "val_flights": _N1, "val_nodes": _N2, "val_waypoints": _N2, "Ts": _POS,
                            "truth_drag": _vec(3, 0.0), "truth_substeps": _N1, "hidden": _WIDTHS, "activation": _ACT,
                            "epochs": _N1, "segment_length": _N1, "batch_size": _N1, "lr": _POS, "val_every": _N1,
                            "mlp_epochs": _N1, "mlp_lr": _POS},
     "quadrotor_mpc": {"steps": _N1, "N": _N1, "Ts": _POS, "Q": _vec(12, 0.0), "R": _vec(4, 0.0),
-                      "costs": partial(C.some_of, choices=("as_written", "as_flown")), "u_max": _vec(), "u_max_judged": _POS, "theta_max": _POS, "L": _POS,
+                      "costs": partial(C.some_of, choices=("as_written", "as_flown")), "u_max": _vec(), "u_max_judged": _POS, "theta_max": _POS, "L": _GAIN,
                       "beta": _NONNEG, "Gamma": _POS, "Gamma_adapnn_grid": _vec(), "Gamma_rtol": _NONNEG,
                       "validation_flights": _N1, "validation_steps": _N1, "validation_waypoints": _N2,
                       "validation_seed": _SEED, "truth_mass": _POS, "truth_inertia": _vec(3, 0.0),
@@ -186,11 +198,11 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                       "validation_vehicles": _N1, "validation_vehicle_seed": _SEED},
     "own_system": {"seeds": _SEEDS2, "Ts": _POS, "n_train": _N2, "n_test": _N2, "nominal": _vec(4),
                    "test": _vec(4), "u_amp": _NONNEG, "hidden": _WIDTHS, "activation": _ACT, "iterations": _N1,
-                   "noise_std": _POS, "N": _N1, "L_hand": _POS, "beta_hand": _NONNEG, "L0": _POS, "beta0": _NONNEG,
+                   "noise_std": _POS, "N": _N1, "L_hand": _GAIN, "beta_hand": _NONNEG, "L0": _GAIN, "beta0": _NONNEG,
                    "tune_iterations": _N1, "tune_lr": _POS, "kf_q_x": _NONNEG, "kf_q_d": _NONNEG,
                    "kf_p0_d": _NONNEG, "spiral_n_samples": _N2, "spiral_Ts": _POS, "spiral_test": _SPIRAL3,
                    "spiral_x0": _X0, "spiral_tune_x0": _X0, "spiral_tune_samples": _N2, "spiral_N": _N1,
-                   "spiral_noise_std": _POS, "spiral_L": _POS, "spiral_beta": _NONNEG,
+                   "spiral_noise_std": _POS, "spiral_L": _GAIN, "spiral_beta": _NONNEG,
                    "spiral_tune_iterations": _N1},
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
                     "quad_tune_flights": _N1, "quad_tune_iterations": _N1, "quad_tune_lr": _POS},
@@ -259,10 +271,7 @@ def _neural_feedback(p: Mapping[str, Any]) -> None:
 def _bottle_data(p: Mapping[str, Any]) -> int:
     """The throws: real ones must be in ``data_dir`` with their pinned SHA-256. Returns the samples per throw."""
     if p["data"] == "synthetic":
-        n_train, n_test, n_samples = p["synthetic_sizes"]
-        C.integer("synthetic_sizes (training throws)", n_train, minimum=1)
-        C.integer("synthetic_sizes (test throws)", n_test, minimum=1)
-        return C.integer("synthetic_sizes (samples per throw)", n_samples, minimum=2)
+        return p["synthetic_sizes"][2]
     C.data_files(Path(p.get("data_dir") or ".") / "bottle", {f: d for f, (_, _, d) in BOTTLE_FILES.items()},
                  how_to_get="Get the authors' published throws with `fnn-pipeline data fetch` (see data/README.md).")
     return next(iter(BOTTLE_FILES.values()))[1][1]

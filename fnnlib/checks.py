@@ -21,7 +21,7 @@ from typing import Any
 from fnnlib.data.bottle import DataError
 from fnnlib.io import file_sha256
 
-__all__ = ["MissingDataError", "boolean", "colon_grid", "data_files", "distinct_seeds", "horizon", "integer",
+__all__ = ["MissingDataError", "boolean", "colon_grid", "data_files", "distinct_seeds", "finite", "horizon", "integer",
            "layer_widths", "nonnegative", "number_list", "numbers", "one_of", "positive", "seed", "some_of", "stable_gain"]
 
 
@@ -37,6 +37,13 @@ def integer(name: str, value: Any, *, minimum: int = 0) -> int:
     """An integer (not a bool) ``>= minimum``: a size, a count, an iteration number."""
     if not (isinstance(value, int) and not isinstance(value, bool) and value >= minimum):
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return value
+
+
+def finite(name: str, value: Any) -> float:
+    """A finite number (a gain, before :func:`stable_gain` checks it against the step)."""
+    if not _is_number(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
     return value
 
 
