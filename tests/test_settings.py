@@ -73,7 +73,7 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     check = VALUE_CHECKS[notebook][param]
     default = _filled(notebook)[param]
     bad = _kind_bad_values().get(check, [] if isinstance(default, list) else "bogus")
-    with pytest.raises(ValueError, match=rf"^{re.escape(param)}( \(.*\))? must "):  # its own check, first
+    with pytest.raises(ValueError, match=rf"^{re.escape(param)}( \(.*\))?( must |: )"):  # its own check, first
         check_notebook_settings(notebook, {**_defaults(notebook), param: bad})
 
 
