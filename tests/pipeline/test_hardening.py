@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 
@@ -13,7 +12,7 @@ from fnnbook import PipelineError, check, is_up_to_date, load_spec, run
 from fnnbook.book import assemble_book
 from fnnbook.runner import mark_killed
 
-from .nbfactory import MakePipeline, child_task, leaf_task, write_notebook
+from .nbfactory import MakePipeline, book_parameters_cell, child_task, leaf_task, write_notebook
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -85,9 +84,7 @@ def test_notebook_value_checks_run_before_anything(name: str, value: object, mes
 
 
 def test_missing_data_is_not_run_and_the_book_says_so(make_pipeline: MakePipeline, tmp_path: Path) -> None:
-    real = json.loads((REPO / "notebooks" / "06_bottle.ipynb").read_text())  # the book's bottle notebook's cell
-    cell = next(c for c in real["cells"] if "parameters" in c["metadata"].get("tags", []))
-    write_notebook(tmp_path / "notebooks" / "bottle.ipynb", "".join(cell["source"]),
+    write_notebook(tmp_path / "notebooks" / "bottle.ipynb", book_parameters_cell("06_bottle"),
                    'check_notebook_settings("bottle", globals())\nraise RuntimeError("must not run")')
     bottle = {"title": "Bottle", "notebook": "notebooks/bottle.ipynb", "claims": ["S2"], "products": [],
               "parameters": {"smoke": {}}}
