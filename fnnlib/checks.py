@@ -14,7 +14,7 @@ ValueError: iterations must be an integer >= 1, got 0
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
