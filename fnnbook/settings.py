@@ -299,6 +299,8 @@ def _quadrotor_mpc(p: Mapping[str, Any]) -> None:
                                                          f"got {grid}")
     _need(min(p["R"]) > 0, f"R must be positive definite (every weight > 0), got {p['R']}")
     _need(min(p["truth_inertia"]) > 0, f"truth_inertia must be > 0 about every axis, got {p['truth_inertia']}")
+    _need(p["qp"] != "osqp" or p["solver"] == "OSQP", f"qp 'osqp' solves with solver 'OSQP' only, got solver "
+                                                      f"{p['solver']!r} (use qp 'cvxpy' for another solver)")
     length = p["steps"] * p["Ts"]
     _need(p["transient_s"] < length, f"transient_s must be shorter than the flight, steps * Ts = {length:g} s, "
                                      f"got {p['transient_s']}")

@@ -127,6 +127,7 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("quadrotor_mpc", {"qp": "gurobi"}, "qp must be one of cvxpy, osqp"),
     ("quadrotor_mpc", {"linearize_method": "backward"}, "linearize_method must be one of"),
     ("quadrotor_mpc", {"solver": "NOPE"}, "solver must be one of .*OSQP"),
+    ("quadrotor_mpc", {"solver": "SCS"}, "qp 'osqp' solves with solver 'OSQP' only"),
     ("own_system", {"N": 500}, "N must be an integer with 1 <= N < n_test"),
     ("own_system", {"spiral_tune_samples": 2000}, "spiral_tune_samples <= spiral_n_samples"),
     ("own_system", {"L0": -5.0}, "L0: .*not positive definite"),
