@@ -5,7 +5,7 @@ literal assignments (``seed = 0``, ``hidden = [50, 50]``).  Those are the
 names a task may set, and their values fix the types it may pass.  A value
 the paper shares between notebooks is written once, in a preset: the cell
 says ``L = None`` and the runner fills in the preset
-(:data:`fnnlib.settings.NOTEBOOK_PRESETS`), whose type then applies.  The
+(:data:`fnnbook.settings.NOTEBOOK_PRESETS`), whose type then applies.  The
 runner also injects ``profile`` and ``out_dir`` (always), ``data_dir`` and
 ``upstream_dirs`` (where declared).
 """
@@ -94,6 +94,17 @@ def read_parameters(notebook: str | os.PathLike[str]) -> dict[str, Any]:
     return defaults
 
 
+def _presets(task: Task) -> dict[str, Any]:
+    """The paper presets of a task's notebook ({} for a notebook that is not one of the book's)."""
+    from fnnbook.settings import notebook_name, notebook_presets  # noqa: PLC0415 (loads torch: not in workers)
+
+    try:
+        name = notebook_name(task.notebook)
+    except ValueError as exc:
+        raise PipelineError(f"task {task.name!r}: {exc}") from exc
+    return {} if name is None else notebook_presets(name)
+
+
 def _type_ok(default: Any, value: Any) -> bool:
     """Whether ``value`` may replace ``default`` (see :func:`check_task_parameters`)."""
     if default is None:
@@ -156,9 +167,7 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
         raise PipelineError(f"task {task.name!r} has no parameters for profile {profile!r} "
                             f"(it has: {', '.join(task.parameters)})")
     choices = [n for n in declared if n not in INJECTED]
-    from fnnlib.settings import notebook_presets  # noqa: PLC0415 (loads torch: not in the pipeline's workers)
-
-    presets = notebook_presets(task.notebook.stem)
+    presets = _presets(task)
     for name, value in task.parameters[profile].items():
         where = f"task {task.name!r}, profile {profile!r}, parameter {name!r}"
         if name in INJECTED:
@@ -194,7 +203,7 @@ def resolve_parameters(
 
     Every default of the notebook's parameters cell (a ``None`` default of a
     preset parameter filled with its paper value,
-    :data:`fnnlib.settings.NOTEBOOK_PRESETS`), updated by the task's
+    :data:`fnnbook.settings.NOTEBOOK_PRESETS`), updated by the task's
     profile overrides (so the executed notebook shows every value the run
     used), plus ``profile``, ``out_dir``, and where
     the notebook declares them ``data_dir`` (a string) and ``upstream_dirs``
@@ -208,9 +217,7 @@ def resolve_parameters(
         it does not exist.
     """
     params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
-    from fnnlib.settings import fill_presets  # noqa: PLC0415
-
-    fill_presets(task.notebook.stem, params)
+    params.update((k, v) for k, v in _presets(task).items() if params.get(k) is None)
     params.update(task.parameters[profile])
     params["profile"] = profile
     params["out_dir"] = str(out_dir)

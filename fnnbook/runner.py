@@ -36,6 +36,7 @@ import psutil
 
 import fnnlib
 from fnnbook.params import FINGERPRINT_FILE, INJECTED, check_task_parameters, read_parameters, resolve_parameters
+from fnnbook.preflight import check_grid_upstream, check_task_values
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
 from fnnlib.io import atomic_write, file_sha256
@@ -209,23 +210,6 @@ def _known_claims(claims_file: Path) -> set[str] | None:
     return {c.id for c in read_claims(claims_file)}
 
 
-def _validate(task: Task, profile: str, params: Mapping[str, Any]) -> str:
-    """Run the notebook's own value checks (fnnlib.check_notebook_settings) on the resolved parameters.
-
-    Returns "" or, when only its data are missing, why it cannot run.
-    """
-    from fnnlib.settings import MissingDataError, check_notebook_settings  # noqa: PLC0415 (loads torch: not in workers)
-
-    settings = {k: v for k, v in params.items() if k not in ("out_dir", "upstream_dirs")}
-    try:
-        check_notebook_settings(task.notebook.stem, settings)
-    except MissingDataError as exc:
-        return str(exc)
-    except (ValueError, TypeError) as exc:
-        raise PipelineError(f"task {task.name!r}, profile {profile!r}: {exc}") from exc
-    return ""
-
-
 def check(
     spec: PipelineSpec,
     profile: str,
@@ -254,7 +238,8 @@ def check(
     ------
     PipelineError
         On the first invalid task, parameter (name, type, or a value the
-        notebook's checks in :func:`fnnlib.check_notebook_settings` refuse),
+        notebook's checks in :func:`fnnbook.settings.check_notebook_settings` refuse, a grid upstream of a
+        task that is not an aggregate step, a data file that is not the published one),
         claim ID or data folder. Missing data files are not an error: the
         plan lists them in ``missing_data``.
     """
@@ -280,7 +265,8 @@ def check(
                                         f"{spec.claims_file.name}")
         params = resolve_parameters(spec, task, profile, declared,
                                     out_dir=staging_dir(spec, profile, name))
-        reason = _validate(task, profile, params)
+        check_grid_upstream(spec, task, declared)
+        reason = check_task_values(task, profile, params)
         if reason:
             missing_data[name] = reason
         parameters[name] = params

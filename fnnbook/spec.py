@@ -14,7 +14,7 @@ import itertools
 import json
 import os
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -154,6 +154,38 @@ class PipelineSpec:
     def output_dir(self, profile: str, task: str) -> Path:
         """Folder holding the last good outputs of ``task`` in ``profile``."""
         return self.output_root / profile / task
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, but a key written twice in one mapping is refused (PyYAML keeps the last silently).
+
+    Keys merged in with ``<<: *anchor`` may still be overridden by the mapping's own keys (YAML's merge rule).
+    """
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            if not isinstance(key, Hashable):
+                continue  # the safe loader itself refuses it
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                raise PipelineError(f"line {line}: key {key!r} is written twice in one mapping (first on line "
+                                    f"{seen[key]}); keep one")
+            seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def _load_yaml(file: Path) -> Any:
+    """The YAML document in ``file``, refusing duplicate keys."""
+    try:
+        return yaml.load(file.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+    except PipelineError as exc:
+        raise PipelineError(f"{file}, {exc}") from None
+    except yaml.YAMLError as exc:
+        raise PipelineError(f"{file} is not valid YAML: {exc}") from exc
 
 
 def _suggest(name: str, choices: Iterable[str]) -> str:
@@ -299,16 +331,13 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
     Raises
     ------
     PipelineError
-        On unknown or missing keys, a missing notebook, an unknown upstream
+        On unknown, missing or duplicate keys, a missing notebook, an unknown upstream
         task, a cycle, or a task listed in no part (or in two).
     """
     file = Path(path).resolve()
     if not file.is_file():
         raise PipelineError(f"pipeline file {file} does not exist")
-    try:
-        data = yaml.safe_load(file.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise PipelineError(f"{file} is not valid YAML: {exc}") from exc
+    data = _load_yaml(file)
     where = str(file.name)
     data = _mapping(where, data)
     _check_keys(where, data, _TOP_REQUIRED, _TOP_OPTIONAL)

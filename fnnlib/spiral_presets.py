@@ -2,8 +2,8 @@
 
 The Sec. 3 and Sec. 4 notebooks (spiral, theory, ablations, observers, neural feedback, and the spiral part of
 "Your own system") share these values. Their ``parameters`` cells leave a shared value at ``None``; the runner
-(and :func:`fnnlib.settings.check_notebook_settings`, for a notebook run by hand) fills it from here through
-:data:`fnnlib.settings.NOTEBOOK_PRESETS`, so a task's profile may still override it. The Sec. 5 values live in
+(and the notebook's settings check, for a notebook run by hand) fills it from here through the book's table of
+presets (``fnnbook.settings``), so a task's profile may still override it. The Sec. 5 values live in
 :mod:`fnnlib.quadrotor_presets`; the training recipes in :mod:`fnnlib.training` (``PAPER_SPIRAL_RECIPE``,
 ``PAPER_BOTTLE_RECIPE``).
 

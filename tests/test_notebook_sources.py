@@ -39,8 +39,9 @@ def test_source_notebook_has_no_outputs(src: Path) -> None:
 
 @pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
 def test_settings_are_checked_right_after_the_parameters_cell(src: Path) -> None:
-    """The notebook runs the same value checks as `fnn-pipeline check` (fnnlib.check_notebook_settings)."""
+    """The notebook runs the same value checks as `fnn-pipeline check` (fnnbook.settings.check_notebook_settings)."""
     cells = _nbbuild().build(src).cells
     first = next(i for i, c in enumerate(cells) if "parameters" in c.metadata.get("tags", []))
     task = re.sub(r"^\d+_", "", src.stem)  # files are numbered in paper order: 01_spiral.py runs task spiral
-    assert f'F.check_notebook_settings("{task}", globals())' in cells[first + 1].source
+    assert f'\ncheck_notebook_settings("{task}", globals())' in cells[first + 1].source
+    assert "from fnnbook.settings import check_notebook_settings" in cells[first + 1].source

@@ -12,7 +12,7 @@
 # one ensemble, and is judged per seed, paired (`fnnbook.rules.sec3`).
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/spiral"
 seeds = [0, 1, 2, 3, 4]
@@ -41,7 +41,8 @@ noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("spiral", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("spiral", globals())
 
 # %% [tags: hide-input]
 import time

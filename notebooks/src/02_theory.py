@@ -13,7 +13,7 @@
 # decided over the seeds. Theorem 2 (the adaptive variant, App. A.6) belongs to the quadrotor section.
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/theory"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -34,7 +34,8 @@ rate_tolerance = 0.005
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("theory", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("theory", globals())
 
 # %% [tags: hide-input]
 import copy

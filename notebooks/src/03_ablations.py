@@ -12,7 +12,7 @@
 # measured per seed, and the verdicts are decided over the seeds (see *Verdicts*).
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/ablations"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -48,7 +48,8 @@ settle_threshold = 0.5
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("ablations", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("ablations", globals())
 
 # %% [tags: hide-input]
 from pathlib import Path

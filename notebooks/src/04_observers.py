@@ -11,7 +11,7 @@
 # decided over the seeds.
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/observers"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -36,7 +36,8 @@ repeats = 3
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("observers", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("observers", globals())
 
 # %% [tags: hide-input]
 import math

@@ -16,7 +16,7 @@
 # (`fnnbook.rules.sec4`). The single-seed panels show seed `seed`.
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/neural_feedback"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -54,7 +54,8 @@ heldout_min_distance = 3.0
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("neural_feedback", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("neural_feedback", globals())
 
 # %% [tags: hide-input]
 import time

@@ -11,7 +11,7 @@
 # and every comparison is judged per throw and per seed, paired (`fnnbook.rules.bottle`).
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/bottle"
 data_dir = "data"
@@ -33,7 +33,8 @@ synthetic_sizes = [21, 9, 1058]
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("bottle", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("bottle", globals())
 
 # %% [tags: hide-input]
 import time

@@ -12,7 +12,7 @@
 # than the training ones) and **Q6** (training cost).
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_learning"
 seed = 0
@@ -39,7 +39,8 @@ mlp_lr = None
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("quadrotor_learning", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("quadrotor_learning", globals())
 
 # %% [tags: hide-input]
 import time

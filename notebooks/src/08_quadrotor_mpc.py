@@ -14,7 +14,7 @@
 # last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_mpc"
 upstream_dirs = {"quadrotor_learning": "outputs/manual/quadrotor_learning"}
@@ -55,7 +55,8 @@ validation_vehicle_seed = 1001
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("quadrotor_mpc", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("quadrotor_mpc", globals())
 
 # %% [tags: hide-input]
 import json

@@ -13,7 +13,7 @@
 # seeds and compared pair by pair.
 
 # %% tags=["parameters"]
-# None: the paper value from fnnlib's presets (fnnlib.settings.NOTEBOOK_PRESETS), filled in by the runner
+# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/own_system"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
@@ -53,7 +53,8 @@ spiral_tune_iterations = 40
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("own_system", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("own_system", globals())
 
 # %% [tags: hide-input]
 import time

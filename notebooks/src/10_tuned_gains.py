@@ -35,7 +35,8 @@ quad_tune_lr = 0.2
 # %%
 import fnnlib as F
 
-F.check_notebook_settings("tuned_gains", globals())  # the checks `fnn-pipeline check` runs first
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("tuned_gains", globals())
 
 # %% [tags: hide-input]
 import json

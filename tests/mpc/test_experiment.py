@@ -157,20 +157,3 @@ def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> N
     flown = fly(adapnn_model(net, 0.16, Ts=0.02), mpc, Quadrotor(v), x_v, u_v, steps=steps + 2, **loop)
     assert per_flight[2] == pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)
     assert sel.table[0.16]["rmse"] == pytest.approx(float(np.median(per_flight)))
-
-
-@pytest.mark.parametrize(("change", "match"), [({"u_max_judged": 5.0}, "u_max_judged"), ({"costs": ["paper"]}, "costs"),
-                                               ({"validation_flights": 0}, "validation_flights"),
-                                               ({"validation_vehicles": 0}, "validation_vehicles"),
-                                               ({"Gamma_adapnn_grid": [0.16, 0.16]}, "Gamma_adapnn_grid"),
-                                               ({"Gamma_adapnn_grid": [0.0]}, "Gamma_adapnn_grid"),
-                                               ({"Gamma_rtol": -0.01}, "Gamma_rtol")])
-def test_mpc_settings_are_checked_before_any_flight(change: dict, match: str) -> None:
-    from fnnlib.settings import check_notebook_settings
-
-    good = {"Ts": 0.02, "L": 3.0, "u_max": [4.0, 6.0], "u_max_judged": 6.0, "costs": ["as_written", "as_flown"],
-            "steps": 300, "N": 10, "truth_substeps": 1, "validation_flights": 2, "validation_steps": 300,
-            "validation_vehicles": 4, "Gamma_adapnn_grid": [0.04, 0.16], "Gamma_rtol": 0.05, "disturbance_draws": 2}
-    check_notebook_settings("quadrotor_mpc", good)
-    with pytest.raises(ValueError, match=match):
-        check_notebook_settings("quadrotor_mpc", {**good, **change})

@@ -57,6 +57,13 @@ def write_notebook(path: Path, params: str | None, body: str = "", *, tag: str =
     return path
 
 
+def book_parameters_cell(notebook: str) -> str:
+    """The ``parameters`` cell of one of the book's notebooks (``"06_bottle"``), as source."""
+    path = Path(__file__).resolve().parents[2] / "notebooks" / f"{notebook}.ipynb"
+    cell = next(c for c in nbformat.read(path, as_version=4).cells if "parameters" in c.metadata.get("tags", []))
+    return cell.source
+
+
 def leaf_task(**params: Any) -> dict[str, Any]:
     return {"title": "Leaf", "notebook": "notebooks/leaf.ipynb", "claims": ["S1"], "upstream": [],
             "products": ["results.json", "value.txt"],

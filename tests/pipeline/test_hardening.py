@@ -12,7 +12,7 @@ from fnnbook import PipelineError, check, is_up_to_date, load_spec, run
 from fnnbook.book import assemble_book
 from fnnbook.runner import mark_killed
 
-from .nbfactory import MakePipeline, child_task, leaf_task, write_notebook
+from .nbfactory import MakePipeline, book_parameters_cell, child_task, leaf_task, write_notebook
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -62,13 +62,13 @@ def test_data_files_enter_the_fingerprint_not_the_data_path(make_pipeline: MakeP
     ("L", 250.0, "unstable"),
     ("N", 0, "N"),
     ("iterations", 0, "iterations must be an integer >= 1"),
-    ("seeds", [0], "seeds must list at least two distinct integers"),
-    ("seeds", [1, 1], "seeds must list at least two distinct integers"),
+    ("seeds", [0], "seeds must list at least 2 distinct integers"),
+    ("seeds", [1, 1], "seeds must list at least 2 distinct integers"),
     ("noise_std", 0.03, "noise_sweep must hold 0 and the judged level"),
 ])
 def test_notebook_value_checks_run_before_anything(name: str, value: object, message: str,
                                                    tmp_path: Path) -> None:
-    """The real spiral notebook's checks (fnnlib.check_notebook_settings), on a copy of pipeline.yaml."""
+    """The real spiral notebook's checks (fnnbook.settings.check_notebook_settings), on a copy of pipeline.yaml."""
     doc = yaml.safe_load((REPO / "pipeline.yaml").read_text())
     doc["claims_file"] = str(REPO / "pipeline.yaml")  # any file; no claim IDs are needed here
     for task in doc["tasks"].values():
@@ -84,9 +84,8 @@ def test_notebook_value_checks_run_before_anything(name: str, value: object, mes
 
 
 def test_missing_data_is_not_run_and_the_book_says_so(make_pipeline: MakePipeline, tmp_path: Path) -> None:
-    write_notebook(tmp_path / "notebooks" / "bottle.ipynb",
-                   'profile = ""\nout_dir = ""\ndata_dir = ""\ndata = "real"\nL = 5.0\nbeta = 0.02\nN = 50\n',
-                   "raise RuntimeError('must not run')")
+    write_notebook(tmp_path / "notebooks" / "bottle.ipynb", book_parameters_cell("06_bottle"),
+                   'check_notebook_settings("bottle", globals())\nraise RuntimeError("must not run")')
     bottle = {"title": "Bottle", "notebook": "notebooks/bottle.ipynb", "claims": ["S2"], "products": [],
               "parameters": {"smoke": {}}}
     after = {**child_task(), "upstream": ["bottle"]}

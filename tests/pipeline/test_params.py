@@ -6,7 +6,7 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from .nbfactory import MakePipeline, child_task, leaf_task, write_notebook
+from .nbfactory import MakePipeline, book_parameters_cell, child_task, leaf_task, write_notebook
 
 from fnnbook import PipelineError, PipelineSpec, check, load_spec, read_parameters
 from fnnbook.params import _type_ok
@@ -203,8 +203,8 @@ def test_unknown_claim_id_is_an_error(make_pipeline: MakePipeline) -> None:
 
 def test_a_none_preset_is_filled_and_typed_by_its_paper_value(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     """A cell leaves a shared paper value at None; the runner injects the preset and checks overrides by its type."""
-    write_notebook(tmp_path / "notebooks" / "02_theory.ipynb",
-                   'profile = ""\nout_dir = ""\nL = None\nTs = None\nL_sweep = [5.0]\n', "pass")
+    write_notebook(tmp_path / "notebooks" / "02_theory.ipynb", book_parameters_cell("02_theory"),
+                   'check_notebook_settings("theory", globals())')  # one of the book's notebooks: it has presets
     task = {**leaf_task(), "notebook": "notebooks/02_theory.ipynb",
             "parameters": {"paper": {}, "smoke": {"L": 10}}}
     spec = load_spec(make_pipeline({"theory": task}))
