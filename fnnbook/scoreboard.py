@@ -201,15 +201,15 @@ def headline_of(result: ClaimResult | None) -> tuple[str, str]:
     if result is None:
         return "", ""
     head = result.headline
-    if head:
-        text = _number(head.get("value"))
-        if head.get("spread") is not None:
-            text += f" ± {_number(head['spread'])}"
-        if head.get("unit"):
-            text += f" {head['unit']}"
-        if head.get("n"):
-            text += f" (n = {head['n']} seeds)"
-        return str(head.get("name", "")), text
+    if head is not None:
+        text = _number(head.value)
+        if head.spread is not None:
+            text += f" ± {_number(head.spread)}"
+        if head.unit:
+            text += f" {head.unit}"
+        if head.n:
+            text += f" (n = {head.n} seeds)"
+        return head.name, text
     return "checks holding", f"{sum(result.checks.values())} of {len(result.checks)}"
 
 

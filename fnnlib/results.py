@@ -14,7 +14,7 @@ Besides its ``checks``, a claim may carry:
   with constants measured on the same run, or by self-consistency (frozen
   weights, bookkeeping).  They never count toward the verdict, and a false
   one stops the notebook (:class:`GuaranteeFailed`);
-* ``headline``: the one number a reader looks for first,
+* ``headline``: the one number a reader looks for first (:class:`Headline`),
   ``{"name", "value", "unit"}`` plus ``"spread"``, ``"n"`` and
   ``"per_seed"`` when it is measured over seeds (:func:`headline_number`);
 * ``paper``: the paper's number or statement it is compared with;
@@ -76,7 +76,54 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def headline_number(name: str, value: float | Sequence[float], *, unit: str = "") -> dict[str, Any]:
+@dataclass(frozen=True)
+class Headline:
+    """The one number of a claim a reader looks for first, as the scoreboard shows it (:func:`headline_number`).
+
+    Attributes
+    ----------
+    name : str
+        What the number is, in a few words.
+    value : float
+        The number; over seeds, their mean.
+    unit : str
+        E.g. ``"cm"``; empty for a ratio.
+    spread, n, per_seed : float, int, tuple of float, or None
+        Over seeds: the sample standard deviation (``ddof=1``), the count and the values; None for one run.
+    """
+
+    name: str
+    value: float
+    unit: str = ""
+    spread: float | None = None
+    n: int | None = None
+    per_seed: tuple[float, ...] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"name", "value", "unit"}``, with ``"spread", "n", "per_seed"`` before ``"unit"`` when over seeds."""
+        out: dict[str, Any] = {"name": self.name, "value": self.value}
+        if self.n is not None:
+            out |= {"spread": self.spread, "n": self.n, "per_seed": list(self.per_seed or ())}
+        return _plain(out | {"unit": self.unit})
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Headline:
+        """Read what :meth:`to_json` wrote.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` or ``value`` is missing, or a key is unknown.
+        """
+        missing = [k for k in ("name", "value") if k not in data]
+        unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
+        if missing or unknown:
+            raise ValueError(f"headline lacks {', '.join(missing)}" if missing else f"headline: unknown keys {unknown}")
+        per_seed = data.get("per_seed")
+        return cls(**{**data, "per_seed": None if per_seed is None else tuple(per_seed)})
+
+
+def headline_number(name: str, value: float | Sequence[float], *, unit: str = "") -> Headline:
     """The headline number of a claim, as the scoreboard shows it.
 
     Parameters
@@ -97,22 +144,16 @@ def headline_number(name: str, value: float | Sequence[float], *, unit: str = ""
     """
     if not name:
         raise ValueError("a headline needs a name")
-    out: dict[str, Any] = {"name": name}
     values = _plain(value)
-    if isinstance(values, list):
-        if not values:
-            raise ValueError(f"headline {name!r}: no per-seed values")
-        values = [float(v) for v in values]
-        n = len(values)
-        mean = math.fsum(values) / n
-        out["value"] = mean
-        out["spread"] = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0
-        out["n"] = n
-        out["per_seed"] = values
-    else:
-        out["value"] = float(values)
-    out["unit"] = unit
-    return _plain(out)
+    if not isinstance(values, list):
+        return Headline(name, float(values), unit)
+    if not values:
+        raise ValueError(f"headline {name!r}: no per-seed values")
+    values = [float(v) for v in values]
+    n = len(values)
+    mean = math.fsum(values) / n
+    spread = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0
+    return Headline(name, mean, unit, spread=spread, n=n, per_seed=tuple(values))
 
 
 @dataclass(frozen=True)
@@ -139,7 +180,7 @@ class ClaimResult:
         What holds by construction, by a theorem with constants measured on the same run, or by
         self-consistency; shown apart from ``checks``, never counted toward the verdict.  ``None``: the rule
         states none, and the JSON has no ``guarantees`` key.
-    headline : mapping, optional
+    headline : Headline, optional
         The claim's headline number, as made by :func:`headline_number`.
     paper : str, optional
         The paper's number or statement for this claim.
@@ -152,7 +193,9 @@ class ClaimResult:
         If a guarantee is false: something that must hold does not, so the run itself is wrong and no
         verdict is written.
     ValueError
-        If ``checks`` is empty, or ``headline`` lacks a name or a value.
+        If ``checks`` is empty.
+    TypeError
+        If ``headline`` is not a :class:`Headline`.
     """
 
     id: str
@@ -161,7 +204,7 @@ class ClaimResult:
     numbers: Mapping[str, Any] = field(default_factory=dict)
     figure: str | None = None
     guarantees: Mapping[str, bool] | None = None
-    headline: Mapping[str, Any] | None = None
+    headline: Headline | None = None
     paper: str | None = None
     title: str | None = None
 
@@ -170,12 +213,10 @@ class ClaimResult:
         failed = [k for k, v in (self.guarantees or {}).items() if not bool(v)]
         if failed:
             raise GuaranteeFailed(f"claim {self.id}: guarantee(s) {', '.join(failed)} do not hold")
-        missing = [k for k in ("name", "value") if self.headline is not None and k not in self.headline]
-        if missing:
-            raise ValueError(f"claim {self.id}: headline lacks {', '.join(missing)}")
+        if self.headline is not None and not isinstance(self.headline, Headline):
+            raise TypeError(f"claim {self.id}: headline must be a Headline (headline_number), got {self.headline!r}")
         plain = {"checks": {k: bool(v) for k, v in self.checks.items()}, "numbers": _plain(dict(self.numbers)),
-                 "guarantees": None if self.guarantees is None else {k: True for k in self.guarantees},
-                 "headline": None if self.headline is None else _plain(dict(self.headline))}
+                 "guarantees": None if self.guarantees is None else {k: True for k in self.guarantees}}
         for name, value in plain.items():
             object.__setattr__(self, name, value)
 
@@ -193,6 +234,8 @@ class ClaimResult:
         ``guarantees, headline, paper, title`` where given (so results without them read as before)."""
         out = {k: getattr(self, k) for k in _REQUIRED}
         out |= {k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None}
+        if self.headline is not None:
+            out["headline"] = self.headline.to_json()
         return copy.deepcopy(out)  # the result stays frozen
 
     @classmethod
@@ -203,7 +246,8 @@ class ClaimResult:
         ------
         ValueError
             If a key is missing or unknown, the verdict is not one of :data:`VERDICTS` or not the one its
-            checks imply, or a guarantee is false (a file edited by hand, or written by another program).
+            checks imply, a guarantee is false (a file edited by hand, or written by another program), or the
+            headline lacks its name or value.
         """
         cid = data.get("id")
         missing = [k for k in _REQUIRED if k not in data]
@@ -215,6 +259,8 @@ class ClaimResult:
         if not all((data.get("guarantees") or {}).values()):
             raise ValueError(f"claim {cid!r} has a failed guarantee")
         fields = {k: v for k, v in data.items() if k != "verdict"}
+        if data.get("headline") is not None:
+            fields["headline"] = Headline.from_json(data["headline"])
         claim = cls(**fields)
         if claim.verdict != data["verdict"]:
             raise ValueError(f"claim {cid!r}: verdict {data['verdict']!r} is not the one its checks imply "

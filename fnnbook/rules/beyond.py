@@ -26,11 +26,10 @@ scoreboard over every task's results (:func:`b2`, :func:`b3`).
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
-from fnnlib.results import ClaimResult, GuaranteeFailed, headline_number
+from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number
 from fnnlib.stats import paired_win
 
 __all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b2", "b3"]
@@ -113,7 +112,7 @@ MIN_SEEDS = 5
 """B2's least number of independent seeds (or paired units) behind a claim's headline (issue 15: at least 5)."""
 
 
-def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MIN_SEEDS) -> ClaimResult:
+def b2(headlines: Mapping[str, Headline | None], *, min_seeds: int = MIN_SEEDS) -> ClaimResult:
     """B2 (every comparison over several seeds, with spread shown), computed by the scoreboard from the runs.
 
     ``headlines`` maps each judged claim ID (B2 and B3 aside) to its headline
@@ -129,7 +128,7 @@ def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MI
     """
     if not headlines:
         raise ValueError("B2 needs the judged claims' headlines")
-    n = {cid: (h or {}).get("n") for cid, h in headlines.items()}
+    n = {cid: None if h is None else h.n for cid, h in headlines.items()}
     seeded = {cid: k for cid, k in n.items() if k is not None and k >= 2}
     single = sorted(cid for cid in n if cid not in seeded)
     few = sorted(cid for cid, k in seeded.items() if k < min_seeds)
@@ -138,7 +137,7 @@ def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MI
         checks={f"per_seed_headlines_over_>={min_seeds}_seeds": bool(seeded) and not few,
                 "every_claim_shows_a_spread": not single},
         guarantees={"spread_with_every_per_seed_headline":
-                    all("spread" in (headlines[cid] or {}) for cid in seeded)},
+                    all(headlines[cid].spread is not None for cid in seeded)},
         numbers={"seeds_per_claim": n, "claims_with_fewer_seeds": few, "claims_without_spread": single},
         rule=f"every judged claim's headline is per seed (n >= 2, with its spread) and every per-seed "
              f"headline rests on >= {min_seeds} seeds or paired units (computed by the scoreboard)",

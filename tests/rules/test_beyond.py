@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b2
-from fnnlib.results import ClaimResult, headline_number
+from fnnlib.results import ClaimResult, Headline, headline_number
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
         "open_loop": [3.0, 3.2, 2.9, 3.1, 3.0], "kalman": [0.8, 0.9, 0.7, 0.8, 0.9]}
@@ -83,8 +83,8 @@ def test_bad_input_is_refused(errors, match):
         b1_paired(errors)
 
 
-def _headline(n: int | None) -> dict:
-    return {"name": "x", "value": 1.0} if n is None else {"name": "x", "value": 1.0, "spread": 0.1, "n": n}
+def _headline(n: int | None) -> Headline:
+    return Headline("x", 1.0) if n is None else Headline("x", 1.0, spread=0.1, n=n, per_seed=(1.0,) * n)
 
 
 def test_b2_passes_when_every_claim_is_over_five_seeds_with_spread() -> None:
