@@ -22,6 +22,10 @@ Besides its ``checks``, a claim may carry:
 
 All four are optional: a result without them reads as before, and the
 scoreboard falls back on the claims file and the numbers.
+
+One claim is a :class:`ClaimResult` (what every rule of ``fnnbook.rules``
+returns); one task's ``results.json`` is a :class:`Results`, written by
+:func:`write_results` and read by :func:`read_results` (``.claim(id)``).
 """
 
 from __future__ import annotations
