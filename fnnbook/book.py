@@ -19,10 +19,9 @@ from typing import Any
 import yaml
 
 from fnnbook.runner import read_status
-from fnnbook.scoreboard import (SEEDS_CHECK_ID, SELF_CHECK_ID, plot_verdicts, read_claims, render_scoreboard,
-                               score_rows, seeds_check, self_check)
+from fnnbook.scoreboard import plot_verdicts, read_claims, render_scoreboard, score_rows, with_scoreboard_claims
 from fnnbook.spec import PipelineError, PipelineSpec
-from fnnlib.results import RESULTS_FILENAME, read_results
+from fnnlib.results import RESULTS_FILENAME, Results, read_results
 
 __all__ = ["GENERATED", "assemble_book", "build_book"]
 
@@ -144,7 +143,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         shutil.rmtree(generated)
     generated.mkdir(parents=True)
 
-    results: dict[str, dict[str, Any]] = {}
+    results: dict[str, Results] = {}
     pages: dict[str, str] = {}
     figures: dict[str, str] = {}
     parts: list[dict[str, Any]] = []
@@ -184,13 +183,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
             parts.append({"caption": part.title, "numbered": True, "chapters": chapters})
 
     declared = {n: t.claims for n, t in spec.tasks.items()}
-    computed = []  # the scoreboard's own claims: B2 from the tasks' headlines, then B3 over everything
-    if any(c.id == SEEDS_CHECK_ID for c in claims) and (b2 := seeds_check(results)) is not None:
-        computed.append(b2)
-    if any(c.id == SELF_CHECK_ID for c in claims):
-        computed.append(self_check(claims, {**results, "scoreboard": {"claims": computed}}, declared))
-    if computed:
-        results = {**results, "scoreboard": {"claims": computed}}
+    results = with_scoreboard_claims(claims, results, profile, declared)  # B2 from the headlines, then B3
     rows = score_rows(claims, results, declared)
     plot_verdicts(rows, generated / "verdicts.png")
     (generated / "scoreboard.md").write_text(

@@ -8,6 +8,7 @@ shown as "not run".
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -15,14 +16,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fnnlib.results import VERDICTS, GuaranteeFailed, claim_result, headline_number, verdict_from_checks
+import jinja2
 
-__all__ = ["NOT_RUN", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of", "plot_verdicts", "read_claims",
-           "render_scoreboard", "score_rows", "seeds_check", "self_check", "short_title", "verdict_counts"]
+from fnnbook.rules import beyond
+from fnnlib.results import VERDICTS, ClaimResult, Results
+
+__all__ = ["NOT_RUN", "SCOREBOARD_TASK", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of",
+           "plot_verdicts", "read_claims", "render_scoreboard", "score_rows", "seeds_check", "self_check",
+           "short_title", "verdict_counts", "with_scoreboard_claims"]
 
 #: the claim the scoreboard reports on itself ("the scoreboard page, computed from the runs")
 SELF_CHECK_ID = "B3"
 SEEDS_CHECK_ID = "B2"
+#: the name under which the scoreboard's own claims (B2, B3) sit beside the tasks' results
+SCOREBOARD_TASK = "scoreboard"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
@@ -56,13 +63,13 @@ class ScoreRow:
     """A claim with the verdict measured for it (or "not run").
 
     ``task`` is the task that reported it (or declares it); ``result`` is
-    the claim's entry of that task's ``results.json``, if any.
+    the claim's result in that task's ``results.json``, if any.
     """
 
     claim: Claim
     verdict: str
     task: str | None
-    result: Mapping[str, Any] | None
+    result: ClaimResult | None
 
 
 def _cells(line: str) -> list[str]:
@@ -120,7 +127,7 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
 
 def score_rows(
     claims: Sequence[Claim],
-    results: Mapping[str, Mapping[str, Any]],
+    results: Mapping[str, Results],
     declared: Mapping[str, Sequence[str]] | None = None,
 ) -> list[ScoreRow]:
     """Attach to each claim the verdict a task's results report for it.
@@ -128,8 +135,8 @@ def score_rows(
     Parameters
     ----------
     claims : sequence of Claim
-    results : mapping of str to dict
-        Task name -> its ``results.json`` (tasks without outputs left out).
+    results : mapping of str to Results
+        Task name -> its ``results.json`` (:func:`fnnlib.results.read_results`; tasks without outputs left out).
     declared : mapping of str to sequence of str, optional
         Task name -> claim IDs it declares; names the task of claims that
         have no result yet.
@@ -139,17 +146,16 @@ def score_rows(
     list of ScoreRow
         One per claim, in order; verdict :data:`NOT_RUN` where no result.
     """
-    found: dict[str, tuple[str, Mapping[str, Any]]] = {}
+    found: dict[str, tuple[str, ClaimResult]] = {}
     for task, data in results.items():
-        for entry in data.get("claims", []):
-            found.setdefault(entry["id"], (task, entry))
+        for result in data:
+            found.setdefault(result.id, (task, result))
     owner = {cid: task for task, ids in (declared or {}).items() for cid in ids}
     rows = []
     for claim in claims:
         if claim.id in found:
-            task, entry = found[claim.id]
-            verdict = entry.get("verdict", NOT_RUN)
-            rows.append(ScoreRow(claim, verdict if verdict in VERDICTS else NOT_RUN, task, entry))
+            task, result = found[claim.id]
+            rows.append(ScoreRow(claim, result.verdict, task, result))
         else:
             rows.append(ScoreRow(claim, NOT_RUN, owner.get(claim.id), None))
     return rows
@@ -184,7 +190,7 @@ def short_title(text: str, words: int = 9) -> str:
     return " ".join(parts[:words]) + (" …" if len(parts) > words else "") if parts else ""
 
 
-def headline_of(entry: Mapping[str, Any]) -> tuple[str, str]:
+def headline_of(result: ClaimResult | None) -> tuple[str, str]:
     """The headline number of a result as ``(name, "value ± spread unit (n = k seeds)")``.
 
     Uses the result's ``headline`` (see :func:`fnnlib.results.headline_number`).
@@ -192,48 +198,19 @@ def headline_of(entry: Mapping[str, Any]) -> tuple[str, str]:
     of its checks hold instead of guessing a number from ``numbers``;
     ``("", "")`` when there is no result.
     """
-    head = entry.get("headline")
-    if head:
-        text = _number(head.get("value"))
-        if head.get("spread") is not None:
-            text += f" ± {_number(head['spread'])}"
-        if head.get("unit"):
-            text += f" {head['unit']}"
-        if head.get("n"):
-            text += f" (n = {head['n']} seeds)"
-        return str(head.get("name", "")), text
-    checks = entry.get("checks") or {}
-    if checks:
-        return "checks holding", f"{sum(bool(v) for v in checks.values())} of {len(checks)}"
-    return "", ""
-
-
-def _bullets(marks: Mapping[str, bool]) -> list[str]:
-    return [f"- {'✓' if ok else '✗'} `{str(k).replace('`', chr(39))}`" for k, ok in marks.items()]
-
-
-def _details(row: ScoreRow, figure: str | None) -> list[str]:
-    """The folded body of a row: the paper's claim, rule, checks, guarantees, numbers, figure."""
-    entry = row.result or {}
-    out = [f"**Claim ({row.claim.figure or 'paper'}).** {_inline(row.claim.text)}", ""]
-    if not entry:
-        return out + ["No task has produced a result for this claim yet.", ""]
-    if entry.get("rule"):
-        out += [f"**Rule.** {_inline(entry['rule'])}", ""]
-    out += ["**Checks** (they decide the verdict):", "", *_bullets(entry.get("checks") or {}), ""]
-    guarantees = entry.get("guarantees") or {}
-    if guarantees:
-        out += ["**Guarantees** (hold by construction or by a theorem on the same run; asserted while the "
-                "notebook runs, never counted toward the verdict):", "", *_bullets(guarantees), ""]
-    numbers = entry.get("numbers") or {}
-    if numbers:
-        out += ["**Numbers.**", "", "| name | value |", "|---|---|"]
-        out += [f"| `{str(k).replace('`', chr(39))}` | {_inline(_number(v))} |" for k, v in numbers.items()]
-        out.append("")
-    if figure:
-        out += [f"({_figure_label(row)})=", f"```{{image}} {figure}", f":alt: figure of claim {row.claim.id}",
-                ":width: 100%", "```", ""]
-    return out
+    if result is None:
+        return "", ""
+    head = result.headline
+    if head is not None:
+        text = _number(head.value)
+        if head.spread is not None:
+            text += f" ± {_number(head.spread)}"
+        if head.unit:
+            text += f" {head.unit}"
+        if head.n:
+            text += f" (n = {head.n} seeds)"
+        return head.name, text
+    return "checks holding", f"{sum(result.checks.values())} of {len(result.checks)}"
 
 
 def _figure_label(row: ScoreRow) -> str:
@@ -278,6 +255,34 @@ def plot_verdicts(rows: Sequence[ScoreRow], path: str | os.PathLike[str]) -> Pat
     return out
 
 
+def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str],
+             notes: Mapping[str, str]) -> dict[str, Any]:
+    """What the template shows of a row beside the claim and its result: its summary cells and its figure."""
+    result = row.result
+    name, value = headline_of(result)
+    ours = f"{_inline(name)}: **{_inline(value)}**" if name else (_inline(value) or "—")
+    if result is None and row.task in notes:
+        ours = _inline(notes[row.task])
+    where = [f"[section]({pages[row.task]})"] if row.task is not None and row.task in pages else []
+    figure = f"{figures[row.task]}/{result.figure}" if result and result.figure and row.task in figures else None
+    if figure:  # opens the row and scrolls to the figure inside it
+        where.append(f"{{ref}}`figure <{_figure_label(row)}>`")
+    return {"claim": row.claim, "result": result, "verdict": row.verdict, "badge": _BADGE[row.verdict],
+            "title": (result and result.title) or short_title(row.claim.text), "ours": ours,
+            "paper": (result and result.paper) or row.claim.text,
+            "paper_label": f"paper, {row.claim.figure}" if row.claim.figure else "paper",
+            "where": where, "figure": figure, "figure_label": _figure_label(row)}
+
+
+@functools.cache
+def _template() -> jinja2.Template:
+    env = jinja2.Environment(loader=jinja2.PackageLoader("fnnbook", "templates"), autoescape=False,
+                             trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
+                             undefined=jinja2.StrictUndefined)
+    env.filters |= {"inline": _inline, "number": _number, "code": lambda text: str(text).replace("`", "'")}
+    return env.get_template("scoreboard.md.j2")
+
+
 def render_scoreboard(
     rows: Sequence[ScoreRow],
     *,
@@ -287,7 +292,7 @@ def render_scoreboard(
     notes: Mapping[str, str] | None = None,
     summary_figure: str | None = None,
 ) -> str:
-    """Render the scoreboard page as MyST markdown.
+    """Render the scoreboard page as MyST markdown (the template ``templates/scoreboard.md.j2``).
 
     At the top, the counts of each verdict (and ``summary_figure``, the
     verdicts per section, see :func:`plot_verdicts`).  Then one row per
@@ -317,108 +322,44 @@ def render_scoreboard(
     -------
     str
     """
-    figures = figures or {}
-    counts = {v: sum(r.verdict == v for r in rows) for v in (*VERDICTS, NOT_RUN)}
-    out = [
-        "# Scoreboard",
-        "",
-        f"Profile **{profile}**: {len(rows)} claims, "
-        + ", ".join(f"{counts[v]} {v}" for v in (*VERDICTS, NOT_RUN)) + ".",
-        "",
-    ]
-    if summary_figure:
-        out += [f"```{{image}} {summary_figure}", ":alt: verdicts per section", ":class: sb-summary", "```", ""]
-    if profile != "paper":
-        out += [":::{warning}",
-                f"These numbers come from the `{profile}` profile, not the paper's settings; "
-                "the verdicts say whether the code runs end to end, not whether the paper's "
-                "claims hold.", ":::", ""]
-    out += [
-        "Each verdict is computed from the measured numbers by the rule shown in the claim's fold-out: "
-        "*reproduced* when every check holds, *partly* when some do, *not reproduced* when none "
-        "does; *not run* when no task has produced a result for the claim. Guarantees (what holds by "
-        "construction) are listed apart and never count. Click a row to unfold its checks and numbers.",
-        "",
-    ]
-    group = None
-    for row in rows:
-        if row.claim.group != group:
-            group = row.claim.group
-            out += ["", f"## {group}", "",
-                    '<div class="sb-head"><span class="sb-id">ID</span><span class="sb-claim">claim</span>'
-                    '<span class="sb-ours">ours (headline number)</span><span class="sb-verdict">verdict</span>'
-                    '<span class="sb-where">see</span></div>', ""]
-        entry = row.result or {}
-        name, value = headline_of(entry)
-        ours = f"{_inline(name)}: **{_inline(value)}**" if name else (_inline(value) or "—")
-        paper = entry.get("paper") or row.claim.text
-        paper_label = f"paper, {row.claim.figure}" if row.claim.figure else "paper"
-        if row.result is None and row.task in (notes or {}):
-            ours = _inline(notes[row.task])
-        where = []
-        if row.task is not None and row.task in pages:
-            where.append(f"[section]({pages[row.task]})")
-        fig = f"{figures[row.task]}/{entry['figure']}" if entry.get("figure") and row.task in figures else None
-        if fig:  # opens the row and scrolls to the figure inside it
-            where.append(f"{{ref}}`figure <{_figure_label(row)}>`")
-        title = entry.get("title") or short_title(row.claim.text)
-        summary = " ".join([
-            f"[{row.claim.id}]{{.sb-id}}",
-            f"[{_inline(title)}]{{.sb-claim}}",
-            f"[{ours}]{{.sb-ours}}",
-            f"[*{_inline(paper_label)}:* {_inline(paper)}]{{.sb-paper}}",
-            f"[{{bdg-{_BADGE[row.verdict]}}}`{row.verdict}`]{{.sb-verdict}}",
-            f"[{' '.join(where) or '—'}]{{.sb-where}}",
-        ])
-        out += [f"::::{{dropdown}} {summary}", f":name: claim-{row.claim.id.lower()}",
-                ":class-container: sb-row", "", *_details(row, fig), "::::", ""]
-    return "\n".join(out) + "\n"
+    counts = [f"{sum(r.verdict == v for r in rows)} {v}" for v in (*VERDICTS, NOT_RUN)]
+    shown = [_summary(r, pages, figures or {}, notes or {}) for r in rows]
+    return _template().render(rows=shown, profile=profile, counts=counts, summary_figure=summary_figure)
 
 
-def seeds_check(results: Mapping[str, Mapping[str, Any]]) -> dict[str, Any] | None:
-    """Claim B2 (every comparison over seeds, spread shown), computed from the tasks' claims by
-    :func:`fnnbook.rules.beyond.b2`; None when no task reported a claim."""
-    from fnnbook.rules import beyond  # noqa: PLC0415
-
-    headlines = {e["id"]: e.get("headline") for data in results.values() for e in data.get("claims", [])
-                 if e["id"] not in (SEEDS_CHECK_ID, SELF_CHECK_ID)}
-    if not headlines:
-        return None
-    rule = beyond.b2(headlines)
-    seeded = [k for k in rule["numbers"]["seeds_per_claim"].values() if k]
-    return claim_result(SEEDS_CHECK_ID, **rule, title="every comparison over seeds, spread shown",
-                        headline=headline_number("judged claims with a per-seed headline",
-                                                 len(seeded) / len(headlines)),
-                        paper="the paper shows single runs")
+def seeds_check(results: Mapping[str, Results]) -> ClaimResult | None:
+    """Claim B2 (every comparison over seeds, spread shown), judged by :func:`fnnbook.rules.beyond.b2` on the
+    tasks' headlines; None when no task reported a claim."""
+    headlines = {c.id: c.headline for r in results.values() for c in r if c.id not in (SEEDS_CHECK_ID, SELF_CHECK_ID)}
+    return beyond.b2(headlines) if headlines else None
 
 
-def self_check(claims: Sequence[Claim], results: Mapping[str, Mapping[str, Any]],
-               declared: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
-    """The scoreboard's own claim (B3): it is computed from the runs.
+def self_check(claims: Sequence[Claim], results: Mapping[str, Results],
+               declared: Mapping[str, Sequence[str]] | None = None) -> ClaimResult:
+    """The scoreboard's own claim (B3: it is computed from the runs), judged by :func:`fnnbook.rules.beyond.b3`.
 
-    Checks (each fails on a plausible run): some task has results; every claim a task declares (or, without
-    ``declared``, every claim of the claims file but B3 itself) has a verdict, i.e. no task failed or was
-    skipped.  Guarantees (bookkeeping that holds by construction, shown apart and never counted): every
-    reported ID is in the claims file, and every verdict is the one its checks imply.  A broken guarantee
-    stops the book (:class:`~fnnlib.results.GuaranteeFailed`) naming the claims at fault.
+    The claims expected are every claim a task declares (or, without ``declared``, every claim of the claims
+    file but B3 itself).  A reported ID the claims file does not list stops the book
+    (:class:`~fnnlib.results.GuaranteeFailed`).
     """
     ids = {c.id for c in claims}
-    entries = [e for data in results.values() for e in data.get("claims", [])]
-    unknown = sorted({e["id"] for e in entries} - ids)
-    mismatched = sorted(e["id"] for e in entries
-                        if not e.get("checks") or verdict_from_checks(e["checks"]) != e.get("verdict"))
-    if unknown or mismatched:
-        raise GuaranteeFailed(f"claim {SELF_CHECK_ID}: IDs not in the claims file {unknown}; verdicts not "
-                              f"from their checks {mismatched}")
     expected = ({cid for task_ids in declared.values() for cid in task_ids} if declared is not None
                 else ids - {SELF_CHECK_ID})
-    missing = sorted(expected - {e["id"] for e in entries})
-    return claim_result(
-        SELF_CHECK_ID,
-        checks={"results_found": bool(results), "every_declared_claim_reported": not missing},
-        guarantees={"ids_known": not unknown, "verdicts_follow_checks": not mismatched},
-        numbers={"tasks_with_results": len(results), "claims_reported": len(entries), "claims_listed": len(ids),
-                 "claims_not_reported": missing},
-        rule="some task has results and every claim a task declares has a verdict (checks); every reported ID "
-             "is in the claims file and every verdict equals the one its checks imply (guarantees: bookkeeping)",
-    )
+    return beyond.b3(ids, [c for r in results.values() for c in r], tasks_with_results=len(results),
+                     expected=expected)
+
+
+def with_scoreboard_claims(claims: Sequence[Claim], results: Mapping[str, Results], profile: str,
+                           declared: Mapping[str, Sequence[str]] | None = None) -> dict[str, Results]:
+    """``results`` with the scoreboard's own claims, where the claims file lists them, as task ``"scoreboard"``:
+    B2 from the tasks' headlines, then B3 over everything (B2 included)."""
+    listed = {c.id for c in claims}
+    computed: list[ClaimResult] = []
+    if SEEDS_CHECK_ID in listed and (b2 := seeds_check(results)) is not None:
+        computed.append(b2)
+    if SELF_CHECK_ID in listed:
+        own = Results(task=SCOREBOARD_TASK, profile=profile, claims=tuple(computed))
+        computed.append(self_check(claims, {**results, SCOREBOARD_TASK: own}, declared))
+    if not computed:
+        return dict(results)
+    return {**results, SCOREBOARD_TASK: Results(task=SCOREBOARD_TASK, profile=profile, claims=tuple(computed))}

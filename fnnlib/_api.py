@@ -49,7 +49,8 @@ from fnnlib.observers import (
     steady_state_gain,
 )
 from fnnlib.plotting import new_figure, save_figure
-from fnnlib.results import GuaranteeFailed, claim_result, headline_number, read_results, verdict_from_checks, write_results
+from fnnlib.results import (RESULTS_FILENAME, ClaimResult, GuaranteeFailed, Headline, Results, headline_number,
+                            read_results, verdict_from_checks, write_results)
 from fnnlib.seeding import make_generator, seed_everything
 from fnnlib.stability import (
     discrete_residual,
@@ -111,7 +112,7 @@ __all__ = [
     "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
     "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
     "cascade_predict_loop",
-    "check_gain", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
+    "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",

@@ -14,7 +14,7 @@ Besides its ``checks``, a claim may carry:
   with constants measured on the same run, or by self-consistency (frozen
   weights, bookkeeping).  They never count toward the verdict, and a false
   one stops the notebook (:class:`GuaranteeFailed`);
-* ``headline``: the one number a reader looks for first,
+* ``headline``: the one number a reader looks for first (:class:`Headline`),
   ``{"name", "value", "unit"}`` plus ``"spread"``, ``"n"`` and
   ``"per_seed"`` when it is measured over seeds (:func:`headline_number`);
 * ``paper``: the paper's number or statement it is compared with;
@@ -22,15 +22,22 @@ Besides its ``checks``, a claim may carry:
 
 All four are optional: a result without them reads as before, and the
 scoreboard falls back on the claims file and the numbers.
+
+One claim is a :class:`ClaimResult` (what every rule of ``fnnbook.rules``
+returns); one task's ``results.json`` is a :class:`Results`, written by
+:func:`write_results` and read by :func:`read_results` (``.claim(id)``).
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import datetime as _dt
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +45,10 @@ from fnnlib.io import atomic_write
 
 VERDICTS = ("reproduced", "partly", "not reproduced")
 RESULTS_FILENAME = "results.json"
+
+#: the keys of a claim's JSON, in the order they are written; the last four only when given
+_REQUIRED = ("id", "verdict", "rule", "checks", "numbers", "figure")
+_OPTIONAL = ("guarantees", "headline", "paper", "title")
 
 
 class GuaranteeFailed(AssertionError):
@@ -69,7 +80,54 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def headline_number(name: str, value: float | Sequence[float], *, unit: str = "") -> dict[str, Any]:
+@dataclass(frozen=True)
+class Headline:
+    """The one number of a claim a reader looks for first, as the scoreboard shows it (:func:`headline_number`).
+
+    Attributes
+    ----------
+    name : str
+        What the number is, in a few words.
+    value : float
+        The number; over seeds, their mean.
+    unit : str
+        E.g. ``"cm"``; empty for a ratio.
+    spread, n, per_seed : float, int, tuple of float, or None
+        Over seeds: the sample standard deviation (``ddof=1``), the count and the values; None for one run.
+    """
+
+    name: str
+    value: float
+    unit: str = ""
+    spread: float | None = None
+    n: int | None = None
+    per_seed: tuple[float, ...] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"name", "value", "unit"}``, with ``"spread", "n", "per_seed"`` before ``"unit"`` when over seeds."""
+        out: dict[str, Any] = {"name": self.name, "value": self.value}
+        if self.n is not None:
+            out |= {"spread": self.spread, "n": self.n, "per_seed": list(self.per_seed or ())}
+        return _plain(out | {"unit": self.unit})
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Headline:
+        """Read what :meth:`to_json` wrote.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` or ``value`` is missing, or a key is unknown.
+        """
+        missing = [k for k in ("name", "value") if k not in data]
+        unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
+        if missing or unknown:
+            raise ValueError(f"headline lacks {', '.join(missing)}" if missing else f"headline: unknown keys {unknown}")
+        per_seed = data.get("per_seed")
+        return cls(**{**data, "per_seed": None if per_seed is None else tuple(per_seed)})
+
+
+def headline_number(name: str, value: float | Sequence[float], *, unit: str = "") -> Headline:
     """The headline number of a claim, as the scoreboard shows it.
 
     Parameters
@@ -90,55 +148,43 @@ def headline_number(name: str, value: float | Sequence[float], *, unit: str = ""
     """
     if not name:
         raise ValueError("a headline needs a name")
-    out: dict[str, Any] = {"name": name}
     values = _plain(value)
-    if isinstance(values, list):
-        if not values:
-            raise ValueError(f"headline {name!r}: no per-seed values")
-        values = [float(v) for v in values]
-        n = len(values)
-        mean = math.fsum(values) / n
-        out["value"] = mean
-        out["spread"] = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0
-        out["n"] = n
-        out["per_seed"] = values
-    else:
-        out["value"] = float(values)
-    out["unit"] = unit
-    return _plain(out)
+    if not isinstance(values, list):
+        return Headline(name, float(values), unit)
+    if not values:
+        raise ValueError(f"headline {name!r}: no per-seed values")
+    values = [float(v) for v in values]
+    n = len(values)
+    mean = math.fsum(values) / n
+    spread = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0
+    return Headline(name, mean, unit, spread=spread, n=n, per_seed=tuple(values))
 
 
-def claim_result(
-    claim_id: str,
-    *,
-    checks: Mapping[str, bool],
-    numbers: Mapping[str, Any],
-    rule: str,
-    figure: str | None = None,
-    guarantees: Mapping[str, bool] | None = None,
-    headline: Mapping[str, Any] | None = None,
-    paper: str | None = None,
-    title: str | None = None,
-) -> dict[str, Any]:
-    """Bundle one claim's measured numbers, checks and derived verdict.
+@dataclass(frozen=True)
+class ClaimResult:
+    """One claim's checks, guarantees, measured numbers and the verdict they imply.
 
-    Parameters
+    Every rule of ``fnnbook.rules`` returns one; the notebook adds what only it knows (the numbers shown, the
+    figure, the headline) with :meth:`replace` and writes it with :func:`write_results`.
+
+    Attributes
     ----------
-    claim_id : str
-        The ID in ``CLAIMS.md``, e.g. ``"S2"``.
+    id : str
+        The claim's ID, e.g. ``"S2"``.
     checks : mapping of str to bool
-        Named sub-checks, each computed from ``numbers``.
-    numbers : mapping
-        The measured numbers the checks use (scalars or short lists).
+        Named sub-checks, each computed from the measured numbers; they alone decide :attr:`verdict`.
     rule : str
-        The rule, in words, that turns ``numbers`` into ``checks``.
+        The rule, in words, that turns the numbers into ``checks``.
+    numbers : mapping
+        The measured numbers behind the checks (scalars or short lists), made JSON-plain.
     figure : str, optional
-        Path of the figure that shows the claim, relative to the task's
-        output directory (e.g. ``"figures/fig4f_multistep.png"``).
+        Path of the figure that shows the claim, relative to the task's output directory
+        (e.g. ``"figures/fig4f_multistep.png"``).
     guarantees : mapping of str to bool, optional
-        What holds by construction or self-consistency; shown apart from
-        ``checks`` and never counted toward the verdict.
-    headline : mapping, optional
+        What holds by construction, by a theorem with constants measured on the same run, or by
+        self-consistency; shown apart from ``checks``, never counted toward the verdict.  ``None``: the rule
+        states none, and the JSON has no ``guarantees`` key.
+    headline : Headline, optional
         The claim's headline number, as made by :func:`headline_number`.
     paper : str, optional
         The paper's number or statement for this claim.
@@ -148,35 +194,135 @@ def claim_result(
     Raises
     ------
     GuaranteeFailed
-        If a guarantee is false: something that must hold does not, so the
-        run itself is wrong and no verdict is written.
+        If a guarantee is false: something that must hold does not, so the run itself is wrong and no
+        verdict is written.
     ValueError
-        If ``checks`` is empty, or ``headline`` lacks a name or a value.
+        If ``checks`` is empty.
+    TypeError
+        If ``headline`` is not a :class:`Headline`.
     """
-    result: dict[str, Any] = {
-        "id": claim_id,
-        "verdict": verdict_from_checks(checks),
-        "rule": rule,
-        "checks": {k: bool(v) for k, v in checks.items()},
-        "numbers": _plain(dict(numbers)),
-        "figure": figure,
-    }
-    # optional fields are written only when given, so older results stay byte for byte the same
-    if guarantees is not None:
-        failed = [k for k, v in guarantees.items() if not bool(v)]
+
+    id: str
+    checks: Mapping[str, bool]
+    rule: str
+    numbers: Mapping[str, Any] = field(default_factory=dict)
+    figure: str | None = None
+    guarantees: Mapping[str, bool] | None = None
+    headline: Headline | None = None
+    paper: str | None = None
+    title: str | None = None
+
+    def __post_init__(self) -> None:
+        verdict_from_checks(self.checks)  # refuses a claim without checks
+        failed = [k for k, v in (self.guarantees or {}).items() if not bool(v)]
         if failed:
-            raise GuaranteeFailed(f"claim {claim_id}: guarantee(s) {', '.join(failed)} do not hold")
-        result["guarantees"] = {k: True for k in guarantees}
-    if headline is not None:
-        missing = [k for k in ("name", "value") if k not in headline]
-        if missing:
-            raise ValueError(f"claim {claim_id}: headline lacks {', '.join(missing)}")
-        result["headline"] = _plain(dict(headline))
-    if paper is not None:
-        result["paper"] = paper
-    if title is not None:
-        result["title"] = title
-    return result
+            raise GuaranteeFailed(f"claim {self.id}: guarantee(s) {', '.join(failed)} do not hold")
+        if self.headline is not None and not isinstance(self.headline, Headline):
+            raise TypeError(f"claim {self.id}: headline must be a Headline (headline_number), got {self.headline!r}")
+        plain = {"checks": {k: bool(v) for k, v in self.checks.items()}, "numbers": _plain(dict(self.numbers)),
+                 "guarantees": None if self.guarantees is None else {k: True for k in self.guarantees}}
+        for name, value in plain.items():
+            object.__setattr__(self, name, value)
+
+    @property
+    def verdict(self) -> str:
+        """``"reproduced"`` (every check holds), ``"partly"`` (some do) or ``"not reproduced"`` (none does)."""
+        return verdict_from_checks(self.checks)
+
+    def replace(self, **changes: Any) -> ClaimResult:
+        """A copy with ``changes`` (e.g. the ``numbers``, ``figure`` and ``headline`` a notebook adds)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> dict[str, Any]:
+        """The claim as ``results.json`` holds it: ``id, verdict, rule, checks, numbers, figure``, then
+        ``guarantees, headline, paper, title`` where given (so results without them read as before)."""
+        out = {k: getattr(self, k) for k in _REQUIRED}
+        out |= {k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None}
+        if self.headline is not None:
+            out["headline"] = self.headline.to_json()
+        return copy.deepcopy(out)  # the result stays frozen
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ClaimResult:
+        """Read one claim written by :meth:`to_json`.
+
+        Raises
+        ------
+        ValueError
+            If a key is missing or unknown, the verdict is not one of :data:`VERDICTS` or not the one its
+            checks imply, a guarantee is false (a file edited by hand, or written by another program), or the
+            headline lacks its name or value.
+        """
+        cid = data.get("id")
+        missing = [k for k in _REQUIRED if k not in data]
+        unknown = sorted(set(data) - {*_REQUIRED, *_OPTIONAL})
+        if missing or unknown:
+            raise ValueError(f"claim {cid!r}: keys missing {missing}, unknown {unknown}")
+        if data["verdict"] not in VERDICTS:
+            raise ValueError(f"claim {cid!r} has verdict {data['verdict']!r}")
+        if not all((data.get("guarantees") or {}).values()):
+            raise ValueError(f"claim {cid!r} has a failed guarantee")
+        fields = {k: v for k, v in data.items() if k != "verdict"}
+        if data.get("headline") is not None:
+            fields["headline"] = Headline.from_json(data["headline"])
+        claim = cls(**fields)
+        if claim.verdict != data["verdict"]:
+            raise ValueError(f"claim {cid!r}: verdict {data['verdict']!r} is not the one its checks imply "
+                             f"({claim.verdict!r})")
+        return claim
+
+
+@dataclass(frozen=True)
+class Results:
+    """One task's ``results.json``: its claims, typed, and its free-form ``metrics``.
+
+    Attributes
+    ----------
+    task, profile : str
+        The task that wrote it and the profile it ran.
+    claims : tuple of ClaimResult
+        In the order written; IDs are unique.
+    metrics : mapping
+        What later tasks or the reader need beside the claims (JSON values).
+    created : str
+        ISO time stamp of the write (empty when not recorded).
+    """
+
+    task: str
+    profile: str
+    claims: tuple[ClaimResult, ...] = ()
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+    created: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "claims", tuple(self.claims))
+        ids = [c.id for c in self.claims]
+        if len(ids) != len(set(ids)):
+            raise ValueError(f"duplicate claim IDs in results: {ids}")
+
+    def __iter__(self) -> Iterator[ClaimResult]:
+        return iter(self.claims)
+
+    def claim(self, claim_id: str) -> ClaimResult:
+        """The claim ``claim_id``; a :class:`KeyError` naming the task and the IDs it has when absent."""
+        for c in self.claims:
+            if c.id == claim_id:
+                return c
+        raise KeyError(f"task {self.task!r} reports no claim {claim_id!r} (it has {[c.id for c in self.claims]})")
+
+    def to_json(self) -> dict[str, Any]:
+        """The file's content: ``task, profile, created, claims, metrics``."""
+        return {"task": self.task, "profile": self.profile, "created": self.created,
+                "claims": [c.to_json() for c in self.claims], "metrics": _plain(dict(self.metrics))}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Results:
+        """Read what :meth:`to_json` wrote (see :meth:`ClaimResult.from_json` for the errors)."""
+        for key in ("task", "profile", "claims"):
+            if key not in data:
+                raise ValueError(f"lacks the key {key!r}")
+        return cls(task=data["task"], profile=data["profile"], created=data.get("created", ""),
+                   claims=tuple(ClaimResult.from_json(c) for c in data["claims"]), metrics=data.get("metrics", {}))
 
 
 def write_results(
@@ -184,32 +330,44 @@ def write_results(
     *,
     task: str,
     profile: str,
-    claims: Sequence[Mapping[str, Any]],
+    claims: Sequence[ClaimResult],
     metrics: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``results.json`` for one task atomically (temp file + rename).
 
     Returns the path written.
+
+    Raises
+    ------
+    TypeError
+        If a claim is not a :class:`ClaimResult`.
+    ValueError
+        If two claims share an ID.
     """
-    ids = [c["id"] for c in claims]
-    if len(ids) != len(set(ids)):
-        raise ValueError(f"duplicate claim IDs in results: {ids}")
-    payload = {
-        "task": task,
-        "profile": profile,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "claims": [_plain(dict(c)) for c in claims],
-        "metrics": _plain(dict(metrics or {})),
-    }
+    wrong = [type(c).__name__ for c in claims if not isinstance(c, ClaimResult)]
+    if wrong:
+        raise TypeError(f"write_results takes ClaimResult claims, got {wrong}")
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    results = Results(task=task, profile=profile, claims=tuple(claims), metrics=metrics or {}, created=created)
     path = Path(out_dir) / RESULTS_FILENAME
     with atomic_write(path, "w") as fh:
-        json.dump(payload, fh, indent=2, sort_keys=False)
+        json.dump(results.to_json(), fh, indent=2, sort_keys=False)
         fh.write("\n")
     return path
 
 
-def read_results(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read and minimally validate a results JSON written by :func:`write_results`."""
+def read_results(path: str | os.PathLike[str]) -> Results:
+    """Read and validate a results JSON written by :func:`write_results` (find a claim with
+    :meth:`Results.claim`).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    ValueError
+        If it is not valid JSON, lacks ``task``, ``profile`` or ``claims``, or a claim is invalid
+        (see :meth:`ClaimResult.from_json`).
+    """
     p = Path(path)
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
@@ -217,12 +375,7 @@ def read_results(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise
     except (OSError, ValueError) as exc:
         raise ValueError(f"results file {p} is not valid JSON: {exc}") from exc
-    for key in ("task", "profile", "claims"):
-        if key not in data:
-            raise ValueError(f"results file {p} lacks the key {key!r}")
-    for c in data["claims"]:
-        if c.get("verdict") not in VERDICTS:
-            raise ValueError(f"results file {p}: claim {c.get('id')!r} has verdict {c.get('verdict')!r}")
-        if not all((c.get("guarantees") or {}).values()):
-            raise ValueError(f"results file {p}: claim {c.get('id')!r} has a failed guarantee")
-    return data
+    try:
+        return Results.from_json(data)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"results file {p}: {exc}") from exc

@@ -39,13 +39,13 @@ def test_task_runs_in_smoke_profile(smoke_outputs: SmokeOutputs, task: str) -> N
     assert (out / f"{task}.ipynb").is_file()
 
     results = read_results(out / RESULTS_FILENAME)  # also checks every verdict is a valid one
-    assert results["task"] == task and results["profile"] == PROFILE
-    reported = {c["id"]: c for c in results["claims"]}
+    assert results.task == task and results.profile == PROFILE
+    reported = {c.id: c for c in results}
     missing = [cid for cid in spec_task.claims if cid not in reported]
     assert not missing, f"{task}: results.json lacks the declared claims {missing}"
     for cid in spec_task.claims:
         claim = reported[cid]
-        assert claim["verdict"] in VERDICTS
-        assert claim["checks"], f"{cid} has no checks"
-        if claim.get("figure"):
-            assert (out / claim["figure"]).is_file(), f"{cid}: figure {claim['figure']} missing"
+        assert claim.verdict in VERDICTS
+        assert claim.checks, f"{cid} has no checks"
+        if claim.figure:
+            assert (out / claim.figure).is_file(), f"{cid}: figure {claim.figure} missing"

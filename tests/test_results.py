@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnlib.results import VERDICTS, claim_result, verdict_from_checks
+from fnnlib.results import VERDICTS, ClaimResult, verdict_from_checks
 
 
 @pytest.mark.parametrize(("checks", "verdict"), [
@@ -24,8 +24,8 @@ def test_a_claim_without_checks_has_no_verdict() -> None:
         verdict_from_checks({})
 
 
-def test_claim_result_carries_the_derived_verdict() -> None:
-    entry = claim_result("S2", checks={"smaller": True, "better": False}, numbers={"err": 0.5},
-                         rule="err_fb < err_node", figure="figures/fig4f.png")
-    assert entry["verdict"] == "partly"
-    assert entry["figure"] == "figures/fig4f.png"
+def test_a_claim_result_carries_the_derived_verdict() -> None:
+    entry = ClaimResult("S2", checks={"smaller": True, "better": False}, numbers={"err": 0.5},
+                        rule="err_fb < err_node", figure="figures/fig4f.png")
+    assert entry.verdict == "partly" and entry.to_json()["verdict"] == "partly"
+    assert entry.figure == "figures/fig4f.png"

@@ -1,4 +1,5 @@
-r"""The rules of claims B1 (gains tuned from data) and B2 (seeds), fixed before any of their numbers exist.
+r"""The rules of claims B1 (gains tuned from data), B2 (seeds) and B3 (the scoreboard), fixed before any of their
+numbers exist.
 
 B1: the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11), learned from training data by
 gradient descent through the differentiable cascade (``fnnlib.tune_gains``), predict (or fly) better than
@@ -16,19 +17,22 @@ Per setting, with ``errors[setting][predictor]`` one error per unit (lower is be
 
 A *win* of A over B is :func:`fnnlib.stats.paired_win`: A is lower in at least S - 1 of S units **and**
 the 90 % t-interval of the mean paired difference lies below 0. All checks true: *reproduced*; some:
-*partly*; none: *not reproduced* (:func:`fnnlib.claim_result`). B1 has no guarantee.
+*partly*; none: *not reproduced* (:class:`fnnlib.ClaimResult`). B1 has no guarantee.
+
+B2 (every comparison over seeds) and B3 (the scoreboard is computed from the runs) are judged by the
+scoreboard over every task's results (:func:`b2`, :func:`b3`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
+from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number
 from fnnlib.stats import paired_win
 
-__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b2"]
+__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b2", "b3"]
 
 KALMAN_FACTOR = 2.0
 """How much worse than the Kalman filter the tuned gains may be, unit by unit (check 3)."""
@@ -63,8 +67,8 @@ def _checked(errors: Errors) -> dict[str, dict[str, np.ndarray]]:
     return out
 
 
-def b1(errors: Errors) -> dict[str, Any]:
-    """B1's checks (see the module docstring), ready for :func:`fnnlib.claim_result` (``**b1(errors)``).
+def b1(errors: Errors) -> ClaimResult:
+    """B1's checks (see the module docstring); the notebook adds its numbers (``b1(errors).replace(numbers=...)``).
 
     Parameters
     ----------
@@ -74,7 +78,7 @@ def b1(errors: Errors) -> dict[str, Any]:
 
     Returns
     -------
-    dict
+    ClaimResult
         ``checks`` (``"<setting>: tuned beats hand"``, ``"<setting>: tuned beats open loop"``,
         ``"<setting>: tuned within 2x Kalman"``, the last two where that predictor is given),
         ``guarantees`` (none) and ``rule`` (the rule in words).
@@ -88,11 +92,14 @@ def b1(errors: Errors) -> dict[str, Any]:
             S = e["tuned"].size
             checks[f"{setting}: tuned within {KALMAN_FACTOR:g}x Kalman"] = (
                 int((e["tuned"] <= KALMAN_FACTOR * e["kalman"]).sum()) >= S - 1)
-    return {"checks": checks, "guarantees": {},
-            "rule": ("per setting: the tuned (L, beta) win (lower in >= S-1 of S paired units and the 90 % interval "
-                     "of the mean paired difference below 0) over the hand-tuned gains and, where given, over the "
-                     f"open-loop model; where a Kalman filter is given, tuned <= {KALMAN_FACTOR:g}x its error in all "
-                     "units but one")}
+    return ClaimResult(
+        "B1",
+        checks=checks,
+        guarantees={},
+        rule=("per setting: the tuned (L, beta) win (lower in >= S-1 of S paired units and the 90 % interval "
+              "of the mean paired difference below 0) over the hand-tuned gains and, where given, over the "
+              f"open-loop model; where a Kalman filter is given, tuned <= {KALMAN_FACTOR:g}x its error in all "
+              "units but one"))
 
 
 def b1_paired(errors: Errors) -> dict[str, dict]:
@@ -105,7 +112,7 @@ MIN_SEEDS = 5
 """B2's least number of independent seeds (or paired units) behind a claim's headline (issue 15: at least 5)."""
 
 
-def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MIN_SEEDS) -> dict[str, Any]:
+def b2(headlines: Mapping[str, Headline | None], *, min_seeds: int = MIN_SEEDS) -> ClaimResult:
     """B2 (every comparison over several seeds, with spread shown), computed by the scoreboard from the runs.
 
     ``headlines`` maps each judged claim ID (B2 and B3 aside) to its headline
@@ -117,17 +124,56 @@ def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MI
     2. ``every_claim_shows_a_spread``: every judged claim's headline is per seed (``n >= 2``).
 
     Guarantee (by construction of ``headline_number``): a per-seed headline carries its spread.
+    Headline: the fraction of judged claims whose headline has a seed count ``n``.
     """
     if not headlines:
         raise ValueError("B2 needs the judged claims' headlines")
-    n = {cid: (h or {}).get("n") for cid, h in headlines.items()}
+    n = {cid: None if h is None else h.n for cid, h in headlines.items()}
     seeded = {cid: k for cid, k in n.items() if k is not None and k >= 2}
     single = sorted(cid for cid in n if cid not in seeded)
     few = sorted(cid for cid, k in seeded.items() if k < min_seeds)
-    return {"checks": {f"per_seed_headlines_over_>={min_seeds}_seeds": bool(seeded) and not few,
-                       "every_claim_shows_a_spread": not single},
-            "guarantees": {"spread_with_every_per_seed_headline":
-                           all("spread" in (headlines[cid] or {}) for cid in seeded)},
-            "numbers": {"seeds_per_claim": n, "claims_with_fewer_seeds": few, "claims_without_spread": single},
-            "rule": f"every judged claim's headline is per seed (n >= 2, with its spread) and every per-seed "
-                    f"headline rests on >= {min_seeds} seeds or paired units (computed by the scoreboard)"}
+    return ClaimResult(
+        "B2",
+        checks={f"per_seed_headlines_over_>={min_seeds}_seeds": bool(seeded) and not few,
+                "every_claim_shows_a_spread": not single},
+        guarantees={"spread_with_every_per_seed_headline":
+                    all(headlines[cid].spread is not None for cid in seeded)},
+        numbers={"seeds_per_claim": n, "claims_with_fewer_seeds": few, "claims_without_spread": single},
+        rule=f"every judged claim's headline is per seed (n >= 2, with its spread) and every per-seed "
+             f"headline rests on >= {min_seeds} seeds or paired units (computed by the scoreboard)",
+        headline=headline_number("judged claims with a per-seed headline",
+                                 sum(bool(k) for k in n.values()) / len(headlines)),
+        paper="the paper shows single runs",
+        title="every comparison over seeds, spread shown")
+
+
+def b3(listed: Collection[str], reported: Sequence[ClaimResult], *, tasks_with_results: int,
+       expected: Collection[str]) -> ClaimResult:
+    """B3 (the scoreboard page is computed from the runs), judged by the scoreboard.
+
+    ``listed``: the claim IDs of the claims file; ``reported``: every claim a task reported (B2 included);
+    ``tasks_with_results``: how many result sets there are; ``expected``: the IDs the tasks declare.
+
+    Checks (each fails on a plausible run): some task has results; every expected claim has a verdict, i.e.
+    no task failed or was skipped. Guarantees (bookkeeping, shown apart and never counted): every reported
+    ID is listed; every verdict is the one its checks imply (by construction: a :class:`ClaimResult` derives
+    its verdict, and reading a results file refuses a stored verdict that differs).
+
+    Raises
+    ------
+    GuaranteeFailed
+        Naming the reported IDs that the claims file does not list.
+    """
+    ids = {c.id for c in reported}
+    unknown = sorted(ids - set(listed))
+    if unknown:
+        raise GuaranteeFailed(f"claim B3: IDs not in the claims file {unknown}")
+    missing = sorted(set(expected) - ids)
+    return ClaimResult(
+        "B3",
+        checks={"results_found": tasks_with_results > 0, "every_declared_claim_reported": not missing},
+        guarantees={"ids_known": not unknown, "verdicts_follow_checks": True},
+        numbers={"tasks_with_results": tasks_with_results, "claims_reported": len(reported),
+                 "claims_listed": len(set(listed)), "claims_not_reported": missing},
+        rule="some task has results and every claim a task declares has a verdict (checks); every reported ID "
+             "is in the claims file and every verdict equals the one its checks imply (guarantees: bookkeeping)")

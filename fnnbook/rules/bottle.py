@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, beats, per_seed
+from fnnlib.results import ClaimResult
 
-Rule = dict[str, Any]
 
 
 def _throws(value: Any, name: str) -> np.ndarray:
@@ -23,7 +23,7 @@ def _throws(value: Any, name: str) -> np.ndarray:
     return arr
 
 
-def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> Rule:
+def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> ClaimResult:
     """O1 (Fig. 6): feedback < neural ODE < drag model in 0.5 s position error.
 
     ``feedback``, ``neural_ode``: (throws, seeds); ``drag`` (throws,) or (throws, 1): the fitted drag model
@@ -41,19 +41,24 @@ def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> Rule:
         checks |= {"feedback<neural_ode over seeds": beats(fb.mean(0), nn.mean(0)),
                    "neural_ode<drag over seeds": beats(nn.mean(0), np.full(S, dr.mean()))}
     n = fb.shape[0]
-    return {"checks": checks, "guarantees": {},
-            "rule": f"a < b when lower on >= {n - 1} of the {n} throws and the 90 % interval of the mean paired "
-                    "difference excludes 0" + (f"; and the same over {S} seeds on the mean over throws" if S > 1
-                                               else "; one seed (single trained network)")}
+    return ClaimResult(
+        "O1",
+        checks=checks,
+        guarantees={},
+        rule=f"a < b when lower on >= {n - 1} of the {n} throws and the 90 % interval of the mean paired "
+             "difference excludes 0" + (f"; and the same over {S} seeds on the mean over throws" if S > 1
+                                        else "; one seed (single trained network)"))
 
 
 def o2(*, acc_rmse_feedback: Value, acc_rmse_neural_ode: Value, error_feedback: Value, travel: float,
-       overlap_fraction: float = 0.1) -> Rule:
+       overlap_fraction: float = 0.1) -> ClaimResult:
     """O2 (Figs. S2, S3): the feedback's learned accelerations are closer to the measured ones than the neural
     ODE's, and its predicted positions almost overlap the truth (mean error < ``overlap_fraction`` of the
     distance flown in 0.5 s, in every seed)."""
-    return {"checks": {"feedback_acc_closer": beats(acc_rmse_feedback, acc_rmse_neural_ode),
-                       "positions_overlap": bool((per_seed(error_feedback) < overlap_fraction * travel).all())},
-            "guarantees": {},
-            "rule": "feedback acceleration RMSE beats the neural ODE's; mean feedback error < "
-                    f"{overlap_fraction:.0%} of the distance flown in 0.5 s in every seed"}
+    return ClaimResult(
+        "O2",
+        checks={"feedback_acc_closer": beats(acc_rmse_feedback, acc_rmse_neural_ode),
+                "positions_overlap": bool((per_seed(error_feedback) < overlap_fraction * travel).all())},
+        guarantees={},
+        rule="feedback acceleration RMSE beats the neural ODE's; mean feedback error < "
+             f"{overlap_fraction:.0%} of the distance flown in 0.5 s in every seed")

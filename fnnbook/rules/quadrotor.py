@@ -1,35 +1,28 @@
 r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out (issue 15).
 
-Each rule returns a :class:`Rule`: ``checks`` decide the verdict and each can fail on a plausible run;
+Each rule returns a :class:`~fnnlib.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
+plausible run;
 ``guarantees`` hold by construction or by a theorem whose constants are measured on the same run, and never
 count. Comparisons over trained networks (and disturbances) are paired and decided by
 :func:`fnnlib.stats.paired_win` (lower is better: a win holds in at least S - 1 of S pairs and the 90 %
-t-interval of the mean paired difference excludes 0). The notebooks pass ``checks``, ``guarantees`` and
-``numbers`` on to :func:`fnnlib.results.claim_result`.
+t-interval of the mean paired difference excludes 0). Q3-Q5 are judged per setting (``label``, e.g. the cost
+variant); the notebook joins the settings into one claim. A rule without guarantees leaves them ``None``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, NamedTuple
 
 import numpy as np
 from torch import Tensor
 
 from fnnlib.mpc.experiment import SIX
+from fnnlib.results import ClaimResult
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["SIX", "Rule", "count_trainable", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
+__all__ = ["SIX", "count_trainable", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
            "q5_adaptive", "q6_training_cost"]
-
-
-class Rule(NamedTuple):
-    """What a rule returns: the verdict's checks, the guarantees apart, and the numbers behind both."""
-
-    checks: dict[str, bool]
-    guarantees: dict[str, bool]
-    numbers: dict[str, Any]
 
 
 def _paired(values: Mapping[str, Sequence[float]], names: Iterable[str]) -> dict[str, np.ndarray]:
@@ -52,7 +45,7 @@ def _wins(v: Mapping[str, np.ndarray], pairs: Iterable[tuple[str, str]], label: 
     return checks, stats
 
 
-def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> Rule:
+def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> ClaimResult:
     """Q1: training converges for every one of at least ``min_members`` random initialisations (Fig. A).
 
     ``member_loss`` (epochs + 1, E): row 0 before training. Checks: at least ``min_members`` members; every
@@ -64,10 +57,13 @@ def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> Rule:
         raise ValueError(f"member_loss must be a finite (epochs + 1, members) array, got shape {loss.shape}")
     checks = {f"at least {min_members} initialisations": loss.shape[1] >= min_members,
               **convergence_checks(loss, loss.shape[0] - 1)}
-    return Rule(checks, {}, {"final_over_initial": (loss[-1] / loss[0]).tolist(), "final_loss": loss[-1].tolist()})
+    return ClaimResult("Q1", checks=checks, numbers={"final_over_initial": (loss[-1] / loss[0]).tolist(),
+                                                    "final_loss": loss[-1].tolist()},
+                       rule=f"at least {min_members} initialisations; final <= 10 % of initial and flat over the last "
+                            "10 % of epochs for each; max/min final <= 2")
 
 
-def q2_prediction(rel: Mapping[str, Mapping[str, float]], *, tol: float = 0.10) -> Rule:
+def q2_prediction(rel: Mapping[str, Mapping[str, float]], *, tol: float = 0.10) -> ClaimResult:
     """Q2: the learned model predicts all 12 states of the long validation flights (Figs. S4-S7).
 
     ``rel[model][group]``: relative RMSE per state group (p, v, Theta, omega) for ``"neural ODE"`` and
@@ -79,10 +75,12 @@ def q2_prediction(rel: Mapping[str, Mapping[str, float]], *, tol: float = 0.10) 
         raise ValueError(f"need the groups p, v, Theta, omega, got {sorted(nn_)}")
     checks = {f"neural ODE: relative RMSE <= {100 * tol:g} % for p, v, Theta and omega": all(v <= tol for v in nn_.values()),
               "neural ODE below nominal for p and v": all(nn_[g] < nom[g] for g in ("p", "v"))}
-    return Rule(checks, {}, {name: {g: float(v) for g, v in r.items()} for name, r in rel.items()})
+    numbers = {name: {g: float(v) for g, v in r.items()} for name, r in rel.items()}
+    return ClaimResult("Q2", checks=checks, numbers=numbers,
+                       rule=f"relative RMSE per state group <= {100 * tol:g} %; below the nominal model for p and v")
 
 
-def q3_tracking(rmse: Mapping[str, Sequence[float]], *, label: str) -> Rule:
+def q3_tracking(rmse: Mapping[str, Sequence[float]], *, label: str) -> ClaimResult:
     """Q3 (Fig. 7): FNN tracks best of the six; Neural < Nomi; MLP worse than Neural. Paired over runs.
 
     ``rmse[model]``: mean per-axis tracking RMSE, one value per (trained network, disturbance), in the same
@@ -91,18 +89,22 @@ def q3_tracking(rmse: Mapping[str, Sequence[float]], *, label: str) -> Rule:
     v = _paired(rmse, SIX)
     pairs = [("FNN", m) for m in SIX if m != "FNN"] + [("Neural", "Nomi"), ("Neural", "MLP")]
     checks, stats = _wins(v, pairs, label)
-    return Rule(checks, {}, {"paired": stats, "mean": {n: float(x.mean()) for n, x in v.items()}})
+    mean = {n: float(x.mean()) for n, x in v.items()}
+    return ClaimResult("Q3", checks=checks, numbers={"paired": stats, "mean": mean},
+                       rule=f"{label}: FNN paired-beats each of the other five; Neural beats Nomi and MLP")
 
 
-def q4_prediction(acc_rmse: Mapping[str, Sequence[float]], *, label: str) -> Rule:
+def q4_prediction(acc_rmse: Mapping[str, Sequence[float]], *, label: str) -> ClaimResult:
     """Q4 (Fig. S8): the first-step acceleration prediction is best with FNN, among the six. Paired over runs."""
     v = _paired(acc_rmse, SIX)
     checks, stats = _wins(v, [("FNN", m) for m in SIX if m != "FNN"], label)
-    return Rule(checks, {}, {"paired": stats, "mean": {n: float(x.mean()) for n, x in v.items()}})
+    mean = {n: float(x.mean()) for n, x in v.items()}
+    return ClaimResult("Q4", checks=checks, numbers={"paired": stats, "mean": mean},
+                       rule=f"{label}: FNN's first-step acceleration error paired-beats each of the other five")
 
 
 def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[float], *, label: str,
-                rel_tol: float = 0.25, min_inside: float = 0.95) -> Rule:
+                rel_tol: float = 0.25, min_inside: float = 0.95) -> ClaimResult:
     r"""Q5 (Fig. S14): AdapFNN is comparable to FNN with a slightly larger RMSE; Theorem 2's ball holds.
 
     Checks (paired over runs): AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs; AdapFNN's mean
@@ -117,8 +119,11 @@ def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[f
               f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)": float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
     guarantees = {f"{label}: Theorem 2 ball holds >= {100 * min_inside:g} % after the transient, every run":
                   bool(inside.size > 0 and (inside >= min_inside).all())}
-    return Rule(checks, guarantees, {"within_fraction": float(within.mean()), "mean": {n: float(x.mean()) for n, x in v.items()},
-                                     "theorem2_inside_min": float(inside.min()) if inside.size else None})
+    numbers = {"within_fraction": float(within.mean()), "mean": {n: float(x.mean()) for n, x in v.items()},
+               "theorem2_inside_min": float(inside.min()) if inside.size else None}
+    return ClaimResult("Q5", checks=checks, guarantees=guarantees, numbers=numbers,
+                       rule=f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN in >= S - 1 of S runs and its mean "
+                            "RMSE >= FNN's; Theorem 2's ball is a guarantee")
 
 
 def count_trainable(tensors: Iterable[Tensor]) -> int:
@@ -126,7 +131,7 @@ def count_trainable(tensors: Iterable[Tensor]) -> int:
     return int(sum(t.numel() for t in tensors if t.requires_grad))
 
 
-def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> Rule:
+def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> ClaimResult:
     """Q6: the linear feedback needs no training. The training time is reported, not judged.
 
     ``n_trainable_feedback`` is counted on the feedback object (:func:`count_trainable`); the paper's 30 min
@@ -134,6 +139,10 @@ def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> Rul
     """
     if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model):
         raise ValueError(f"bad inputs: {n_trainable_feedback}, {seconds_per_model}")
-    return Rule({"linear feedback has no trainable parameter (counted on the feedback object)": int(n_trainable_feedback) == 0},
-                {}, {"trainable_feedback_parameters": int(n_trainable_feedback),
-                     "seconds_per_model_50_epochs": float(seconds_per_model)})
+    return ClaimResult(
+        "Q6",
+        checks={"linear feedback has no trainable parameter (counted on the feedback object)":
+                int(n_trainable_feedback) == 0},
+        numbers={"trainable_feedback_parameters": int(n_trainable_feedback),
+                 "seconds_per_model_50_epochs": float(seconds_per_model)},
+        rule="no trainable parameter on the feedback object; the time is reported without a baseline to judge it")

@@ -1,7 +1,8 @@
 """Rules of the Sec. 3 claims S1-S11 (the linear feedback, Eqs. (7)-(8), (11), Theorem 1, App. A.2-A.7).
 
 Every function takes measured numbers (one value, or one value per seed where the section runs seeds) and
-returns ``{"checks", "guarantees", "rule"}`` for :func:`fnnlib.results.claim_result`.
+returns the claim's :class:`~fnnlib.results.ClaimResult` (checks, guarantees, rule); the notebook adds its
+numbers.
 
 Over S seeds (the spiral task's networks, claim B2) two kinds of checks are judged:
 
@@ -20,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, at_most, beats, every_seed, most_seeds, per_seed, seeds_note
+from fnnlib.results import ClaimResult
 
-Rule = dict[str, Any]
 
 
 def _rows(value: Any, name: str) -> np.ndarray:
@@ -48,28 +49,32 @@ def _same_seeds(name: str, *arrays: np.ndarray) -> int:
     return sizes.pop()
 
 
-def s1(nominal_rate_rel_rmse: Value, *, tol: float = 0.05) -> Rule:
+def s1(nominal_rate_rel_rmse: Value, *, tol: float = 0.05) -> ClaimResult:
     """S1 (Fig. 4c): the neural ODE fits the nominal change rate: relative RMSE <= ``tol`` in every seed."""
-    return {"checks": {f"nominal_rate_rel_rmse<={tol:g}": at_most(nominal_rate_rel_rmse, tol)},
-            "guarantees": {},
-            "rule": f"relative change-rate RMSE on the nominal trajectory <= {tol:.0%} in every seed"
-                    + seeds_note(nominal_rate_rel_rmse)}
+    return ClaimResult(
+        "S1",
+        checks={f"nominal_rate_rel_rmse<={tol:g}": at_most(nominal_rate_rel_rmse, tol)},
+        guarantees={},
+        rule=f"relative change-rate RMSE on the nominal trajectory <= {tol:.0%} in every seed"
+             + seeds_note(nominal_rate_rel_rmse))
 
 
 def s2(*, nominal_rel: Value, test_rel_neural_ode: Value, rate_neural_ode: Value, rate_feedback: Value,
-       err_N_neural_ode: Value, err_N_feedback: Value, N: int, degrade_factor: float = 2.0) -> Rule:
+       err_N_neural_ode: Value, err_N_feedback: Value, N: int, degrade_factor: float = 2.0) -> ClaimResult:
     """S2 (Fig. 4d-f): the neural ODE degrades on the test spiral; the feedback (Eqs. (7)-(8)) fixes the
     change rate and the ``N``-step error (cascade of Sec. 3.3 against the Euler rollout)."""
     scaled = degrade_factor * per_seed(nominal_rel)
-    return {"checks": {"neural_ode_degrades": beats(scaled, test_rel_neural_ode),
-                       "feedback_rate_better": beats(rate_feedback, rate_neural_ode),
-                       f"feedback_N{N}_better": beats(err_N_feedback, err_N_neural_ode)},
-            "guarantees": {},
-            "rule": f"test relative rate error > {degrade_factor:g}x the nominal one; feedback beats the neural ODE "
-                    f"in change-rate RMSE and in mean {N}-step error" + seeds_note(rate_feedback)}
+    return ClaimResult(
+        "S2",
+        checks={"neural_ode_degrades": beats(scaled, test_rel_neural_ode),
+                "feedback_rate_better": beats(rate_feedback, rate_neural_ode),
+                f"feedback_N{N}_better": beats(err_N_feedback, err_N_neural_ode)},
+        guarantees={},
+        rule=f"test relative rate error > {degrade_factor:g}x the nominal one; feedback beats the neural ODE "
+             f"in change-rate RMSE and in mean {N}-step error" + seeds_note(rate_feedback))
 
 
-def s3(*, noise_std: Sequence[float], decay: Any, no_decay: Any, neural_ode: Any, judged_std: float) -> Rule:
+def s3(*, noise_std: Sequence[float], decay: Any, no_decay: Any, neural_ode: Any, judged_std: float) -> ClaimResult:
     """S3 (Fig. 4g): under measurement noise the gain decay Eq. (11) lowers the multi-step error.
 
     ``decay``, ``no_decay``, ``neural_ode``: mean ``N``-step errors, one row per entry of ``noise_std``
@@ -90,13 +95,16 @@ def s3(*, noise_std: Sequence[float], decay: Any, no_decay: Any, neural_ode: Any
     checks = {f"decay_better_at_std_{s:g}": beats(d[i], nd[i]) for i, s in enumerate(stds) if s > 0}
     checks[f"decay_better_than_neural_ode_at_std_{judged_std:g}"] = beats(d[ij], nn[ij])
     checks[f"decay_helps_more_at_std_{judged_std:g}_than_noise_free"] = bool(gain[ij] > gain[i0])
-    return {"checks": checks, "guarantees": {},
-            "rule": "decay beats no decay at every noise level > 0; at the judged level "
-                    f"{judged_std:g} the decayed cascade beats the open-loop neural ODE, and decay's relative gain "
-                    "1 - decay/no-decay is larger there than without noise" + seeds_note(d[0])}
+    return ClaimResult(
+        "S3",
+        checks=checks,
+        guarantees={},
+        rule="decay beats no decay at every noise level > 0; at the judged level "
+             f"{judged_std:g} the decayed cascade beats the open-loop neural ODE, and decay's relative gain "
+             "1 - decay/no-decay is larger there than without noise" + seeds_note(d[0]))
 
 
-def s4(*, err_neural_ode: Any, err_feedback: Any, N: int) -> Rule:
+def s4(*, err_neural_ode: Any, err_feedback: Any, N: int) -> ClaimResult:
     """S4 (Fig. 4h): the feedback cascade beats the neural ODE at every horizon ``n <= N`` and ``n <= N_max``.
 
     ``err_*``: mean errors for horizons 1..N_max, one row per horizon (one column per seed).
@@ -105,15 +113,17 @@ def s4(*, err_neural_ode: Any, err_feedback: Any, N: int) -> Rule:
     if nn.shape != fb.shape or not 1 <= N <= nn.shape[0]:
         raise ValueError(f"S4: need matching curves with N <= N_max, got {nn.shape}, {fb.shape}, N={N}")
     win = [beats(fb[n], nn[n]) for n in range(nn.shape[0])]
-    return {"checks": {f"feedback_better_all_N<={N}": all(win[:N]),
-                       f"feedback_better_all_N<={nn.shape[0]}": all(win)},
-            "guarantees": {},
-            "rule": "feedback mean error beats the neural ODE's at every horizon" + seeds_note(fb[0])}
+    return ClaimResult(
+        "S4",
+        checks={f"feedback_better_all_N<={N}": all(win[:N]),
+                f"feedback_better_all_N<={nn.shape[0]}": all(win)},
+        guarantees={},
+        rule="feedback mean error beats the neural ODE's at every horizon" + seeds_note(fb[0]))
 
 
 def s5(*, ball_x: Value, ball_f: Value, feedback_x: Value, feedback_f: Value, continuous_x: Value,
        continuous_f: Value, ratio_x: Value, ratio_f: Value, L_sweep: Sequence[float], limit_x: Any,
-       ball_x_sweep: Any, conservative_ratio: float = 2.0) -> Rule:
+       ball_x_sweep: Any, conservative_ratio: float = 2.0) -> ClaimResult:
     """S5 (Theorem 1, Fig. S1).
 
     Every number is one per seed (each seed's own gamma, balls and errors); ``limit_x`` and ``ball_x_sweep``
@@ -130,21 +140,22 @@ def s5(*, ball_x: Value, ball_f: Value, feedback_x: Value, feedback_f: Value, co
     S = _same_seeds("S5", bx, bf, fx, ff, cx, cf, rx, rf, lim, ball_sw)
     if len(L_sweep) != lim.shape[0] or ball_sw.shape != lim.shape or list(L_sweep) != sorted(L_sweep):
         raise ValueError("S5: L_sweep (increasing), limit_x and ball_x_sweep (one row per gain) must match")
-    return {"checks": {"feedback_x_in_ball": most_seeds(fx <= bx), "feedback_f_in_ball": most_seeds(ff <= bf),
-                       f"conservative_ratio>={conservative_ratio:g}": most_seeds(np.minimum(rx, rf)
-                                                                                 >= conservative_ratio),
-                       "inside_gamma_over_L_at_every_L": most_seeds((lim <= ball_sw).all(axis=0)),
-                       "limit_decreases_with_L": most_seeds((lim[1:] < lim[:-1]).all(axis=0))},
-            "guarantees": {"continuous_x_in_ball (Theorem 1)": every_seed(cx <= bx),
-                           "continuous_f_in_ball (Theorem 1)": every_seed(cf <= bf)},
-            "rule": "after t = 5/lambda_min the feedback network's errors inside Theorem 1's balls; ball / measured "
-                    f"limit (max over the last half) >= {conservative_ratio:g} for both; over the L sweep the limit "
-                    "inside gamma/L and decreasing. The continuous observer inside the balls is the theorem itself "
-                    "(gamma measured on each run): a guarantee in every seed, not a check" + _threshold_note(S)}
+    return ClaimResult(
+        "S5",
+        checks={"feedback_x_in_ball": most_seeds(fx <= bx), "feedback_f_in_ball": most_seeds(ff <= bf),
+                f"conservative_ratio>={conservative_ratio:g}": most_seeds(np.minimum(rx, rf) >= conservative_ratio),
+                "inside_gamma_over_L_at_every_L": most_seeds((lim <= ball_sw).all(axis=0)),
+                "limit_decreases_with_L": most_seeds((lim[1:] < lim[:-1]).all(axis=0))},
+        guarantees={"continuous_x_in_ball (Theorem 1)": every_seed(cx <= bx),
+                    "continuous_f_in_ball (Theorem 1)": every_seed(cf <= bf)},
+        rule="after t = 5/lambda_min the feedback network's errors inside Theorem 1's balls; ball / measured "
+             f"limit (max over the last half) >= {conservative_ratio:g} for both; over the L sweep the limit "
+             "inside gamma/L and decreasing. The continuous observer inside the balls is the theorem itself "
+             "(gamma measured on each run): a guarantee in every seed, not a check" + _threshold_note(S))
 
 
 def s6(*, rho: Sequence[float], diverges: Any, max_err: Any, iss_bound: Any, switches: Value, rho_lo: Value,
-       rho_hi: Value, rate: Any, rate_tolerance: float = 0.005) -> Rule:
+       rho_hi: Value, rate: Any, rate_tolerance: float = 0.005) -> ClaimResult:
     """S6 (App. A.2, Eq. (25)).
 
     ``diverges``, ``max_err``, ``iss_bound``, ``rate``: one row per gain (entry of ``rho``), one column per
@@ -168,19 +179,21 @@ def s6(*, rho: Sequence[float], diverges: Any, max_err: Any, iss_bound: Any, swi
     S = _same_seeds("S6", div, err, iss, rate_a, sw, lo, hi)
     stable, unstable = rho_a < 1, rho_a > 1
     on_rate = np.abs(rate_a - rho_a[:, None]) <= rate_tolerance
-    return {"checks": {"bounded_below_rho_1": most_seeds((~div[stable]).all(axis=0)),
-                       "diverges_above_rho_1": most_seeds(div[unstable].all(axis=0)),
-                       "transition_at_rho_1": most_seeds((sw == 1) & (lo <= 1.0) & (1.0 <= hi)),
-                       "growth_rate_is_rho": most_seeds(div.any(axis=0) & (on_rate | ~div).all(axis=0))},
-            "guarantees": {"under_iss_bound_below_rho_1 (Eq. (25))": every_seed(
-                (err <= iss * (1 + 1e-9))[stable].all(axis=0))},
-            "rule": "growth factor > 10 = diverges; rho < 1 bounded, rho > 1 diverges; one switch along rho between "
-                    f"adjacent grid values rho_lo <= 1 <= rho_hi; diverging runs grow at rate rho (+-{rate_tolerance:g}). "
-                    "Under the ISS bound for rho < 1 is Eq. (25) itself: a guarantee in every seed" + _threshold_note(S)}
+    return ClaimResult(
+        "S6",
+        checks={"bounded_below_rho_1": most_seeds((~div[stable]).all(axis=0)),
+                "diverges_above_rho_1": most_seeds(div[unstable].all(axis=0)),
+                "transition_at_rho_1": most_seeds((sw == 1) & (lo <= 1.0) & (1.0 <= hi)),
+                "growth_rate_is_rho": most_seeds(div.any(axis=0) & (on_rate | ~div).all(axis=0))},
+        guarantees={"under_iss_bound_below_rho_1 (Eq. (25))":
+                    every_seed((err <= iss * (1 + 1e-9))[stable].all(axis=0))},
+        rule="growth factor > 10 = diverges; rho < 1 bounded, rho > 1 diverges; one switch along rho between "
+             f"adjacent grid values rho_lo <= 1 <= rho_hi; diverging runs grow at rate rho (+-{rate_tolerance:g}). "
+             "Under the ISS bound for rho < 1 is Eq. (25) itself: a guarantee in every seed" + _threshold_note(S))
 
 
 def s7(*, outward_noisy: Value, outward_noise_free: Value, levels_interior_min_noisy: Value, n_levels: int,
-       best_gain_noisy: Any, best_gain_noise_free: Any, trend_fraction: float = 0.8) -> Rule:
+       best_gain_noisy: Any, best_gain_noise_free: Any, trend_fraction: float = 0.8) -> ClaimResult:
     """S7 (Fig. 3): error grows with uncertainty; under noise it falls then rises with the gain.
 
     ``outward_*`` and ``levels_interior_min_noisy``: one per seed; ``best_gain_*``: one row per level, one
@@ -195,18 +208,20 @@ def s7(*, outward_noisy: Value, outward_noise_free: Value, levels_interior_min_n
         raise ValueError("S7: one best gain per level (rows), with and without noise")
     S = _same_seeds("S7", on, oc, inner, bn, bc)
     trend = f"(frac>={trend_fraction:g})"
-    return {"checks": {f"error_grows_with_uncertainty_noisy{trend}": most_seeds(on >= trend_fraction),
-                       f"error_grows_with_uncertainty_noise_free{trend}": most_seeds(oc >= trend_fraction),
-                       "noisy_error_falls_then_rises_with_gain(most_levels)": most_seeds(inner > n_levels / 2),
-                       "noise_lowers_the_best_gain(most_levels)": most_seeds((bn < bc).sum(axis=0) > n_levels / 2)},
-            "guarantees": {},
-            "rule": f"fraction of outward steps from the nominal level with growing error >= {trend_fraction:g} (noisy "
-                    "and noise-free maps); noisy error minimal at an interior gain for more than half the levels; and "
-                    "the noisy best gain below the noise-free one at more than half the levels (the noise mechanism)"
-                    + _threshold_note(S)}
+    return ClaimResult(
+        "S7",
+        checks={f"error_grows_with_uncertainty_noisy{trend}": most_seeds(on >= trend_fraction),
+                f"error_grows_with_uncertainty_noise_free{trend}": most_seeds(oc >= trend_fraction),
+                "noisy_error_falls_then_rises_with_gain(most_levels)": most_seeds(inner > n_levels / 2),
+                "noise_lowers_the_best_gain(most_levels)": most_seeds((bn < bc).sum(axis=0) > n_levels / 2)},
+        guarantees={},
+        rule=f"fraction of outward steps from the nominal level with growing error >= {trend_fraction:g} (noisy "
+             "and noise-free maps); noisy error minimal at an interior gain for more than half the levels; and "
+             "the noisy best gain below the noise-free one at more than half the levels (the noise mechanism)"
+             + _threshold_note(S))
 
 
-def s8(*, rate_neural_ode: Any, rate_feedback: Any, err_N_neural_ode: Any, err_N_feedback: Any) -> Rule:
+def s8(*, rate_neural_ode: Any, rate_feedback: Any, err_N_neural_ode: Any, err_N_feedback: Any) -> ClaimResult:
     """S8 (Fig. S9): the linear feedback beats the neural ODE at every residual level, both metrics.
 
     One row per residual level, one column per seed; at each level "beats" is the paired win over seeds.
@@ -218,14 +233,16 @@ def s8(*, rate_neural_ode: Any, rate_feedback: Any, err_N_neural_ode: Any, err_N
     if not r_nn.shape == r_fb.shape == e_nn.shape == e_fb.shape:
         raise ValueError("S8: one row per residual level for every metric, with the same seeds")
     n = r_nn.shape[0]
-    return {"checks": {f"rate_better_at_all_{n}_levels": all(beats(r_fb[j], r_nn[j]) for j in range(n)),
-                       f"multistep_better_at_all_{n}_levels": all(beats(e_fb[j], e_nn[j]) for j in range(n))},
-            "guarantees": {},
-            "rule": "feedback beats the neural ODE at every residual level (change-rate RMSE; mean N-step error)"
-                    + seeds_note(r_fb[0])}
+    return ClaimResult(
+        "S8",
+        checks={f"rate_better_at_all_{n}_levels": all(beats(r_fb[j], r_nn[j]) for j in range(n)),
+                f"multistep_better_at_all_{n}_levels": all(beats(e_fb[j], e_nn[j]) for j in range(n))},
+        guarantees={},
+        rule="feedback beats the neural ODE at every residual level (change-rate RMSE; mean N-step error)"
+             + seeds_note(r_fb[0]))
 
 
-def s9(*, beta: Sequence[float], rmse_noisy: Any, rmse_noise_free: Any) -> Rule:
+def s9(*, beta: Sequence[float], rmse_noisy: Any, rmse_noise_free: Any) -> ClaimResult:
     """S9 (Fig. S11): over the decay grid the noisy RMSE first falls, then rises.
 
     ``rmse_*``: one row per beta, one column per seed.  Checks: (i) the RMSE at the second beta beats the one
@@ -240,17 +257,19 @@ def s9(*, beta: Sequence[float], rmse_noisy: Any, rmse_noise_free: Any) -> Rule:
         raise ValueError("S9: an increasing beta grid of >= 3 values with one RMSE row per value, noisy and noise-free")
     S = _same_seeds("S9", rn, rc)
     best, best_clean = rn.argmin(axis=0), rc.argmin(axis=0)
-    return {"checks": {"falls_at_first": beats(rn[1], rn[0]),
-                       "interior_minimum": most_seeds((0 < best) & (best < b.size - 1)),
-                       "noise_raises_the_best_beta": most_seeds(b[best] > b[best_clean])},
-            "guarantees": {},
-            "rule": "noisy N-step RMSE lower at the second beta than at beta = 0; smallest at an interior beta of the "
-                    "paper's grid; the noisy best beta larger than the noise-free one (the noise mechanism)"
-                    + _threshold_note(S)}
+    return ClaimResult(
+        "S9",
+        checks={"falls_at_first": beats(rn[1], rn[0]),
+                "interior_minimum": most_seeds((0 < best) & (best < b.size - 1)),
+                "noise_raises_the_best_beta": most_seeds(b[best] > b[best_clean])},
+        guarantees={},
+        rule="noisy N-step RMSE lower at the second beta than at beta = 0; smallest at an interior beta of the "
+             "paper's grid; the noisy best beta larger than the noise-free one (the noise mechanism)"
+             + _threshold_note(S))
 
 
 def s10(*, state: Mapping[str, Value], rate: Mapping[str, Value], multistep: Mapping[str, Value],
-        rate_err_after_feedback: Value, rate_err_after_neural_ode: Value, settle_threshold: float = 0.5) -> Rule:
+        rate_err_after_feedback: Value, rate_err_after_neural_ode: Value, settle_threshold: float = 0.5) -> ClaimResult:
     """S10 (Fig. S12): a step change of the dynamics is attenuated quickly.
 
     ``state``, ``rate``, ``multistep``: for the observer error, the change-rate error and the ``N``-step
@@ -272,14 +291,17 @@ def s10(*, state: Mapping[str, Value], rate: Mapping[str, Value], multistep: Map
             (peak > band) & (time <= settle_threshold))
     checks["rate_error_below_neural_ode_after"] = beats(rate_err_after_feedback, rate_err_after_neural_ode)
     S = _same_seeds("S10", *(np.zeros(s) for s in seeds), per_seed(rate_err_after_feedback))
-    return {"checks": checks, "guarantees": {},
-            "rule": "observer, change-rate and N-step errors (the last indexed by the prediction's start) each leave "
-                    f"the band (2x the steady level) after the switch and are back inside within {settle_threshold:g} s; "
-                    "the feedback rate error then below the neural ODE's" + _threshold_note(S)}
+    return ClaimResult(
+        "S10",
+        checks=checks,
+        guarantees={},
+        rule="observer, change-rate and N-step errors (the last indexed by the prediction's start) each leave "
+             f"the band (2x the steady level) after the switch and are back inside within {settle_threshold:g} s; "
+             "the feedback rate error then below the neural ODE's" + _threshold_note(S))
 
 
 def s11(*, design: Mapping[str, Value], equiv: Mapping[str, Value], same_data: bool,
-        rate_settled: Mapping[str, Value], rival_factor: float = 2.0) -> Rule:
+        rate_settled: Mapping[str, Value], rival_factor: float = 2.0) -> ClaimResult:
     """S11 (design card): the linear feedback beside a Luenberger observer and a Kalman filter, same data.
 
     ``rate_settled``: observer name -> settled change-rate RMSE, one per seed (each seed's network and noise
@@ -300,17 +322,19 @@ def s11(*, design: Mapping[str, Value], equiv: Mapping[str, Value], same_data: b
             "rho_linear_feedback", "rho_luenberger", "rho_kalman_steady")
     d = {k: per_seed(design[k]) for k in used}  # other entries (context) are ignored
     e = {k: per_seed(equiv[k]) for k in ("max_rel_diff_lowpass", "max_rel_diff_luenberger")}
-    return {"checks": {"feedback_rate_beats_neural_ode": beats(lf, nn),
-                       f"feedback_rate_within_{rival_factor:g}x_best_observer": most_seeds(lf <= rival_factor * best_rival)},
-            "guarantees": {
-                "same_data_all_metrics": bool(same_data),
-                "luenberger_poles_as_placed": every_seed(d["luenberger_pole_err"] <= 1e-8),
-                "kalman_gain_equals_dlqe": every_seed((np.maximum(d["kf_L_rel_err_vs_dlqe"], d["kf_P_rel_err_vs_dlqe"])
-                                                       <= 1e-8) & (d["filterpy_K_rel_err"] <= 1e-6)),
-                "linear_feedback_is_luenberger": every_seed(np.maximum(e["max_rel_diff_lowpass"],
-                                                                       e["max_rel_diff_luenberger"]) <= 1e-5),
-                "error_dynamics_stable": every_seed(np.maximum.reduce([d["rho_linear_feedback"], d["rho_luenberger"],
-                                                                       d["rho_kalman_steady"]]) < 1)},
-            "rule": "settled change-rate RMSE on the noisy data: linear feedback beats the neural ODE, and is within "
-                    f"{rival_factor:g}x the best Luenberger/Kalman observer; the design identities (poles, dlqe, "
-                    "Luenberger twin, stability, same data) are guarantees in every seed" + _threshold_note(S)}
+    return ClaimResult(
+        "S11",
+        checks={"feedback_rate_beats_neural_ode": beats(lf, nn),
+                f"feedback_rate_within_{rival_factor:g}x_best_observer": most_seeds(lf <= rival_factor * best_rival)},
+        guarantees={
+         "same_data_all_metrics": bool(same_data),
+         "luenberger_poles_as_placed": every_seed(d["luenberger_pole_err"] <= 1e-8),
+         "kalman_gain_equals_dlqe": every_seed((np.maximum(d["kf_L_rel_err_vs_dlqe"], d["kf_P_rel_err_vs_dlqe"])
+                                                <= 1e-8) & (d["filterpy_K_rel_err"] <= 1e-6)),
+         "linear_feedback_is_luenberger": every_seed(np.maximum(e["max_rel_diff_lowpass"],
+                                                                e["max_rel_diff_luenberger"]) <= 1e-5),
+         "error_dynamics_stable": every_seed(np.maximum.reduce([d["rho_linear_feedback"], d["rho_luenberger"],
+                                                                d["rho_kalman_steady"]]) < 1)},
+        rule="settled change-rate RMSE on the noisy data: linear feedback beats the neural ODE, and is within "
+             f"{rival_factor:g}x the best Luenberger/Kalman observer; the design identities (poles, dlqe, "
+             "Luenberger twin, stability, same data) are guarantees in every seed" + _threshold_note(S))

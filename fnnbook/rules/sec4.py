@@ -1,7 +1,7 @@
 """Rules of the Sec. 4 claims D1-D4 (the neural feedback of Eq. (12), Alg. 1, Fig. 5, S10).
 
-Every function takes measured numbers (one value, or one value per seed) and returns
-``{"checks", "guarantees", "rule"}`` for :func:`fnnlib.results.claim_result`.
+Every function takes measured numbers (one value, or one value per seed) and returns the claim's
+:class:`~fnnlib.results.ClaimResult` (checks, guarantees, rule); the notebook adds its numbers.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, beats, most_seeds, per_seed, seeds_note
+from fnnlib.results import ClaimResult
 
-Rule = dict[str, Any]
 
 
 def _in_most(value: Value) -> str:
@@ -21,21 +21,23 @@ def _in_most(value: Value) -> str:
     return f"in >= {max(1, n - 1)} of {n} seeds" if n > 1 else "in the run"
 
 
-def d1(*, rel_dr: Value, rel_nominal: Value, factor: float = 1.5) -> Rule:
+def d1(*, rel_dr: Value, rel_nominal: Value, factor: float = 1.5) -> ClaimResult:
     """D1 (Fig. 5a): the domain-randomized neural ODE's relative change-rate RMSE on the nominal task exceeds
     ``factor`` x the nominal model's.
 
     Win-type, paired per seed (seed s: the spiral task's network s against the domain-randomized model of
     initialisation s): ``factor`` x nominal beats the domain-randomized model by :func:`fnnlib.stats.paired_win`.
     """
-    return {"checks": {"dr_worse_than_nominal_by_factor": beats(factor * per_seed(rel_nominal), rel_dr)},
-            "guarantees": {},
-            "rule": f"domain-randomized relative change-rate RMSE on the nominal task > {factor:g}x the nominal "
-                    "neural ODE's" + seeds_note(rel_dr)}
+    return ClaimResult(
+        "D1",
+        checks={"dr_worse_than_nominal_by_factor": beats(factor * per_seed(rel_nominal), rel_dr)},
+        guarantees={},
+        rule=f"domain-randomized relative change-rate RMSE on the nominal task > {factor:g}x the nominal "
+             "neural ODE's" + seeds_note(rel_dr))
 
 
 def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool | Sequence[bool],
-       factor: float = 1.5) -> Rule:
+       factor: float = 1.5) -> ClaimResult:
     """D2 (Fig. 5b): the frozen neural ODE + neural feedback keeps the nominal accuracy.
 
     Threshold-type, per seed (fixed before the multi-seed run): the relative RMSE of seed s's frozen
@@ -47,25 +49,29 @@ def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool | Sequ
     if not flags or not all(isinstance(f, bool) for f in flags):
         raise ValueError(f"D2: frozen_unchanged must be a bool or one bool per seed, got {frozen_unchanged!r}")
     ok = most_seeds(per_seed(rel_feedback) <= factor * per_seed(rel_nominal))
-    return {"checks": {"feedback_within_factor_of_nominal": ok},
-            "guarantees": {"frozen_neural_ode_unchanged": all(flags)},
-            "rule": f"frozen neural ODE + neural feedback relative RMSE <= {factor:g}x the nominal neural ODE's "
-                    f"{_in_most(rel_feedback)}; every frozen model bitwise unchanged is a guarantee"
-                    + seeds_note(rel_feedback)}
+    return ClaimResult(
+        "D2",
+        checks={"feedback_within_factor_of_nominal": ok},
+        guarantees={"frozen_neural_ode_unchanged": all(flags)},
+        rule=f"frozen neural ODE + neural feedback relative RMSE <= {factor:g}x the nominal neural ODE's "
+             f"{_in_most(rel_feedback)}; every frozen model bitwise unchanged is a guarantee"
+             + seeds_note(rel_feedback))
 
 
-def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1) -> Rule:
+def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1) -> ClaimResult:
     """D3 (Fig. 5c): the feedback's training loss converges.
 
     Threshold-type, per seed (fixed before the multi-seed run): each in at least S-1 of the S seeds, the mean
     Eq. (12) loss of the last 10 % of the iterations < ``ratio_max`` x that of the first 10 %, and the last 10 %
     flat (the least-squares trend over them < ``flat`` of their mean).
     """
-    return {"checks": {"last_below_ratio_of_first": most_seeds(per_seed(ratio) < ratio_max),
-                       "last_window_flat": most_seeds(np.abs(per_seed(trend)) < flat)},
-            "guarantees": {},
-            "rule": f"mean loss of the last 10 % < {ratio_max:g}x that of the first 10 %, and the last 10 % change "
-                    f"by < {flat:.0%} of their mean, each {_in_most(ratio)}" + seeds_note(ratio)}
+    return ClaimResult(
+        "D3",
+        checks={"last_below_ratio_of_first": most_seeds(per_seed(ratio) < ratio_max),
+                "last_window_flat": most_seeds(np.abs(per_seed(trend)) < flat)},
+        guarantees={},
+        rule=f"mean loss of the last 10 % < {ratio_max:g}x that of the first 10 %, and the last 10 % change "
+             f"by < {flat:.0%} of their mean, each {_in_most(ratio)}" + seeds_note(ratio))
 
 
 def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any) -> list[bool]:
@@ -79,7 +85,7 @@ def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any) -> list[boo
 
 def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback: Any, err_N_neural_ode: Any,
        heldout_rate_neural_feedback: Any, heldout_rate_neural_ode: Any, heldout_err_N_neural_feedback: Any,
-       heldout_err_N_neural_ode: Any, N: int) -> Rule:
+       heldout_err_N_neural_ode: Any, N: int) -> ClaimResult:
     """D4 (Fig. S10): the neural feedback beats the neural ODE at the 12 residual levels of S8 -- which sit next
     to the domain-randomized training cases -- and at held-out levels away from them.
 
@@ -90,8 +96,10 @@ def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback
     s8 = _both_better(rate_neural_feedback, rate_neural_ode, err_N_neural_feedback, err_N_neural_ode)
     held = _both_better(heldout_rate_neural_feedback, heldout_rate_neural_ode, heldout_err_N_neural_feedback,
                         heldout_err_N_neural_ode)
-    return {"checks": {f"all_{len(s8)}_S8_levels": all(s8), f"all_{len(held)}_heldout_levels": all(held)},
-            "guarantees": {},
-            "rule": f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error at every S8 "
-                    f"level ({sum(s8)} of {len(s8)}) and at every held-out level ({sum(held)} of {len(held)})"
-                    + seeds_note(np.asarray(rate_neural_feedback, dtype=float).reshape(len(s8), -1)[0])}
+    return ClaimResult(
+        "D4",
+        checks={f"all_{len(s8)}_S8_levels": all(s8), f"all_{len(held)}_heldout_levels": all(held)},
+        guarantees={},
+        rule=f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error at every S8 "
+             f"level ({sum(s8)} of {len(s8)}) and at every held-out level ({sum(held)} of {len(held)})"
+             + seeds_note(np.asarray(rate_neural_feedback, dtype=float).reshape(len(s8), -1)[0]))

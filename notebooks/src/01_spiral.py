@@ -267,14 +267,15 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 # %% [tags: nbval-check-output]
 e_nn_m, e_fb_m = e_nn.mean(-1).tolist(), e_fb.mean(-1).tolist()
 claims = [
-    F.claim_result("S1", **sec3.s1(s1_rel), numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},
-                   figure=fig_c, headline=F.headline_number("nominal change-rate relative RMSE", s1_rel)),
-    F.claim_result("S2", **sec3.s2(nominal_rel=s1_rel, test_rel_neural_ode=s2["test_rate_rel_rmse_neural_ode"],
-                                   rate_neural_ode=rate_nn, rate_feedback=rate_fb, err_N_neural_ode=e_nn_m,
-                                   err_N_feedback=e_fb_m, N=N),
-                   numbers=s2, figure=fig_def,
-                   headline=F.headline_number(f"N={N} error, feedback / neural ODE",
-                                              [f / n for f, n in zip(e_fb_m, e_nn_m)]))]
+    sec3.s1(s1_rel).replace(
+        numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},
+        figure=fig_c, headline=F.headline_number("nominal change-rate relative RMSE", s1_rel)),
+    sec3.s2(nominal_rel=s1_rel, test_rel_neural_ode=s2["test_rate_rel_rmse_neural_ode"],
+            rate_neural_ode=rate_nn, rate_feedback=rate_fb, err_N_neural_ode=e_nn_m,
+            err_N_feedback=e_fb_m, N=N).replace(
+        numbers=s2, figure=fig_def,
+        headline=F.headline_number(f"N={N} error, feedback / neural ODE",
+                                   [f / n for f, n in zip(e_fb_m, e_nn_m)]))]
 
 # %%
 i_j = noise_sweep.index(noise_std)
@@ -282,19 +283,19 @@ every = max(1, N_max // 10)
 mean_fb, mean_nn = err_N_fb.mean(1), err_N_nn.mean(1)
 first_not_better = int(Ns[mean_fb >= mean_nn][0]) if (mean_fb >= mean_nn).any() else None
 claims += [
-    F.claim_result("S3", **sec3.s3(noise_std=sweep["noise_std"], decay=sweep["feedback_decay"],
-                                   no_decay=sweep["feedback_no_decay"], neural_ode=sweep["neural_ode"],
-                                   judged_std=noise_std),
-                   numbers=sweep | judged, figure=fig_g,
-                   headline=F.headline_number(f"N={N} error at noise std {noise_std:g}, decay / no decay",
-                                              [d / n for d, n in zip(sweep["feedback_decay"][i_j],
-                                                                     sweep["feedback_no_decay"][i_j])])),
-    F.claim_result("S4", **sec3.s4(err_neural_ode=err_N_nn, err_feedback=err_N_fb, N=N),
-                   numbers={"N": Ns[::every], "neural_ode": err_N_nn[::every], "feedback": err_N_fb[::every],
-                            "first_N_feedback_not_better_on_the_mean": first_not_better},
-                   figure=fig_h,
-                   headline=F.headline_number(f"N={N_max} error, feedback / neural ODE",
-                                              (err_N_fb[-1] / err_N_nn[-1]).tolist())),
+    sec3.s3(noise_std=sweep["noise_std"], decay=sweep["feedback_decay"],
+            no_decay=sweep["feedback_no_decay"], neural_ode=sweep["neural_ode"],
+            judged_std=noise_std).replace(
+        numbers=sweep | judged, figure=fig_g,
+        headline=F.headline_number(f"N={N} error at noise std {noise_std:g}, decay / no decay",
+                                   [d / n for d, n in zip(sweep["feedback_decay"][i_j],
+                                                          sweep["feedback_no_decay"][i_j])])),
+    sec3.s4(err_neural_ode=err_N_nn, err_feedback=err_N_fb, N=N).replace(
+        numbers={"N": Ns[::every], "neural_ode": err_N_nn[::every], "feedback": err_N_fb[::every],
+                 "first_N_feedback_not_better_on_the_mean": first_not_better},
+        figure=fig_h,
+        headline=F.headline_number(f"N={N_max} error, feedback / neural ODE",
+                                   (err_N_fb[-1] / err_N_nn[-1]).tolist())),
 ]
 
 # %%
@@ -302,4 +303,4 @@ F.write_results(out, task="spiral", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "ms_per_iteration": history.ms_per_iteration,
                          "cascade_seconds_N_max": cascade_s, "seeds": seeds})
 for c in claims:
-    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
+    print(f"{c.id}: {c.verdict:15s} {c.checks}")

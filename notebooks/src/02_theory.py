@@ -245,19 +245,19 @@ fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
 # %% [tags: nbval-check-output]
 fb, ct = "feedback", "continuous"
 claims = [
-    F.claim_result("S5", **sec3.s5(ball_x=s5["ball_x"], ball_f=s5["ball_f"],
-                                   feedback_x=s5[f"{fb}_max_x_after_transient"],
-                                   feedback_f=s5[f"{fb}_max_f_after_transient"],
-                                   continuous_x=s5[f"{ct}_max_x_after_transient"],
-                                   continuous_f=s5[f"{ct}_max_f_after_transient"], ratio_x=s5["ratio_x"],
-                                   ratio_f=s5["ratio_f"], L_sweep=L_sweep, limit_x=sweep_L["limit_x"],
-                                   ball_x_sweep=sweep_L["ball_x"], conservative_ratio=conservative_ratio),
-                   numbers=s5 | {"L_sweep": sweep_L}, figure=fig_s1,
-                   headline=F.headline_number("ball / measured limit of |x~|", s5["ratio_x"])),
-    F.claim_result("S6", **sec3.s6(rho=rho.tolist(), diverges=s6["diverges"], max_err=s6["max_err"],
-                                   iss_bound=s6["iss_bound_max"], switches=switches, rho_lo=rho_lo, rho_hi=rho_hi,
-                                   rate=s6["measured_rate"], rate_tolerance=rate_tolerance),
-                   numbers=s6 | {"transition": [rho_lo, rho_hi], "class_switches": switches}, figure=fig_s6),
+    sec3.s5(ball_x=s5["ball_x"], ball_f=s5["ball_f"],
+            feedback_x=s5[f"{fb}_max_x_after_transient"],
+            feedback_f=s5[f"{fb}_max_f_after_transient"],
+            continuous_x=s5[f"{ct}_max_x_after_transient"],
+            continuous_f=s5[f"{ct}_max_f_after_transient"], ratio_x=s5["ratio_x"],
+            ratio_f=s5["ratio_f"], L_sweep=L_sweep, limit_x=sweep_L["limit_x"],
+            ball_x_sweep=sweep_L["ball_x"], conservative_ratio=conservative_ratio).replace(
+        numbers=s5 | {"L_sweep": sweep_L}, figure=fig_s1,
+        headline=F.headline_number("ball / measured limit of |x~|", s5["ratio_x"])),
+    sec3.s6(rho=rho.tolist(), diverges=s6["diverges"], max_err=s6["max_err"],
+            iss_bound=s6["iss_bound_max"], switches=switches, rho_lo=rho_lo, rho_hi=rho_hi,
+            rate=s6["measured_rate"], rate_tolerance=rate_tolerance).replace(
+        numbers=s6 | {"transition": [rho_lo, rho_hi], "class_switches": switches}, figure=fig_s6),
 ]
 
 # %%
@@ -265,4 +265,4 @@ F.write_results(out, task="theory", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "gamma": gamma.tolist(), "gamma_d": gamma_d.tolist(),
                          "ratio_x": s5["ratio_x"], "ratio_f": s5["ratio_f"]})
 for c in claims:
-    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
+    print(f"{c.id}: {c.verdict:15s} {c.checks}")

@@ -376,38 +376,38 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 
 # %% [tags: nbval-check-output]
 claims = [
-    F.claim_result("S7", **sec3.s7(outward_noisy=s7["outward_increase_noisy"],
-                                   outward_noise_free=s7["outward_increase_noise_free"],
-                                   levels_interior_min_noisy=s7["levels_with_interior_minimum"], n_levels=len(levels),
-                                   best_gain_noisy=s7["best_gain_noisy_per_level"],
-                                   best_gain_noise_free=s7["best_gain_noise_free_per_level"],
-                                   trend_fraction=trend_fraction),
-                   numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()}, figure=fig_s7,
-                   headline=F.headline_number("levels with an interior best gain, noisy",
-                                              s7["levels_with_interior_minimum"]))]
+    sec3.s7(outward_noisy=s7["outward_increase_noisy"],
+            outward_noise_free=s7["outward_increase_noise_free"],
+            levels_interior_min_noisy=s7["levels_with_interior_minimum"], n_levels=len(levels),
+            best_gain_noisy=s7["best_gain_noisy_per_level"],
+            best_gain_noise_free=s7["best_gain_noise_free_per_level"],
+            trend_fraction=trend_fraction).replace(
+        numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()}, figure=fig_s7,
+        headline=F.headline_number("levels with an interior best gain, noisy",
+                                   s7["levels_with_interior_minimum"]))]
 
 # %%
 claims += [
-    F.claim_result("S8", **sec3.s8(rate_neural_ode=s8["rate_rmse_neural_ode"], rate_feedback=s8["rate_rmse_feedback"],
-                                   err_N_neural_ode=s8[f"mean_err_N{N}_neural_ode"],
-                                   err_N_feedback=s8[f"mean_err_N{N}_feedback"]),
-                   numbers=s8, figure=fig_s8,
-                   headline=F.headline_number("levels where the feedback wins the N-step error",
-                                              s8["levels_multistep_better_per_seed"])),
-    F.claim_result("S9", **sec3.s9(beta=s9["beta"], rmse_noisy=s9["rmse_noisy"], rmse_noise_free=s9["rmse_noise_free"]),
-                   numbers=s9, figure=fig_s9, headline=F.headline_number("best beta with noise", s9["best_beta"]))]
+    sec3.s8(rate_neural_ode=s8["rate_rmse_neural_ode"], rate_feedback=s8["rate_rmse_feedback"],
+            err_N_neural_ode=s8[f"mean_err_N{N}_neural_ode"],
+            err_N_feedback=s8[f"mean_err_N{N}_feedback"]).replace(
+        numbers=s8, figure=fig_s8,
+        headline=F.headline_number("levels where the feedback wins the N-step error",
+                                   s8["levels_multistep_better_per_seed"])),
+    sec3.s9(beta=s9["beta"], rmse_noisy=s9["rmse_noisy"], rmse_noise_free=s9["rmse_noise_free"]).replace(
+        numbers=s9, figure=fig_s9, headline=F.headline_number("best beta with noise", s9["best_beta"]))]
 
 # %%
 claims += [
-    F.claim_result("S10", **sec3.s10(state={"band": s10["band_x"], "peak": s10["peak_x"], "time": s10["time_x"]},
-                                     rate={"band": s10["band_f"], "peak": s10["peak_f"], "time": s10["time_f"]},
-                                     multistep={"band": s10["band_multistep"], "peak": s10["peak_multistep"],
-                                                "time": s10["time_multistep"]},
-                                     rate_err_after_feedback=s10["rate_err_after_feedback"],
-                                     rate_err_after_neural_ode=s10["rate_err_after_neural_ode"],
-                                     settle_threshold=settle_threshold),
-                   numbers=s10, figure=fig_s10,
-                   headline=F.headline_number("change-rate error back in its band after", s10["time_f"], unit="s")),
+    sec3.s10(state={"band": s10["band_x"], "peak": s10["peak_x"], "time": s10["time_x"]},
+             rate={"band": s10["band_f"], "peak": s10["peak_f"], "time": s10["time_f"]},
+             multistep={"band": s10["band_multistep"], "peak": s10["peak_multistep"],
+                        "time": s10["time_multistep"]},
+             rate_err_after_feedback=s10["rate_err_after_feedback"],
+             rate_err_after_neural_ode=s10["rate_err_after_neural_ode"],
+             settle_threshold=settle_threshold).replace(
+        numbers=s10, figure=fig_s10,
+        headline=F.headline_number("change-rate error back in its band after", s10["time_f"], unit="s")),
 ]
 
 # %%
@@ -415,4 +415,4 @@ F.write_results(out, task="ablations", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "nominal_level": centre, "best_beta": s9["best_beta"],
                          "reconverge_s_x": s10["time_x"], "reconverge_s_f": s10["time_f"]})
 for c in claims:
-    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
+    print(f"{c.id}: {c.verdict:15s} {c.checks}")

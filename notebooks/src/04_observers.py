@@ -328,7 +328,7 @@ same_shape = all(r.estimate.x_hat.shape == r.estimate.f_hat.shape == r.z_N.shape
 rate_settled = {name: [tb[name]["rate_rmse_settled"] for tb in tables] for name in ["neural ODE", *rivals]}
 s11 = sec3.s11(design=design, equiv=equiv, rate_settled=rate_settled,
                same_data=finite and same_shape and all(len(tb) == len(obs) for tb, obs in zip(tables, observers)))
-s11["checks"], s11["guarantees"]
+s11.checks, s11.guarantees
 
 # %% [tags: nbval-check-output]
 numbers = {k: design[k] for k in ("luenberger_pole_err", "kf_L_rel_err_vs_dlqe", "filterpy_K_rel_err")}
@@ -337,10 +337,10 @@ numbers |= {"lf_vs_twin_rel_diff": equiv["max_rel_diff_luenberger"], "linear_fee
             "rho_lf_luenberger_kalman": [design[k] for k in ("rho_linear_feedback", "rho_luenberger",
                                                              "rho_kalman_steady")]}
 best_rival = np.min([v for k, v in rate_settled.items() if k not in ("neural ODE", "linear feedback")], axis=0)
-claims = [F.claim_result("S11", **s11, numbers=numbers | {"seeds": seeds}, figure=fig_cmp,
-                         headline=F.headline_number("settled change-rate RMSE, linear feedback / best observer",
-                                                    (np.asarray(rate_settled["linear feedback"]) / best_rival).tolist()))]
+claims = [s11.replace(numbers=numbers | {"seeds": seeds}, figure=fig_cmp,
+                     headline=F.headline_number("settled change-rate RMSE, linear feedback / best observer",
+                                                (np.asarray(rate_settled["linear feedback"]) / best_rival).tolist()))]
 F.write_results(out, task="observers", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "observers": table, "observers_per_seed": tables,
                          "lf_frozen_err_N_mean": lf_frozen_err, **design, **equiv})
-print(f"S11: {claims[0]['verdict']}  {claims[0]['checks']}")
+print(f"S11: {claims[0].verdict}  {claims[0].checks}")

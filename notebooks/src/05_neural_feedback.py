@@ -333,30 +333,30 @@ held_out = {"params": p_flip[far].tolist(), "distance_steps": dist[far].tolist()
 ratio_dr = [d / n for d, n in zip(d12["rel_rmse_dr_neural_ode"], d12["rel_rmse_nominal_neural_ode"])]
 ratio_fb = [f / n for f, n in zip(d12["rel_rmse_neural_feedback"], d12["rel_rmse_nominal_neural_ode"])]
 claims = [
-    F.claim_result("D1", **sec4.d1(rel_dr=d12["rel_rmse_dr_neural_ode"], rel_nominal=d12["rel_rmse_nominal_neural_ode"],
-                                   factor=d1_factor),
-                   numbers=d12, figure=fig_ab,
-                   headline=F.headline_number("nominal rate error, domain-randomized / nominal neural ODE", ratio_dr)),
-    F.claim_result("D2", **sec4.d2(rel_feedback=d12["rel_rmse_neural_feedback"],
-                                   rel_nominal=d12["rel_rmse_nominal_neural_ode"], frozen_unchanged=frozen_unchanged,
-                                   factor=d2_factor),
-                   numbers=d12, figure=fig_ab,
-                   headline=F.headline_number("nominal rate error, neural feedback / nominal neural ODE", ratio_fb))]
+    sec4.d1(rel_dr=d12["rel_rmse_dr_neural_ode"], rel_nominal=d12["rel_rmse_nominal_neural_ode"],
+            factor=d1_factor).replace(
+        numbers=d12, figure=fig_ab,
+        headline=F.headline_number("nominal rate error, domain-randomized / nominal neural ODE", ratio_dr)),
+    sec4.d2(rel_feedback=d12["rel_rmse_neural_feedback"],
+            rel_nominal=d12["rel_rmse_nominal_neural_ode"], frozen_unchanged=frozen_unchanged,
+            factor=d2_factor).replace(
+        numbers=d12, figure=fig_ab,
+        headline=F.headline_number("nominal rate error, neural feedback / nominal neural ODE", ratio_fb))]
 
 # %%
 claims += [
-    F.claim_result("D3", **sec4.d3(ratio=d3["ratio"], trend=d3["last_window_trend_relative"], ratio_max=d3_ratio,
-                                   flat=d3_flat),
-                   numbers=d3, figure=fig_c, headline=F.headline_number("loss, last / first 10 %", d3["ratio"])),
-    F.claim_result("D4", **sec4.d4(rate_neural_feedback=rate["neural_feedback"].T, rate_neural_ode=rate["neural_ode"].T,
-                                   err_N_neural_feedback=ms["neural_feedback"].T, err_N_neural_ode=ms["neural_ode"].T,
-                                   heldout_rate_neural_feedback=rate_h["neural_feedback"].T,
-                                   heldout_rate_neural_ode=rate_h["neural_ode"].T,
-                                   heldout_err_N_neural_feedback=ms_h["neural_feedback"].T,
-                                   heldout_err_N_neural_ode=ms_h["neural_ode"].T, N=N),
-                   numbers=d4 | {"held_out": held_out}, figure=fig_d4,
-                   headline=F.headline_number("S8 levels won in both metrics, per seed",
-                                              d4["levels_both_better_per_seed"])),
+    sec4.d3(ratio=d3["ratio"], trend=d3["last_window_trend_relative"], ratio_max=d3_ratio,
+            flat=d3_flat).replace(
+        numbers=d3, figure=fig_c, headline=F.headline_number("loss, last / first 10 %", d3["ratio"])),
+    sec4.d4(rate_neural_feedback=rate["neural_feedback"].T, rate_neural_ode=rate["neural_ode"].T,
+            err_N_neural_feedback=ms["neural_feedback"].T, err_N_neural_ode=ms["neural_ode"].T,
+            heldout_rate_neural_feedback=rate_h["neural_feedback"].T,
+            heldout_rate_neural_ode=rate_h["neural_ode"].T,
+            heldout_err_N_neural_feedback=ms_h["neural_feedback"].T,
+            heldout_err_N_neural_ode=ms_h["neural_ode"].T, N=N).replace(
+        numbers=d4 | {"held_out": held_out}, figure=fig_d4,
+        headline=F.headline_number("S8 levels won in both metrics, per seed",
+                                   d4["levels_both_better_per_seed"])),
 ]
 
 # %%
@@ -367,5 +367,5 @@ F.write_results(out, task="neural_feedback", profile=profile, claims=claims,
                          "refresh_every": refresh_every, "cascade_seconds": cascade_s,
                          "refresh_seconds": refresh_s})
 for c in claims:
-    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
+    print(f"{c.id}: {c.verdict:15s} {c.checks}")
 print(f"task time (after kernel start): {task_seconds:.1f} s")

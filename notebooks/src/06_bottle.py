@@ -181,25 +181,25 @@ acc_rmse
 travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
 claims = [
-    F.claim_result("O1", **rules.o1(feedback=per_throw["feedback"], neural_ode=per_throw["neural ODE"],
-                                    drag=per_throw["drag model"]),
-                   numbers={"mean_error_m": m, "seeds": seeds,
-                            "std_over_throws_m": {k: v["std_over_throws"] for k, v in summary.items()},
-                            "per_seed_m": {k: v["per_seed"] for k, v in summary.items()},
-                            "per_throw_m": {k: v["per_throw"] for k, v in summary.items()},
-                            "throws_feedback_better": int((gap_cm.mean(1) < 0).sum()), "data": data},
-                   figure=fig_6, headline=F.headline_number("0.5 s error, feedback − neural ODE",
-                                                            gap_cm.mean(0).tolist(), unit="cm"))]
+    rules.o1(feedback=per_throw["feedback"], neural_ode=per_throw["neural ODE"],
+             drag=per_throw["drag model"]).replace(
+        numbers={"mean_error_m": m, "seeds": seeds,
+                 "std_over_throws_m": {k: v["std_over_throws"] for k, v in summary.items()},
+                 "per_seed_m": {k: v["per_seed"] for k, v in summary.items()},
+                 "per_throw_m": {k: v["per_throw"] for k, v in summary.items()},
+                 "throws_feedback_better": int((gap_cm.mean(1) < 0).sum()), "data": data},
+        figure=fig_6, headline=F.headline_number("0.5 s error, feedback − neural ODE",
+                                                 gap_cm.mean(0).tolist(), unit="cm"))]
 
 # %%
 claims += [
-    F.claim_result("O2", **rules.o2(acc_rmse_feedback=acc_rmse["feedback"], acc_rmse_neural_ode=acc_rmse["neural ODE"],
-                                    error_feedback=summary["feedback"]["per_seed"], travel=travel),
-                   numbers={"acc_rmse": acc_rmse, "mean_travel_0.5s_m": travel,
-                            "feedback_mean_error_m": summary["feedback"]["per_seed"], "data": data},
-                   figure=fig_s2, headline=F.headline_number("acceleration RMSE, feedback / neural ODE",
-                                                             [f / n for f, n in zip(acc_rmse["feedback"],
-                                                                                    acc_rmse["neural ODE"])])),
+    rules.o2(acc_rmse_feedback=acc_rmse["feedback"], acc_rmse_neural_ode=acc_rmse["neural ODE"],
+             error_feedback=summary["feedback"]["per_seed"], travel=travel).replace(
+        numbers={"acc_rmse": acc_rmse, "mean_travel_0.5s_m": travel,
+                 "feedback_mean_error_m": summary["feedback"]["per_seed"], "data": data},
+        figure=fig_s2, headline=F.headline_number("acceleration RMSE, feedback / neural ODE",
+                                                  [f / n for f, n in zip(acc_rmse["feedback"],
+                                                                         acc_rmse["neural ODE"])])),
 ]
 
 # %%
@@ -207,4 +207,4 @@ F.write_results(out, task="bottle", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "predict_seconds": predict_s, "drag_k": drag.k,
                          "seeds": seeds})
 for c in claims:
-    print(f"{c['id']}: {c['verdict']:15s} {c['checks']}")
+    print(f"{c.id}: {c.verdict:15s} {c.checks}")

@@ -59,7 +59,6 @@ from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline
 check_notebook_settings("quadrotor_mpc", globals())
 
 # %% [tags: hide-input]
-import json
 from pathlib import Path
 
 import numpy as np
@@ -81,9 +80,9 @@ up = Path(upstream_dirs["quadrotor_learning"])
 residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
 mlp, _ = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()
-member_files = json.loads((up / "results.json").read_text()).get("metrics", {}).get("member_checkpoints")
+member_files = F.read_results(up / F.RESULTS_FILENAME).metrics.get("member_checkpoints")
 if not member_files:
-    raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
+    raise FileNotFoundError(f"{up / F.RESULTS_FILENAME} lists no member_checkpoints: rerun quadrotor_learning")
 members = [(str(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up / fname, expected_kind="AeroResidual") for fname in member_files)]
 kept = [sd for sd, _ in members].index(str(meta_res.get("seed")))  # the network with the lowest validation loss
@@ -351,29 +350,31 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
               if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the runs")
 
 # %%
-def merged(r):
-    """One claim's checks, guarantees and numbers over the cost variants."""
-    return dict(checks={k: v for c in costs for k, v in r[c].checks.items()},
-                guarantees={k: v for c in costs for k, v in r[c].guarantees.items()},
-                numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
-                    k: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for k, rows in table.items() if "context" in k}})
+def merged(r, **fields):
+    """One claim over the cost variants: every variant's checks and guarantees, its numbers by variant."""
+    return r[costs[0]].replace(
+        checks={k: v for c in costs for k, v in r[c].checks.items()},
+        guarantees={k: v for c in costs for k, v in (r[c].guarantees or {}).items()},
+        numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
+            k: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for k, rows in table.items() if "context" in k}},
+        **fields)
 
 
 # %%
 S = len(members) * len(tests)
 claims = [
-    F.claim_result("Q3", **merged(r3), figure=f"figures/tracking_{costs[-1]}.png",
-                   headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
-                   paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
-                   title="MPC tracking with the feedback model", rule=f"paired wins over {S} runs per cost at {u_max_judged:g} N"),
-    F.claim_result("Q4", **merged(r4), figure=f"figures/acc_prediction_{costs[-1]}.png",
-                   headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
-                   paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
-                   title="First-step prediction", rule=f"FNN paired-beats the other five over {S} runs per cost"),
-    F.claim_result("Q5", **merged(r5), figure="figures/adapfnn.png",
-                   headline=F.headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
-                   paper="AdapFNN is comparable to FNN with a slightly larger RMSE (Fig. S14, Theorem 2)",
-                   title="Adaptive feedback network", rule="within 25 % in >= S - 1 runs and mean >= FNN's; Theorem 2 ball a guarantee"),
+    merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
+           headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
+           paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
+           title="MPC tracking with the feedback model", rule=f"paired wins over {S} runs per cost at {u_max_judged:g} N"),
+    merged(r4, figure=f"figures/acc_prediction_{costs[-1]}.png",
+           headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
+           paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
+           title="First-step prediction", rule=f"FNN paired-beats the other five over {S} runs per cost"),
+    merged(r5, figure="figures/adapfnn.png",
+           headline=F.headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
+           paper="AdapFNN is comparable to FNN with a slightly larger RMSE (Fig. S14, Theorem 2)",
+           title="Adaptive feedback network", rule="within 25 % in >= S - 1 runs and mean >= FNN's; Theorem 2 ball a guarantee"),
 ]
 
 # %%
@@ -390,4 +391,4 @@ F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
                          "adapnn_oracle_sweep": {c: {g: flight_row(r) for g, r in runs.items()} for c, runs in oracle.items()},
                          "paired_mean_axis_rmse_m": rmse, "paired_acc_pred_rmse": acc})
 for c in claims:
-    print(c["id"], c["verdict"], c["checks"])
+    print(c.id, c.verdict, c.checks)

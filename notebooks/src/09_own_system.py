@@ -187,7 +187,7 @@ fig_b1 = F.save_figure(fig, out, "own_system_b1")
 # %% [tags: nbval-check-output]
 errors = {"pendulum": {k: [r["errors"][k] for r in pendulum] for k in names},
           "spiral": {k: [r["errors"][k] for r in spiral] for k in names}}
-checks = b1(errors)["checks"]
+checks = b1(errors).checks
 tuned_values = {"pendulum": [{"L": r["L"], "beta": r["beta"]} for r in pendulum],
                 "spiral": [{"L": r["L"], "beta": r["beta"]} for r in spiral]}
 F.write_results(out, task="own_system", profile=profile, claims=[],

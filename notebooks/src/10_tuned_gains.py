@@ -39,7 +39,6 @@ from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline
 check_notebook_settings("tuned_gains", globals())
 
 # %% [tags: hide-input]
-import json
 import time
 from pathlib import Path
 
@@ -52,7 +51,7 @@ from fnnbook.rules import beyond as rules
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
-upstream = {k: json.loads((up[k] / "results.json").read_text()) for k in ("own_system", "bottle", "quadrotor_mpc")}
+upstream = {k: F.read_results(up[k] / F.RESULTS_FILENAME) for k in ("own_system", "bottle", "quadrotor_mpc")}
 ran = {k: upstream_parameters(up[k]) for k in ("bottle", "quadrotor_mpc")}  # what those tasks ran with: their
 # data, hand-tuned gains and flight settings are used as they were, never declared again here
 t_start = time.perf_counter()
@@ -81,7 +80,7 @@ seconds: dict[str, float] = {}
 
 # %% [tags: hide-input]
 b_results, b_ran = upstream["bottle"], ran["bottle"]
-o1 = next(c for c in b_results["claims"] if c["id"] == "O1")["numbers"]
+o1 = b_results.claim("O1").numbers
 if b_ran["data"] == "real":
     b_train, b_test = F.load_bottle(data_dir)
 else:  # the bottle task's synthetic throws, drawn as it draws them
@@ -152,11 +151,11 @@ from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
-q_mpc, m = upstream["quadrotor_mpc"]["metrics"], ran["quadrotor_mpc"]  # m: the flight settings it flew
+q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the flight settings it flew
 quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
 q_rmse, forces = q_mpc["paired_mean_axis_rmse_m"], q_mpc["disturbances"]
 costs = list(q_rmse)
-member_files = json.loads((up["quadrotor_learning"] / "results.json").read_text())["metrics"]["member_checkpoints"]
+member_files = F.read_results(up["quadrotor_learning"] / F.RESULTS_FILENAME).metrics["member_checkpoints"]
 members = [(int(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up["quadrotor_learning"] / f, expected_kind="AeroResidual") for f in member_files)]
 flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
@@ -219,7 +218,7 @@ print("tuned flights with fallbacks: " + ", ".join(f"{cost} {sum(f['fallbacks'] 
 # Units: the 5 seeds of that chapter; predictors: open loop, hand-picked, tuned, Kalman.
 
 # %%
-own = upstream["own_system"]["metrics"]["b1"]
+own = upstream["own_system"].metrics["b1"]
 for k in ("pendulum", "spiral"):
     errors[k], tuned_values[k] = own["errors"][k], own["tuned"][k]
 {k: {p: round(float(np.mean(v)), 4) for p, v in errors[k].items()} for k in ("pendulum", "spiral")}
@@ -244,18 +243,18 @@ fig_b1 = F.save_figure(fig, out, "b1_tuned_vs_hand")
 # %% [tags: nbval-check-output]
 rule = rules.b1(errors)
 paired = rules.b1_paired(errors)
-claims = [F.claim_result("B1", **rule, figure=fig_b1, title="L and beta tuned from data",
-                         numbers={"errors": errors, "paired": paired, "tuned": tuned_values,
-                                  "bottle_tuned_per_seed": tuned_per_seed.tolist(),
-                                  "quadrotor_tuned_flights": tuned_flights},
-                         headline=F.headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
-                                                    float(np.mean(errors["bottle"]["tuned"]) /
-                                                          np.mean(errors["bottle"]["hand"]))),
-                         paper="no number: the paper names the choice of gains as its open problem")]
-for name, ok in rule["checks"].items():
+claims = [rule.replace(figure=fig_b1, title="L and beta tuned from data",
+                      numbers={"errors": errors, "paired": paired, "tuned": tuned_values,
+                               "bottle_tuned_per_seed": tuned_per_seed.tolist(),
+                               "quadrotor_tuned_flights": tuned_flights},
+                      headline=F.headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
+                                                 float(np.mean(errors["bottle"]["tuned"]) /
+                                                       np.mean(errors["bottle"]["hand"]))),
+                      paper="no number: the paper names the choice of gains as its open problem")]
+for name, ok in rule.checks.items():
     print(f"{name:50s} {'holds' if ok else 'fails'}")
 for c in claims:
-    print(f"{c['id']}: {c['verdict']}")
+    print(f"{c.id}: {c.verdict}")
 
 # %%
 seconds["total"] = time.perf_counter() - t_start

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ast
-import json
 import math
 from pathlib import Path
 
@@ -234,7 +233,7 @@ def _upstream(root: Path) -> Path:
         if seed == 0:
             F.save_checkpoint(up / "residual.pt", net, {"seed": seed})
     F.save_checkpoint(up / "mlp.pt", AeroResidual((4,), "tanh").double(), {"seed": 0})
-    (up / "results.json").write_text(json.dumps({"metrics": {"member_checkpoints": names}}))
+    F.write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names})
     return up
 
 

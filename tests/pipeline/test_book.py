@@ -14,7 +14,7 @@ import yaml
 
 from fnnbook import PipelineError, PipelineSpec, load_spec
 from fnnbook.book import assemble_book, build_book
-from fnnlib.results import claim_result, write_results
+from fnnlib.results import ClaimResult, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
 
@@ -95,8 +95,8 @@ def fake_outputs(tmp_path: Path) -> PipelineSpec:
     (out / "figures" / "fig4c.png").write_bytes(_png())
     _executed_notebook(out / "alpha.ipynb")
     write_results(out, task="alpha", profile="paper", claims=[
-        claim_result("S1", checks={"error below 0.1": True}, numbers={"rmse": 0.0421, "n": 1000},
-                     rule="rmse < 0.1", figure="figures/fig4c.png")])
+        ClaimResult("S1", checks={"error below 0.1": True}, numbers={"rmse": 0.0421, "n": 1000},
+                    rule="rmse < 0.1", figure="figures/fig4c.png")])
     return spec
 
 

@@ -6,9 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from fnnbook.scoreboard import (NOT_RUN, headline_of, plot_verdicts, read_claims, render_scoreboard, score_rows,
-                               short_title, verdict_counts)
-from fnnlib.results import GuaranteeFailed, claim_result, headline_number
+from fnnbook.scoreboard import (NOT_RUN, SCOREBOARD_TASK, Claim, headline_of, plot_verdicts, read_claims,
+                               render_scoreboard, score_rows, self_check, short_title, verdict_counts,
+                               with_scoreboard_claims)
+from fnnlib.results import ClaimResult, GuaranteeFailed, Results, headline_number
+
+
+def _results(task: str, *claims: ClaimResult) -> dict[str, Results]:
+    return {task: Results(task=task, profile="smoke", claims=claims)}
 
 CLAIMS = """# What the book must reproduce
 
@@ -70,10 +75,10 @@ def _row_lines(page: str, cid: str) -> tuple[str, str]:
 
 
 def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
-    results = {"spiral": {"task": "spiral", "profile": "smoke", "claims": [
+    results = {"spiral": Results.from_json({"task": "spiral", "profile": "smoke", "claims": [
         {"id": "S1", "verdict": "partly", "rule": "err < 0.1 and fit", "figure": "figures/fig4c.png",
          "checks": {"small error": True, "fits": False},
-         "numbers": {"err": 0.012345, "steps": 50, "curve": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]}}]}}
+         "numbers": {"err": 0.012345, "steps": 50, "curve": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]}}]})}
     rows = score_rows(read_claims(claims_file), results, {"spiral": ["S1", "S2"]})
     assert [(r.claim.id, r.verdict, r.task) for r in rows] == [
         ("S1", "partly", "spiral"), ("S2", NOT_RUN, "spiral"), ("B1", NOT_RUN, None)]
@@ -110,12 +115,12 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
 
 
 def test_scoreboard_row_shows_headline_paper_and_guarantees_apart(claims_file: Path) -> None:
-    entry = claim_result("S1", checks={"fb below node in 4 of 5 seeds": True},
-                         guarantees={"frozen weights unchanged": True},
-                         numbers={"err_fb": [0.1, 0.12, 0.11]}, rule="r",
-                         headline=headline_number("N=50 error, feedback", [0.10, 0.12, 0.11], unit="m"),
-                         paper="4.56 cm vs 4.74 cm", title="feedback fits better")
-    rows = score_rows(read_claims(claims_file), {"spiral": {"claims": [entry]}})
+    entry = ClaimResult("S1", checks={"fb below node in 4 of 5 seeds": True},
+                        guarantees={"frozen weights unchanged": True},
+                        numbers={"err_fb": [0.1, 0.12, 0.11]}, rule="r",
+                        headline=headline_number("N=50 error, feedback", [0.10, 0.12, 0.11], unit="m"),
+                        paper="4.56 cm vs 4.74 cm", title="feedback fits better")
+    rows = score_rows(read_claims(claims_file), _results("spiral", entry))
     s1, body = _row_lines(render_scoreboard(rows, profile="paper", pages={}), "S1")
     assert "[feedback fits better]{.sb-claim}" in s1
     assert "[N=50 error, feedback: **0.11 ± 0.01 m (n = 3 seeds)**]{.sb-ours}" in s1
@@ -127,9 +132,10 @@ def test_scoreboard_row_shows_headline_paper_and_guarantees_apart(claims_file: P
 
 
 def test_headline_of_a_single_value_has_no_spread() -> None:
-    name, text = headline_of({"headline": headline_number("RMSE", 0.0421, unit="cm")})
+    name, text = headline_of(ClaimResult("S1", checks={"a": True}, rule="r",
+                                         headline=headline_number("RMSE", 0.0421, unit="cm")))
     assert (name, text) == ("RMSE", "0.0421 cm")
-    assert headline_of({}) == ("", "")
+    assert headline_of(None) == ("", "")
 
 
 def test_short_title_keeps_the_first_clause() -> None:
@@ -139,7 +145,7 @@ def test_short_title_keeps_the_first_clause() -> None:
 
 
 def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) -> None:
-    results = {"t": {"claims": [claim_result("S1", checks={"a": True}, numbers={}, rule="r")]}}
+    results = _results("t", ClaimResult("S1", checks={"a": True}, numbers={}, rule="r"))
     rows = score_rows(read_claims(claims_file), results)
     assert verdict_counts(rows) == {
         "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, NOT_RUN: 1},
@@ -149,32 +155,38 @@ def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) ->
 
 
 def test_self_check_flags_a_verdict_not_from_its_checks() -> None:
-    from fnnlib.results import claim_result
-    from fnnbook.scoreboard import Claim, self_check
-
     claims = [Claim(id="S1", group="g", text="t", figure=""), Claim(id="B3", group="g", text="t", figure="")]
-    good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")
-    assert self_check(claims, {"task": {"claims": [good]}})["verdict"] == "reproduced"
-    forged = {**good, "checks": {"a": False}}  # verdict says reproduced, checks say otherwise
-    with pytest.raises(GuaranteeFailed, match=r"verdicts not from their checks \['S1'\]"):
-        self_check(claims, {"task": {"claims": [forged]}})
+    good = ClaimResult("S1", checks={"a": True}, numbers={}, rule="r")
+    assert self_check(claims, _results("task", good)).verdict == "reproduced"
+    assert self_check(claims, _results("task", good)).guarantees["verdicts_follow_checks"] is True
+    forged = good.to_json() | {"checks": {"a": False}}  # verdict says reproduced, checks say otherwise
+    with pytest.raises(ValueError, match=r"claim 'S1': verdict 'reproduced' is not the one its checks imply"):
+        Results.from_json({"task": "task", "profile": "smoke", "claims": [forged]})  # refused as it is read
     with pytest.raises(GuaranteeFailed, match=r"not in the claims file \['X9'\]"):
-        self_check(claims, {"task": {"claims": [{**good, "id": "X9"}]}})
-    assert self_check(claims, {})["checks"]["results_found"] is False
-    assert self_check(claims, {})["verdict"] == "not reproduced"
+        self_check(claims, _results("task", good.replace(id="X9")))
+    assert self_check(claims, {}).checks["results_found"] is False
+    assert self_check(claims, {}).verdict == "not reproduced"
 
 
 def test_self_check_b3_fails_when_a_declared_claim_has_no_result() -> None:
     """B3's checks can fail on a plausible run: a task that did not run (e.g. data missing)."""
-    from fnnlib.results import claim_result
-    from fnnbook.scoreboard import Claim, self_check
-
     claims = [Claim(id=i, group="g", text="t", figure="") for i in ("S1", "O1", "B3")]
-    good = claim_result("S1", checks={"a": True}, numbers={}, rule="r")
-    result = self_check(claims, {"spiral": {"claims": [good]}}, {"spiral": ["S1"], "bottle": ["O1"]})
-    assert result["verdict"] == "partly"
-    assert result["checks"] == {"results_found": True, "every_declared_claim_reported": False}
-    assert result["numbers"]["claims_not_reported"] == ["O1"]
-    assert set(result["guarantees"]) == {"ids_known", "verdicts_follow_checks"}
-    passing = self_check(claims, {"spiral": {"claims": [good]}}, {"spiral": ["S1"]})
-    assert passing["verdict"] == "reproduced"
+    good = ClaimResult("S1", checks={"a": True}, numbers={}, rule="r")
+    result = self_check(claims, _results("spiral", good), {"spiral": ["S1"], "bottle": ["O1"]})
+    assert result.verdict == "partly"
+    assert result.checks == {"results_found": True, "every_declared_claim_reported": False}
+    assert result.numbers["claims_not_reported"] == ["O1"]
+    assert set(result.guarantees) == {"ids_known", "verdicts_follow_checks"}
+    passing = self_check(claims, _results("spiral", good), {"spiral": ["S1"]})
+    assert passing.verdict == "reproduced"
+
+
+def test_the_scoreboard_adds_b2_then_b3_over_everything() -> None:
+    claims = [Claim(id=i, group="g", text="t", figure="") for i in ("S1", "B2", "B3")]
+    s1 = ClaimResult("S1", checks={"a": True}, rule="r", headline=headline_number("e", [1.0] * 5))
+    results = with_scoreboard_claims(claims, _results("spiral", s1), "smoke", {"spiral": ["S1"]})
+    own = results[SCOREBOARD_TASK]
+    assert [c.id for c in own] == ["B2", "B3"] and own.claim("B2").verdict == "reproduced"
+    assert own.claim("B3").numbers == {"tasks_with_results": 2, "claims_reported": 2, "claims_listed": 3,
+                                       "claims_not_reported": []}
+    assert SCOREBOARD_TASK not in with_scoreboard_claims(claims[:1], _results("spiral", s1), "smoke")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b2
-from fnnlib.results import claim_result
+from fnnlib.results import ClaimResult, Headline, headline_number
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
         "open_loop": [3.0, 3.2, 2.9, 3.1, 3.0], "kalman": [0.8, 0.9, 0.7, 0.8, 0.9]}
@@ -13,14 +13,16 @@ SWAPPED = {"tuned": GOOD["hand"], "hand": GOOD["tuned"]}
 
 
 def verdict(errors) -> str:
-    return claim_result("B1", **b1(errors), numbers={})["verdict"]
+    r = b1(errors)
+    assert r.id == "B1"
+    return r.verdict
 
 
 def test_clear_wins_pass_every_check():
     r = b1({"spiral": GOOD})
-    assert r["checks"] == {"spiral: tuned beats hand": True, "spiral: tuned beats open loop": True,
+    assert r.checks == {"spiral: tuned beats hand": True, "spiral: tuned beats open loop": True,
                            f"spiral: tuned within {KALMAN_FACTOR:g}x Kalman": True}
-    assert r["guarantees"] == {} and verdict({"spiral": GOOD}) == "reproduced"
+    assert r.guarantees == {} and verdict({"spiral": GOOD}) == "reproduced"
     stats = b1_paired({"spiral": GOOD})
     assert set(stats) == {"spiral: tuned vs hand", "spiral: tuned vs open_loop", "spiral: tuned vs kalman"}
     assert stats["spiral: tuned vs hand"]["wins"] == 5
@@ -28,15 +30,15 @@ def test_clear_wins_pass_every_check():
 
 
 def test_losing_to_the_hand_gains_fails():
-    assert b1({"bottle": SWAPPED})["checks"] == {"bottle: tuned beats hand": False}
+    assert b1({"bottle": SWAPPED}).checks == {"bottle: tuned beats hand": False}
     assert verdict({"bottle": SWAPPED}) == "not reproduced"
 
 
 def test_one_loss_is_allowed_two_are_not():
     hand = [2.0] * 5
     one_loss, two_losses = [1.0, 1.0, 1.0, 1.0, 2.1], [1.0, 1.0, 1.0, 2.1, 2.1]
-    assert b1({"q": {"tuned": one_loss, "hand": hand}})["checks"]["q: tuned beats hand"] is True
-    assert b1({"q": {"tuned": two_losses, "hand": hand}})["checks"]["q: tuned beats hand"] is False
+    assert b1({"q": {"tuned": one_loss, "hand": hand}}).checks["q: tuned beats hand"] is True
+    assert b1({"q": {"tuned": two_losses, "hand": hand}}).checks["q: tuned beats hand"] is False
 
 
 def test_wins_inside_the_noise_fail():
@@ -44,7 +46,7 @@ def test_wins_inside_the_noise_fail():
     errors = {"s": {"tuned": [1.0, 1.0, 1.0], "hand": [1.0001, 1.2, 1.0001]}}
     stats = b1_paired(errors)["s: tuned vs hand"]
     assert stats["wins"] == 3 and stats["ci_high"] > 0
-    assert b1(errors)["checks"]["s: tuned beats hand"] is False
+    assert b1(errors).checks["s: tuned beats hand"] is False
 
 
 def test_kalman_factor_all_units_but_one():
@@ -52,13 +54,13 @@ def test_kalman_factor_all_units_but_one():
     ok = [KALMAN_FACTOR] * 4 + [10.0]
     bad = [KALMAN_FACTOR * 1.01] * 2 + [1.0] * 3
     key = f"s: tuned within {KALMAN_FACTOR:g}x Kalman"
-    assert b1({"s": {"tuned": ok, "hand": hand, "kalman": kalman}})["checks"][key] is True
-    assert b1({"s": {"tuned": bad, "hand": hand, "kalman": kalman}})["checks"][key] is False
+    assert b1({"s": {"tuned": ok, "hand": hand, "kalman": kalman}}).checks[key] is True
+    assert b1({"s": {"tuned": bad, "hand": hand, "kalman": kalman}}).checks[key] is False
 
 
 def test_settings_are_judged_apart_and_some_checks_give_partly():
     errors = {"a": GOOD, "b": SWAPPED | {"open_loop": GOOD["open_loop"]}}
-    checks = b1(errors)["checks"]
+    checks = b1(errors).checks
     assert checks["a: tuned beats hand"] and not checks["b: tuned beats hand"]
     assert checks["b: tuned beats open loop"] is True  # worse than the hand gains, still better than no feedback
     assert "b: tuned within 2x Kalman" not in checks
@@ -81,13 +83,13 @@ def test_bad_input_is_refused(errors, match):
         b1_paired(errors)
 
 
-def _headline(n: int | None) -> dict:
-    return {"name": "x", "value": 1.0} if n is None else {"name": "x", "value": 1.0, "spread": 0.1, "n": n}
+def _headline(n: int | None) -> Headline:
+    return Headline("x", 1.0) if n is None else Headline("x", 1.0, spread=0.1, n=n, per_seed=(1.0,) * n)
 
 
 def test_b2_passes_when_every_claim_is_over_five_seeds_with_spread() -> None:
     rule = b2({"S1": _headline(5), "O1": _headline(5), "Q3": _headline(15)})
-    assert all(rule["checks"].values()) and all(rule["guarantees"].values())
+    assert all(rule.checks.values()) and all(rule.guarantees.values())
 
 
 @pytest.mark.parametrize(("headlines", "failing"), [
@@ -97,24 +99,25 @@ def test_b2_passes_when_every_claim_is_over_five_seeds_with_spread() -> None:
 ])
 def test_b2_fails_on_too_few_seeds_or_a_single_run(headlines: dict, failing: str) -> None:
     rule = b2(headlines)
-    assert rule["checks"][failing] is False
-    assert sum(rule["checks"].values()) == 1
+    assert rule.checks[failing] is False
+    assert sum(rule.checks.values()) == 1
 
 
 def test_b2_fails_entirely_when_nothing_is_over_seeds() -> None:
     rule = b2({"S1": _headline(None), "O1": _headline(None)})
-    assert not any(rule["checks"].values())
+    assert not any(rule.checks.values())
     with pytest.raises(ValueError, match="headlines"):
         b2({})
 
 
 def test_b2_is_computed_by_the_scoreboard_from_the_tasks_claims() -> None:
     from fnnbook.scoreboard import seeds_check  # noqa: PLC0415
-    from fnnlib.results import claim_result, headline_number  # noqa: PLC0415
+    from fnnlib.results import Results  # noqa: PLC0415
 
-    s1 = claim_result("S1", checks={"a": True}, numbers={}, rule="r", headline=headline_number("e", [1.0] * 5))
-    q6 = claim_result("Q6", checks={"a": True}, numbers={}, rule="r", headline=headline_number("t", 2.0))
-    assert seeds_check({"spiral": {"claims": [s1]}})["verdict"] == "reproduced"
-    partly = seeds_check({"spiral": {"claims": [s1]}, "quadrotor_learning": {"claims": [q6]}})
-    assert partly["verdict"] == "partly" and partly["numbers"]["claims_without_spread"] == ["Q6"]
+    s1 = ClaimResult("S1", checks={"a": True}, rule="r", headline=headline_number("e", [1.0] * 5))
+    q6 = ClaimResult("Q6", checks={"a": True}, rule="r", headline=headline_number("t", 2.0))
+    spiral, learning = Results("spiral", "paper", (s1,)), Results("quadrotor_learning", "paper", (q6,))
+    assert seeds_check({"spiral": spiral}).verdict == "reproduced"
+    partly = seeds_check({"spiral": spiral, "quadrotor_learning": learning})
+    assert partly.verdict == "partly" and partly.numbers["claims_without_spread"] == ["Q6"]
     assert seeds_check({}) is None

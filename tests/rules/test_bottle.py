@@ -6,25 +6,26 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import bottle
-from fnnlib.results import claim_result
+from fnnlib.results import ClaimResult
 
 RNG = np.random.default_rng(0)
 DRAG = np.full(9, 0.10)
 
 
-def verdict(claim_id: str, rule: dict) -> str:
-    return claim_result(claim_id, **rule, numbers={})["verdict"]
+def verdict(claim_id: str, rule: ClaimResult) -> str:
+    assert rule.id == claim_id
+    return rule.verdict
 
 
 def test_o1_single_seed_per_throw() -> None:
     r = bottle.o1(feedback=np.full(9, 0.03) + 0.001 * np.arange(9), neural_ode=np.full(9, 0.05), drag=DRAG)
-    assert verdict("O1", r) == "reproduced" and set(r["checks"]) == {"feedback<neural_ode per throw",
+    assert verdict("O1", r) == "reproduced" and set(r.checks) == {"feedback<neural_ode per throw",
                                                                      "neural_ode<drag per throw"}
     # the case: a 2 mm mean gap, feedback ahead on 5 of 9 throws -- not a win
     nn = np.array([0.040, 0.050, 0.045, 0.060, 0.030, 0.055, 0.042, 0.048, 0.057])
     fb = nn + np.array([-0.010, -0.008, -0.006, -0.007, -0.005, 0.004, 0.003, 0.005, 0.006])
     r = bottle.o1(feedback=fb, neural_ode=nn, drag=DRAG)
-    assert fb.mean() < nn.mean() and r["checks"]["feedback<neural_ode per throw"] is False
+    assert fb.mean() < nn.mean() and r.checks["feedback<neural_ode per throw"] is False
     assert verdict("O1", r) == "partly"
     assert verdict("O1", bottle.o1(feedback=DRAG * 2, neural_ode=DRAG * 1.5, drag=DRAG)) == "not reproduced"
 
@@ -32,14 +33,14 @@ def test_o1_single_seed_per_throw() -> None:
 def test_o1_over_seeds() -> None:
     nn = 0.05 + 0.005 * RNG.standard_normal((9, 5))
     r = bottle.o1(feedback=nn - 0.01, neural_ode=nn, drag=DRAG)
-    assert verdict("O1", r) == "reproduced" and len(r["checks"]) == 4 and "5 seeds" in r["rule"]
+    assert verdict("O1", r) == "reproduced" and len(r.checks) == 4 and "5 seeds" in r.rule
     # feedback ahead on every throw on average, but only thanks to one seed
     fb = nn.copy()
     fb[:, 0] -= 0.05
     fb[:, 1:] += 0.001
     r = bottle.o1(feedback=fb, neural_ode=nn, drag=DRAG)
-    assert r["checks"]["feedback<neural_ode per throw"] is True
-    assert r["checks"]["feedback<neural_ode over seeds"] is False and verdict("O1", r) == "partly"
+    assert r.checks["feedback<neural_ode per throw"] is True
+    assert r.checks["feedback<neural_ode over seeds"] is False and verdict("O1", r) == "partly"
     with pytest.raises(ValueError, match="pair throw by throw"):
         bottle.o1(feedback=nn, neural_ode=nn[:8], drag=DRAG)
 

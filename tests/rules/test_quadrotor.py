@@ -8,6 +8,7 @@ import torch
 
 from fnnbook.rules.quadrotor import (SIX, count_trainable, q1_convergence, q2_prediction, q3_tracking, q4_prediction,
                                      q5_adaptive, q6_training_cost)
+from fnnlib.results import GuaranteeFailed
 
 RNG = np.random.default_rng(0)
 S = 15  # 5 trained networks x 3 disturbances
@@ -77,8 +78,8 @@ def test_q5_comparable_and_slightly_larger_passes_far_or_smaller_fails() -> None
     assert not far.checks[f"6 N: AdapFNN within 25 % of FNN (>= {S - 1} of {S})"]
     smaller = q5_adaptive({"FNN": runs(0.1), "AdapFNN": runs(0.09, 0.001)}, [1.0] * S, label="6 N")
     assert not smaller.checks["6 N: AdapFNN mean RMSE >= FNN's (slightly larger)"]
-    out = q5_adaptive(paper_like(), [1.0] * (S - 1) + [0.5], label="6 N")
-    assert not out.guarantees["6 N: Theorem 2 ball holds >= 95 % after the transient, every run"]
+    with pytest.raises(GuaranteeFailed, match="6 N: Theorem 2 ball holds >= 95 % after the transient, every run"):
+        q5_adaptive(paper_like(), [1.0] * (S - 1) + [0.5], label="6 N")  # a false guarantee stops the run
 
 
 def test_q6_counts_the_feedback_objects_parameters() -> None:

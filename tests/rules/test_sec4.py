@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import sec4
-from fnnlib.results import GuaranteeFailed, claim_result
+from fnnlib.results import ClaimResult, GuaranteeFailed
 
 
-def verdict(claim_id: str, rule: dict) -> str:
-    return claim_result(claim_id, **rule, numbers={})["verdict"]
+def verdict(claim_id: str, rule: ClaimResult) -> str:
+    assert rule.id == claim_id
+    return rule.verdict
 
 
 def test_d1() -> None:
@@ -26,21 +27,20 @@ def test_d1() -> None:
 
 def test_d2() -> None:
     r = sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=True)
-    assert verdict("D2", r) == "reproduced" and r["guarantees"] == {"frozen_neural_ode_unchanged": True}
+    assert verdict("D2", r) == "reproduced" and r.guarantees == {"frozen_neural_ode_unchanged": True}
     # 9.5x off the nominal accuracy: not reproduced (the frozen weights no longer count)
     assert verdict("D2", sec4.d2(rel_feedback=0.095, rel_nominal=0.01, frozen_unchanged=True)) == "not reproduced"
     with pytest.raises(GuaranteeFailed, match="frozen_neural_ode_unchanged"):
-        claim_result("D2", **sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=False), numbers={})
+        sec4.d2(rel_feedback=0.012, rel_nominal=0.01, frozen_unchanged=False)
     # per seed (a threshold: >= S-1 of S seeds): one seed off passes, two seeds off fail
     nominal = [0.01] * 5
     r = sec4.d2(rel_feedback=[0.012, 0.014, 0.03, 0.01, 0.011], rel_nominal=nominal, frozen_unchanged=[True] * 5)
-    assert verdict("D2", r) == "reproduced" and "4 of 5 seeds" in r["rule"]
+    assert verdict("D2", r) == "reproduced" and "4 of 5 seeds" in r.rule
     r = sec4.d2(rel_feedback=[0.012, 0.02, 0.03, 0.01, 0.011], rel_nominal=nominal, frozen_unchanged=[True] * 5)
     assert verdict("D2", r) == "not reproduced"
     # one seed's frozen model changed: the guarantee stops the notebook
     with pytest.raises(GuaranteeFailed, match="frozen_neural_ode_unchanged"):
-        claim_result("D2", **sec4.d2(rel_feedback=[0.012] * 5, rel_nominal=nominal,
-                                     frozen_unchanged=[True, True, False, True, True]), numbers={})
+        sec4.d2(rel_feedback=[0.012] * 5, rel_nominal=nominal, frozen_unchanged=[True, True, False, True, True])
     with pytest.raises(ValueError, match="one bool per seed"):
         sec4.d2(rel_feedback=[0.012] * 5, rel_nominal=nominal, frozen_unchanged=[])
 
@@ -52,8 +52,8 @@ def test_d3() -> None:
     # per seed (thresholds: >= S-1 of S seeds): one seed not converged passes, two fail
     assert verdict("D3", sec4.d3(ratio=[0.1, 0.1, 0.7, 0.1, 0.1], trend=[0.01, 0.3, 0.0, 0.0, 0.0])) == "reproduced"
     r = sec4.d3(ratio=[0.1, 0.6, 0.7, 0.1, 0.1], trend=[0.01, 0.3, 0.2, 0.0, 0.0])
-    assert r["checks"] == {"last_below_ratio_of_first": False, "last_window_flat": False}
-    assert verdict("D3", r) == "not reproduced" and ">= 4 of 5 seeds" in r["rule"]
+    assert r.checks == {"last_below_ratio_of_first": False, "last_window_flat": False}
+    assert verdict("D3", r) == "not reproduced" and ">= 4 of 5 seeds" in r.rule
 
 
 def d4_numbers(**over):
@@ -70,17 +70,17 @@ def test_d4() -> None:
     held = np.full(6, 0.1)
     held[3] = 0.3
     r = sec4.d4(**d4_numbers(heldout_err_N_neural_feedback=held))
-    assert r["checks"] == {"all_12_S8_levels": True, "all_6_heldout_levels": False} and verdict("D4", r) == "partly"
+    assert r.checks == {"all_12_S8_levels": True, "all_6_heldout_levels": False} and verdict("D4", r) == "partly"
     # one S8 level lost (11 of 12, the single-seed paper run): no longer "partly" by a count of levels
     s8 = np.full(12, 0.1)
     s8[6] = 0.3
     r = sec4.d4(**d4_numbers(err_N_neural_feedback=s8, heldout_err_N_neural_feedback=held))
-    assert verdict("D4", r) == "not reproduced" and "11 of 12" in r["rule"]
+    assert verdict("D4", r) == "not reproduced" and "11 of 12" in r.rule
     # per seed: a level is won only by the paired rule
     seeds = np.tile([0.1, 0.3, 0.1, 0.3, 0.1], (12, 1))
     r = sec4.d4(**d4_numbers(rate_neural_feedback=seeds, rate_neural_ode=np.full((12, 5), 0.2),
                              err_N_neural_feedback=np.full((12, 5), 0.1), err_N_neural_ode=np.full((12, 5), 0.2)))
-    assert r["checks"]["all_12_S8_levels"] is False and "5 seeds" in r["rule"]
+    assert r.checks["all_12_S8_levels"] is False and "5 seeds" in r.rule
     # per seed: every level won in 4 of 5 seeds with a clear mean gap passes; a level won in 3 of 5 fails
     lo = np.tile([0.1, 0.1, 0.1, 0.1, 0.25], (12, 1))
     r = sec4.d4(**d4_numbers(rate_neural_feedback=lo, rate_neural_ode=np.full((12, 5), 0.2),
@@ -94,4 +94,4 @@ def test_d4() -> None:
                              err_N_neural_feedback=three, err_N_neural_ode=np.full((12, 5), 0.2),
                              heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=np.full((6, 5), 0.2),
                              heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=np.full((6, 5), 0.2)))
-    assert r["checks"] == {"all_12_S8_levels": False, "all_6_heldout_levels": True} and "11 of 12" in r["rule"]
+    assert r.checks == {"all_12_S8_levels": False, "all_6_heldout_levels": True} and "11 of 12" in r.rule
