@@ -72,7 +72,6 @@ from fnnlib.sweeps import (
     paired_levels,
     simulate_levels,
 )
-from fnnlib.stats import paired_win
 from fnnlib.systems import DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
 from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
@@ -109,11 +108,11 @@ __all__ = [
     "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
     "fit_drag", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
-    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
+    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members",
     "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
     "cascade_predict_loop",
     "check_gain", "check_notebook_settings", "claim_result", "GuaranteeFailed", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
-    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
+    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
 ]
