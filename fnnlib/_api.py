@@ -7,7 +7,7 @@ does not.
 
 
 from fnnlib._threads import set_num_threads
-from fnnlib.data import load_bottle, synthetic_throws
+from fnnlib.data import bottle_throws, load_bottle, synthetic_throws
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.stats import paired_win
 from fnnlib.models import MODELS, NeuralFeedback, NeuralFeedbackEnsemble, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
@@ -106,7 +106,7 @@ __all__ = [
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
     "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
     "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
-    "fit_drag", "load_bottle", "synthetic_throws",
+    "fit_drag", "bottle_throws", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members",
     "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",

@@ -43,7 +43,7 @@ import fnnlib as F
 
 F.check_notebook_settings("spiral", globals())  # the checks `fnn-pipeline check` runs first
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -263,7 +263,7 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 #   relative gain is larger there than without noise.
 # - **S4**: the feedback beats the neural ODE (i) at every $N \le$ `N` and (ii) at every $N \le$ `N_max`.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 e_nn_m, e_fb_m = e_nn.mean(-1).tolist(), e_fb.mean(-1).tolist()
 claims = [
     F.claim_result("S1", **sec3.s1(s1_rel), numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},

@@ -50,7 +50,7 @@ import fnnlib as F
 
 F.check_notebook_settings("ablations", globals())  # the checks `fnn-pipeline check` runs first
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -373,7 +373,7 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # *threshold* check on one run and holds when it holds in at least $S-1$ of the $S$ seeds. The headlines are
 # the mean ± standard deviation over the seeds.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 claims = [
     F.claim_result("S7", **sec3.s7(outward_noisy=s7["outward_increase_noisy"],
                                    outward_noise_free=s7["outward_increase_noise_free"],
