@@ -91,11 +91,13 @@ numerics = M.Backend(backend, linearize_method)
 models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)
 
 
+# %%
 def make_qp(cost, umax):
     """Eq. (28) with this run's weights and cost variant, thrust box [0, umax] and |Theta| <= theta_max."""
     return M.make_mpc(qp, N, Q, R, cost=cost, u_max=umax, theta_max=theta_max, solver=solver)
 
 
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 hover = truth_mass * NOMINAL.g / 4
@@ -154,6 +156,9 @@ gamma_sel = {cost: M.adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_
                                                make_qp(cost, u_max_judged), steps=validation_steps, Ts=Ts,
                                                substeps=truth_substeps, backend=numerics, rtol=Gamma_rtol)
              for cost in costs}
+
+
+# %%
 print(f"validation flights: {len(val_vehicles)} vehicle(s) x {len(val_refs)} reference(s); masses "
       + ", ".join(f"{v.mass:.2f}" for v in val_vehicles) + " kg; |force| "
       + ", ".join(f"{np.linalg.norm(v.force_disturbance):.2f}" for v in val_vehicles) + " N")

@@ -48,6 +48,8 @@ import torch
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import beyond as rules
 
+
+# %% tags=["hide-input"]
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
@@ -108,6 +110,7 @@ def o1_errors(pred: torch.Tensor) -> torch.Tensor:
     return F.error_norm(pred[..., :3], x_b_test[:, bN:, :3].expand_as(pred[..., :3])).mean(-1)
 
 
+# %%
 t0 = time.perf_counter()
 b_tuned = [bottle_tune(s, net) for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_tune"] = time.perf_counter() - t0
@@ -151,6 +154,9 @@ member_files = json.loads((up["quadrotor_learning"] / "results.json").read_text(
 members = [(int(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up["quadrotor_learning"] / f, expected_kind="AeroResidual") for f in member_files)]
 flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
+
+
+# %% tags=["hide-input"]
 plant = Quadrotor(NOMINAL)
 setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built as it builds them
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
@@ -161,6 +167,7 @@ mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cos
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 
 
+# %% tags=["hide-input"]
 def fnn_flight(net, L, beta, test: M.FlightTest, cost: str) -> M.FlightRow:
     """FNN (residual ``net``, gains ``L``, ``beta``) flown as `quadrotor_mpc` flies it: its row of the flight table."""
     fnn = M.fnn_model(net, L, beta, plant=plant, N=quad_N, Ts=quad_Ts)
@@ -180,6 +187,7 @@ def quad_tune(seed: int, net) -> F.TunedGains:
                         iterations=quad_tune_iterations, lr=quad_tune_lr)
 
 
+# %%
 t0 = time.perf_counter()
 q_tuned = [quad_tune(s, net) for s, net in members]
 seconds["quad_tune"] = time.perf_counter() - t0
@@ -193,6 +201,9 @@ for cost in costs:  # (network, disturbance) with the disturbance fastest, as qu
                                    "hand": q_rmse[cost]["FNN"], "open_loop": q_rmse[cost]["Neural"]}
 seconds["quad_fly"] = time.perf_counter() - t0
 tuned_values["quadrotor"] = [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for (s, _), r in zip(members, q_tuned)]
+
+
+# %%
 print(", ".join(f"{k}: " + ", ".join(f"{p} {np.mean(v):.4f} m" for p, v in e.items())
                 for k, e in errors.items() if k.startswith("quadrotor")))
 print("tuned flights with fallbacks: " + ", ".join(f"{cost} {sum(f['fallbacks'] > 0 for f in fl)}, diverged "

@@ -294,11 +294,12 @@ def test_bad_step_model_and_trajectories_are_refused(tiny):
         adjoint_gradient(step, [], x_r[:, 0], I, x_r)
     with pytest.raises(ValueError, match=r"x1 must have shape \(B, n\) = \(2, 6\)"):
         adjoint_gradient(step, model.parameters(), x_r[:, 0, :4], I, x_r)
+    recipe = InputRecipe(segment_length=5, batch_size=1, epochs=1, lr=1e-3)
     with pytest.raises(TypeError, match="model must be an nn.Module"):
-        train_with_inputs(step, step, (x_r, I), segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
-                          progress=False)
+        train_with_inputs(step, step, (x_r, I), recipe, seed=0, progress=False)
     with pytest.raises(TypeError, match="trajectories must be a pair"):
-        train_with_inputs(model, step, x_r, segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
-                          progress=False)
+        train_with_inputs(model, step, x_r, recipe, seed=0, progress=False)
+    with pytest.raises(TypeError, match="InputRecipe"):
+        train_with_inputs(model, step, (x_r, I), recipe.as_dict(), seed=0, progress=False)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"I must have shape \(B, T, m\)"):
         evaluate_loss(step, x_r, I[0])
