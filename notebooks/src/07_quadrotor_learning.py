@@ -53,7 +53,7 @@ from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
 from fnnlib.models.residual import AeroResidual
 from fnnbook.rules import quadrotor as rules
-from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
+from fnnlib.mpc import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor_presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
                                       PAPER_MLP_RECIPE)
 from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
