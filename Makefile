@@ -16,7 +16,7 @@ RUN_ARGS ?=
 DATA_DIR ?= $(if $(wildcard ../shared/data/bottle),../shared/data,data)
 PY := $(VENV)/bin/python
 
-.PHONY: main test venv pipeline book lock data
+.PHONY: main test venv pipeline book lock data notebooks
 
 # The book is built even when a task failed or did not run (e.g. its data are missing); make then exits with
 # the pipeline's status.
@@ -46,6 +46,12 @@ data: venv
 # -n auto: one pytest-xdist worker per core; the smoke pipeline still runs once (tests/conftest.py)
 test: venv
 	$(PY) -m pytest -n auto
+
+# Rebuild notebooks/NN_<name>.ipynb from its source notebooks/src/NN_<name>.py (jupytext's percent format),
+# keeping the cell ids; tests/test_notebook_sources.py checks that the committed notebooks match.
+notebooks: venv
+	for f in notebooks/src/*.py; do $(VENV)/bin/jupytext --update --set-kernel python3 --to ipynb \
+		-o "notebooks/$$(basename "$${f%.py}").ipynb" "$$f" || exit 1; done
 
 # Regenerate environment-lock.txt after changing pyproject.toml (needs pip-tools in some venv).
 lock:

@@ -28,10 +28,7 @@ import fnnlib as F
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
 from fnnlib.mpc.linearized import COSTS
-from fnnlib.mpc.compiled import warm_up
-from fnnlib.mpc.flight import fly, lissajous_reference
-from fnnlib.models.residual import AdaptiveResidual
-from fnnlib.mpc.models import AdaptiveNNModel, paper_models
+from fnnlib.mpc import Backend, FlightTest, fly, lissajous_reference, paper_models, warm_up
 from fnnlib.quadrotor_presets import (
     PAPER_BETA,
     PAPER_GAMMA,
@@ -101,14 +98,13 @@ def main() -> None:
               f"{'loop ms/step':>12s} {'x real time':>11s} {'fallbacks':>9s}")
         rows = {}
         mpc = cls(N, Q, R, cost=args.cost, u_lb=np.zeros(4), u_ub=np.full(4, 6.0), x_lb=X_LB, x_ub=-X_LB)
-        models = paper_models(residual, mlp, plant=Quadrotor(NOMINAL), L=PAPER_L, beta=PAPER_BETA, N=N,
-                              Gamma=PAPER_GAMMA, Ts=TS)
         # AdapNN at the release's effective gain Ts * Gamma_rel (this library's Gamma = 8 runs away at 6 N)
-        models[4] = AdaptiveNNModel("AdapNN", models[0].plant, AdaptiveResidual(residual, TS * PAPER_GAMMA), Ts=TS)
+        models = paper_models(residual, mlp, plant=Quadrotor(NOMINAL), L=PAPER_L, beta=PAPER_BETA, N=N,
+                              Gamma=PAPER_GAMMA, Ts=TS, adapnn_gamma=TS * PAPER_GAMMA)
+        test = FlightTest(truth, x_r, u_r, steps=args.steps, Ts=TS, substeps=substeps,
+                          backend=Backend(backend, method if backend == "torch" else None))
         for model in models:
-            runs = [fly(model, mpc, truth, x_r, u_r, steps=args.steps, Ts=TS, substeps=substeps,
-                        linearize_method=method if backend == "torch" else None, backend=backend)
-                    for _ in range(args.repeats)]
+            runs = [fly(model, mpc, test) for _ in range(args.repeats)]
             # the first step of each flight warms caches up
             lin = 1e3 * np.concatenate([r.t_linearize[1:] for r in runs])
             sol = 1e3 * np.concatenate([r.t_solve[1:] for r in runs])

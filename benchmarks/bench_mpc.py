@@ -29,13 +29,14 @@ from torch import nn
 
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC, linearize
 from fnnlib.mpc.linearized import COSTS
+from fnnlib.quadrotor_presets import PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
 
 N, NX, NU, DT = 10, 12, 4, 0.05
-Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
-R = np.ones(NU)
+Q = np.array(PAPER_MPC_WEIGHTS["Q"])
+R = np.array(PAPER_MPC_WEIGHTS["R"])
 BOX = {"u_lb": np.zeros(NU), "u_ub": np.full(NU, 4.0),
-       "x_lb": np.r_[np.full(6, -np.inf), np.full(3, -np.pi / 2), np.full(3, -np.inf)],
-       "x_ub": np.r_[np.full(6, np.inf), np.full(3, np.pi / 2), np.full(3, np.inf)]}
+       "x_lb": np.r_[np.full(6, -np.inf), np.full(3, -PAPER_THETA_MAX), np.full(3, -np.inf)],
+       "x_ub": np.r_[np.full(6, np.inf), np.full(3, PAPER_THETA_MAX), np.full(3, np.inf)]}
 
 
 class RigidBody(nn.Module):

@@ -7,7 +7,7 @@ does not.
 
 
 from fnnlib._threads import set_num_threads
-from fnnlib.data import load_bottle, synthetic_throws
+from fnnlib.data import bottle_throws, load_bottle, synthetic_throws
 from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.stats import paired_win
 from fnnlib.models import MODELS, NeuralFeedback, NeuralFeedbackEnsemble, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
@@ -72,7 +72,6 @@ from fnnlib.sweeps import (
     paired_levels,
     simulate_levels,
 )
-from fnnlib.stats import paired_win
 from fnnlib.systems import DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
 from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
@@ -107,13 +106,13 @@ __all__ = [
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
     "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
     "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE", "PAPER_SPIRAL_RECIPE",
-    "fit_drag", "load_bottle", "synthetic_throws",
+    "fit_drag", "bottle_throws", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
-    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members", "paired_win",
+    "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members",
     "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
     "cascade_predict_loop",
     "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
-    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
+    "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
 ]

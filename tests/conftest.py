@@ -10,10 +10,8 @@ browser) need it.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from dataclasses import dataclass
-from types import ModuleType
 from pathlib import Path
 
 import pytest
@@ -43,14 +41,6 @@ def f():
     torch.manual_seed(0)
     net = mlp(2, 2, (8,), "tanh").double()
     return lambda t, x: net(x)
-
-
-def load_nbbuild() -> ModuleType:
-    """``tools/nbbuild.py`` (a script, not a package module), loaded as a module."""
-    spec = importlib.util.spec_from_file_location("nbbuild", ROOT / "tools" / "nbbuild.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ The gains of the authors' release are :data:`~fnnlib.quadrotor_presets.PAPER_DFB
 Notes
 -----
 * No thrust clipping: the learning closed loop must stay smooth and
-  differentiable; :meth:`DFBC.fly` returns the applied thrusts so callers can
+  differentiable; :meth:`DFBC.rollout` returns the applied thrusts so callers can
   report their range (e.g. against the MPC box ``0 <= u <= 4`` N).
 * Derivative kick: with ``z_F(0) = 0`` the filtered derivative starts at
   ``e_omega(0) / tau_f``. Starting on the reference (the state from
@@ -294,8 +294,8 @@ class DFBC:
         lead = self._check_loop(x18, Psi_bar, plant, "Psi_bar")
         return self._loop_step(x18.expand(*lead, 18), Psi_bar, plant, Ts, substeps, a_res_fn)
 
-    def fly(self, x18_0: Tensor, Psi_seq: Tensor, plant: Quadrotor, *, Ts: float, substeps: int = 1,
-            a_res_fn: AccelerationFn | None = None) -> tuple[Tensor, Tensor]:
+    def rollout(self, x18_0: Tensor, Psi_seq: Tensor, plant: Quadrotor, *, Ts: float, substeps: int = 1,
+                a_res_fn: AccelerationFn | None = None) -> tuple[Tensor, Tensor]:
         """Fly a command sequence in closed loop (RK4, command held over each step).
 
         Parameters

@@ -137,3 +137,25 @@ def synthetic_throws(n_throws: int, n_samples: int, *, k: tuple[float, float, fl
     x = obj.simulate(torch.cat([p0, v0], dim=-1), t)  # (n, T, 6)
     acc = obj.rate(x)[..., 3:]
     return Throws(torch.cat([acc, x[..., :3], x[..., 3:]], dim=-1), Ts)
+
+
+#: where the throws come from: the authors' recorded throws, or :func:`synthetic_throws`
+THROW_SOURCES = ("real", "synthetic")
+
+
+def bottle_throws(data: str, *, data_dir: str | Path, synthetic_sizes: tuple[int, int, int] | list[int],
+                  seed: int) -> tuple[Throws, Throws]:
+    """The training and test throws of Sec. 5.1: the real ones, or synthetic ones drawn like them.
+
+    ``data`` is one of :data:`THROW_SOURCES`. ``"real"`` reads ``data_dir`` (:func:`load_bottle`, SHA-256
+    and shapes checked before any work); ``"synthetic"`` draws ``synthetic_sizes`` = (training throws, test
+    throws, samples per throw) with :func:`synthetic_throws`, the training throws with ``seed`` and the test
+    throws with ``seed + 1``.
+    """
+    if data not in THROW_SOURCES:
+        raise ValueError(f"data must be one of {THROW_SOURCES}, got {data!r}")
+    if data == "real":
+        return load_bottle(data_dir)
+    n_tr, n_te, n_s = synthetic_sizes
+    return synthetic_throws(n_tr, n_s, seed=seed), synthetic_throws(n_te, n_s, seed=seed + 1)
+

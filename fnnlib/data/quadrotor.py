@@ -97,7 +97,7 @@ def make_flights(n_flights: int, n_nodes: int, *, Ts: float, seed: int, truth: Q
     x0[:, :3] = Psi[:, 0, :3]
     x18_0 = controller.initial_closed_loop_state(x0)
     with torch.no_grad():
-        X, U = controller.fly(x18_0, Psi, Quadrotor(truth), Ts=Ts, substeps=substeps)
+        X, U = controller.rollout(x18_0, Psi, Quadrotor(truth), Ts=Ts, substeps=substeps)
     return Flights(x=X, Psi=Psi, u=U, Ts=float(Ts))
 
 

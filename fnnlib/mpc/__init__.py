@@ -1,6 +1,46 @@
-"""MPC of Eq. (28) (App. A.5.3): affine models of a torch step along a plan, and the linear time-varying QP."""
+"""MPC of Eq. (28) (App. A.5.3) and the flight test of Sec. 5.2.2.
 
+The public face, what a notebook needs: the prediction models (:func:`paper_models`), a flight test
+(:class:`FlightTest` on a :class:`Backend`, or :func:`flight_tests_from_settings`), one closed-loop flight
+(:func:`fly`), the QP (:func:`make_mpc`), the flight table (:func:`flight_row`, :class:`TableKey`), the paired
+flights (:func:`paired_grid`), AdapNN's gain chosen on validation flights, the speed summary and Theorem 2.
+Below them: the affine models of a torch step along a plan and the linear time-varying QP.
+"""
+
+from __future__ import annotations
+
+from torch import nn
+
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, FlightSetup, PairedFlights, TableKey,
+                                   acc_pred_rmse, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
+                                   disturbance_realisations, fallback_note, flight_row, flight_table_json,
+                                   flight_tests_from_settings, fnn_model, make_mpc, mpc_from_settings, paired_grid, pooled_speed,
+                                   speed_summary, theorem2_check)
+from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearize import Linearization, StepFn, linearize
 from fnnlib.mpc.linearized import LinearizedMPC, MPCSolution, OSQPMPC, RebuildMPC, shift_plan
+from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
+from fnnlib.mpc.tuning import (GainSelection, randomization_coordinates, randomized_vehicles,
+                               select_gain_on_validation, validation_references)
 
-__all__ = ["Linearization", "LinearizedMPC", "MPCSolution", "OSQPMPC", "RebuildMPC", "StepFn", "linearize", "shift_plan"]
+
+def warm_up(*residuals: nn.Module | None) -> float:
+    """Compile the numba kernels of the compiled backend (:func:`fnnlib.mpc.compiled.warm_up`); seconds taken.
+
+    numba is imported only here, when the compiled backend is asked for."""
+    from fnnlib.mpc.compiled import warm_up as compile_kernels
+
+    return compile_kernels(*residuals)
+
+
+__all__ = [
+    "CARRYING", "SIX", "SPEED_TARGETS", "AdaptiveNNModel", "Backend", "FeedbackCascadeModel", "FlightResult",
+    "FlightRow", "FlightSetup", "FlightTest", "GainSelection", "Linearization", "LinearizedMPC", "MPCSolution",
+    "OSQPMPC", "PairedFlights", "PredictionModel", "RebuildMPC", "StepFn", "TableKey", "acc_pred_rmse",
+    "adapnn_flights", "adapnn_gain_on_validation", "adapnn_model", "disturbance_realisations", "fallback_note",
+    "flight_row", "flight_table_json", "flight_tests_from_settings", "fly", "fnn_model", "lissajous_reference", "linearize",
+    "make_mpc", "mpc_from_settings", "paired_grid", "paper_models", "pooled_speed", "randomization_coordinates",
+    "randomized_vehicles", "select_gain_on_validation", "shift_plan", "speed_summary", "theorem2_check",
+    "tracking_rmse", "validation_references", "warm_up",
+]

@@ -11,11 +11,13 @@ measured state under the applied input, and the model's change rate and :math:`\
   flight to ~1e-9, several times faster.
 
 The models' online hooks (``observe``, ``commit``) are torch with either backend. Backends are chosen by
-name through :data:`BACKENDS`.
+name through :data:`BACKENDS`; a flight test names its numerics with a :class:`Backend` (name and, for the
+torch reference, the linearization method).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -25,7 +27,7 @@ from fnnlib.mpc.linearize import Linearization, linearize
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import Quadrotor
 
-__all__ = ["BACKENDS", "FlightBackend", "NumbaBackend", "TorchBackend", "check_backend_name", "make_backend"]
+__all__ = ["BACKENDS", "Backend", "FlightBackend", "NumbaBackend", "TorchBackend", "check_backend_name", "make_backend"]
 
 
 class FlightBackend(Protocol):
@@ -137,3 +139,34 @@ def make_backend(name: str, model: PredictionModel, truth: Quadrotor, *, Ts: flo
     """
     return BACKENDS[check_backend_name(name)](model, truth, Ts=Ts, substeps=substeps,
                                               linearize_method=linearize_method, N=N)
+
+
+#: how the compiled backend linearizes (it takes no method)
+EXACT_LINEARIZATION = "exact (forward mode, compiled)"
+
+
+@dataclass(frozen=True)
+class Backend:
+    """The numerics a flight test runs on: a key of :data:`BACKENDS`, with the torch reference's linearization.
+
+    ``linearize_method`` is :func:`~fnnlib.mpc.linearize.linearize`'s method, required by ``"torch"`` (the
+    paper run's is ``"forward"``); the compiled ``"numba"`` backend has exact Jacobians and ignores it.
+    """
+
+    name: str
+    linearize_method: str | None = None
+
+    def __post_init__(self) -> None:
+        check_backend_name(self.name)
+        if self.name == "torch" and self.linearize_method is None:
+            raise ValueError("the torch backend needs a linearize_method (e.g. 'forward')")
+
+    @property
+    def linearization(self) -> str:
+        """How the model is linearized: the torch backend's method, or the compiled backend's exact Jacobians."""
+        return str(self.linearize_method) if self.name == "torch" else EXACT_LINEARIZATION
+
+    def build(self, model: PredictionModel, truth: Quadrotor, *, Ts: float, substeps: int, N: int) -> FlightBackend:
+        """This backend's numerics for one flight of ``model`` on ``truth`` (see :func:`make_backend`)."""
+        return make_backend(self.name, model, truth, Ts=Ts, substeps=substeps, N=N,
+                            linearize_method=self.linearize_method)

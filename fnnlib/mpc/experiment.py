@@ -1,35 +1,41 @@
 r"""The flight test of Sec. 5.2.2 (App. A.5.3-A.5.4, A.9): seven prediction models in the MPC of Eq. (28).
 
 What the ``quadrotor_mpc`` notebook computes, as functions: the QP with the paper's boxes, the flight
-settings shared by every flight (:class:`FlightTest`), the per-model table, the AdapNN gain sweep, the
-speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), AdapNN's gain chosen
+tests of Sec. 5.2.2 built from a run's settings (:func:`flight_tests_from_settings`), the per-model table
+(:class:`FlightRow`, keyed by :class:`TableKey`), the AdapNN gain sweep, the speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), AdapNN's gain chosen
 on validation flights, the disturbance realisations, and the flights paired over trained networks x disturbances that
 the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 from torch import Tensor, nn
 
 from fnnlib.stability import theorem1_balls
 from fnnlib.models.residual import AdaptiveResidual
-from fnnlib.mpc.flight import FlightResult, fly, tracking_rmse
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
-from fnnlib.mpc.models import AdaptiveNNModel, PredictionModel, paper_models
+from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
 from fnnlib.mpc.tuning import GainSelection, select_gain_on_validation
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor, QuadrotorParams
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor, QuadrotorParams
 
 __all__ = [
     "CARRYING",
     "QP_CLASSES",
     "SIX",
     "SPEED_TARGETS",
+    "FlightRow",
+    "FlightSetup",
     "FlightTest",
+    "PairedFlights",
+    "TableKey",
     "acc_pred_rmse",
     "adapnn_flights",
     "adapnn_gain_on_validation",
@@ -37,10 +43,13 @@ __all__ = [
     "disturbance_realisations",
     "fallback_note",
     "flight_row",
+    "flight_table_json",
+    "flight_tests_from_settings",
+    "fnn_model",
     "make_mpc",
+    "mpc_from_settings",
     "paired_grid",
     "pooled_speed",
-    "speed_runs",
     "speed_summary",
     "theorem2_check",
 ]
@@ -77,7 +86,7 @@ def make_mpc(qp: str, N: int, Q: Sequence[float], R: Sequence[float], *, cost: s
 
 
 def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int, spread: float) -> list[tuple[float, ...]]:
-    """The paper's constant force and ``n_drawn`` drawn around it (issue 16: Q3-Q5 over disturbances).
+    """The paper's constant force and ``n_drawn`` drawn around it (Q3-Q5 are judged over disturbances).
 
     Each drawn force has every axis uniform in ``paper * (1 +- spread)`` (``numpy.random.default_rng(seed)``),
     so both its size and its direction vary around the paper's 0.3 N per axis. The paper's force comes first.
@@ -92,23 +101,44 @@ def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int,
     return [tuple(float(f) for f in F0)] + [tuple(float(f) for f in row) for row in drawn]
 
 
-@dataclass(frozen=True)
-class FlightTest:
-    """What every flight of the test shares: the vehicle, the reference and the loop settings of :func:`fly`."""
+def mpc_from_settings(settings: Mapping[str, Any], *, cost: str, u_max: float) -> MPC:
+    """:func:`make_mpc` with a run's ``qp``, ``N``, ``Q``, ``R``, ``theta_max`` and ``solver`` (the notebook's names)."""
+    s = settings
+    return make_mpc(s["qp"], s["N"], s["Q"], s["R"], cost=cost, u_max=u_max, theta_max=s["theta_max"],
+                    solver=s["solver"])
 
-    truth: Quadrotor
+
+@dataclass(frozen=True)
+class FlightSetup:
+    """The flight tests of Sec. 5.2.2: the test vehicle (with the paper's force), the forces flown, the
+    Lissajous reference ``x_r`` (steps + N + 1, 12), ``u_r`` (steps + N, 4), and one test per force."""
+
+    vehicle: QuadrotorParams
+    forces: list[tuple[float, ...]]
     x_r: Tensor
     u_r: Tensor
-    steps: int
-    Ts: float
-    substeps: int
-    backend: str
-    linearize_method: str | None
+    tests: list[FlightTest]
 
-    def fly(self, model: PredictionModel, mpc: MPC, *, progress: bool = False) -> FlightResult:
-        """One flight of ``model`` in ``mpc`` on the test vehicle."""
-        return fly(model, mpc, self.truth, self.x_r, self.u_r, steps=self.steps, Ts=self.Ts, substeps=self.substeps,
-                   linearize_method=self.linearize_method, backend=self.backend, progress=progress)
+
+def flight_tests_from_settings(settings: Mapping[str, Any]) -> FlightSetup:
+    """The Sec. 5.2.2 flight tests (App. A.5.4) from a run's settings, under the ``quadrotor_mpc`` notebook's names.
+
+    The test vehicle is :data:`~fnnlib.systems.quadrotor.TEST_TRUTH` with ``truth_mass``, ``truth_inertia``,
+    ``truth_drag``; the forces are :func:`disturbance_realisations` of ``disturbance`` (``disturbance_draws``,
+    ``disturbance_seed``, ``disturbance_spread``); the reference is the paper's Lissajous curve over ``steps``
+    steps of ``Ts`` (horizon ``N``) by flatness on the nominal vehicle; the loop runs ``truth_substeps`` RK4
+    sub-steps on ``backend`` (with ``linearize_method`` for the torch reference).
+    """
+    s = settings
+    vehicle = TEST_TRUTH.replace(mass=s["truth_mass"], inertia=tuple(s["truth_inertia"]), drag=tuple(s["truth_drag"]),
+                                 force_disturbance=tuple(s["disturbance"]))
+    forces = disturbance_realisations(s["disturbance"], s["disturbance_draws"], seed=s["disturbance_seed"],
+                                      spread=s["disturbance_spread"])
+    x_r, u_r = lissajous_reference(s["steps"], s["N"], Ts=s["Ts"], params=NOMINAL, curve=PAPER_LISSAJOUS)
+    backend = Backend(s["backend"], s["linearize_method"])
+    tests = [FlightTest(Quadrotor(vehicle.replace(force_disturbance=f)), x_r, u_r, steps=s["steps"], Ts=s["Ts"],
+                        substeps=s["truth_substeps"], backend=backend) for f in forces]
+    return FlightSetup(vehicle, forces, x_r, u_r, tests)
 
 
 def acc_pred_rmse(r: FlightResult) -> float:
@@ -122,17 +152,67 @@ def fallback_note(r: FlightResult) -> str:
     return ("DIVERGED " if r.diverged else "") + (f"[{reasons}]" if reasons else "")
 
 
-def flight_row(r: FlightResult) -> dict[str, Any]:
-    """One model's row of the flight table: tracking RMSE, prediction RMSE, fallbacks, timings."""
-    return {**tracking_rmse(r.x, r.x_ref), "acc_pred_rmse": acc_pred_rmse(r), "fallbacks": r.n_fallbacks,
-            "fallback_reasons": dict(r.fallback_reasons), "reference_fallbacks": r.n_reference_fallbacks,
-            "diverged": r.diverged,
-            "reference_linearizations": r.n_reference_linearizations,
-            "step_ms_median": 1e3 * float(np.median(r.t_linearize + r.t_solve)),
-            "step_ms_p95": 1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
-            "linearize_ms_median": 1e3 * float(np.median(r.t_linearize)),
-            "solve_ms_median": 1e3 * float(np.median(r.t_solve)),
-            "flight_s": r.elapsed_s, "real_time_factor": r.real_time_factor}
+@dataclass(frozen=True)
+class FlightRow:
+    """One model's row of the flight table: tracking RMSE (m; per axis, their mean, the error norm's),
+    first-step acceleration prediction RMSE, fallbacks, timings (ms per step, s per flight)."""
+
+    x: float
+    y: float
+    z: float
+    mean_axis: float
+    norm: float
+    acc_pred_rmse: float
+    fallbacks: int
+    fallback_reasons: dict[str, int]
+    reference_fallbacks: int
+    diverged: bool
+    reference_linearizations: int
+    step_ms_median: float
+    step_ms_p95: float
+    linearize_ms_median: float
+    solve_ms_median: float
+    flight_s: float
+    real_time_factor: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row as results.json stores it (the fields in order)."""
+        return asdict(self)
+
+
+def flight_row(r: FlightResult) -> FlightRow:
+    """The flight's row of the flight table."""
+    return FlightRow(**tracking_rmse(r.x, r.x_ref), acc_pred_rmse=acc_pred_rmse(r), fallbacks=r.n_fallbacks,
+                     fallback_reasons=dict(r.fallback_reasons), reference_fallbacks=r.n_reference_fallbacks,
+                     diverged=r.diverged, reference_linearizations=r.n_reference_linearizations,
+                     step_ms_median=1e3 * float(np.median(r.t_linearize + r.t_solve)),
+                     step_ms_p95=1e3 * float(np.percentile(r.t_linearize + r.t_solve, 95)),
+                     linearize_ms_median=1e3 * float(np.median(r.t_linearize)),
+                     solve_ms_median=1e3 * float(np.median(r.t_solve)),
+                     flight_s=r.elapsed_s, real_time_factor=r.real_time_factor)
+
+
+class TableKey(NamedTuple):
+    """A flight table's key: the cost variant of Eq. (28) and the thrust bound in N."""
+
+    cost: str
+    u_max: float
+
+    def label(self, judged_u_max: float) -> str:
+        """The key as results.json writes it: ``"as_flown, 6 N"``, ``" (context)"`` added off the judged bound."""
+        return f"{self.cost}, {self.u_max:g} N" + ("" if self.u_max == judged_u_max else " (context)")
+
+
+def flight_table_json(table: Mapping[TableKey, Mapping[str, FlightRow]], judged_u_max: float) -> dict[str, Any]:
+    """The flight table as results.json stores it: labelled keys (:meth:`TableKey.label`), rows as dicts."""
+    return {k.label(judged_u_max): {n: row.to_dict() for n, row in rows.items()} for k, rows in table.items()}
+
+
+def fnn_model(residual: nn.Module, L: float | Tensor, beta: float, *, plant: Quadrotor, N: int,
+              Ts: float) -> FeedbackCascadeModel:
+    """FNN: the cascade of Eq. (11) with gain ``L`` (scalar or (12,)) and decay ``beta`` on the neural model
+    (``plant`` plus ``residual``), as :func:`~fnnlib.mpc.models.paper_models` builds it, with other gains."""
+    return FeedbackCascadeModel(PredictionModel("Neural", plant, residual, Ts=Ts), L, beta, N, name="FNN")
 
 
 def adapnn_model(residual: nn.Module, Gamma: float, *, Ts: float) -> AdaptiveNNModel:
@@ -142,12 +222,12 @@ def adapnn_model(residual: nn.Module, Gamma: float, *, Ts: float) -> AdaptiveNNM
 
 def adapnn_flights(residual: nn.Module, gammas: Iterable[float], mpc: MPC, test: FlightTest) -> dict[float, FlightResult]:
     """AdapNN flown once per adaptation gain (the paper tunes it "for optimal performance")."""
-    return {g: test.fly(adapnn_model(residual, g, Ts=test.Ts), mpc) for g in gammas}
+    return {g: fly(adapnn_model(residual, g, Ts=test.Ts), mpc, test) for g in gammas}
 
 
 def adapnn_gain_on_validation(residual: nn.Module, grid: Sequence[float], refs: Sequence[tuple[Tensor, Tensor]],
                               vehicles: Sequence[QuadrotorParams], mpc: MPC, *, steps: int, Ts: float, substeps: int,
-                              backend: str, linearize_method: str | None, rtol: float) -> GainSelection:
+                              backend: Backend, rtol: float) -> GainSelection:
     """AdapNN's gain chosen on validation flights (:func:`~fnnlib.mpc.tuning.select_gain_on_validation`).
 
     Every vehicle of ``vehicles`` (e.g. :func:`~fnnlib.mpc.tuning.randomized_vehicles` around the training
@@ -156,33 +236,22 @@ def adapnn_gain_on_validation(residual: nn.Module, grid: Sequence[float], refs: 
     flights are in the order vehicle, then reference. Nothing of the test flight is an argument: the choice
     cannot depend on it.
     """
-    cases = [(Quadrotor(v), x_r, u_r) for v in vehicles for x_r, u_r in refs]
+    cases = [(FlightTest(Quadrotor(v), x_r, u_r, steps=int(steps), Ts=Ts, substeps=substeps, backend=backend),)
+             for v in vehicles for x_r, u_r in refs]
 
-    def fly_fn(gain: float, truth: Quadrotor, x_r: Tensor, u_r: Tensor) -> FlightResult:
-        return fly(adapnn_model(residual, gain, Ts=Ts), mpc, truth, x_r, u_r, steps=int(steps), Ts=Ts,
-                   substeps=substeps, linearize_method=linearize_method, backend=backend)
+    def fly_fn(gain: float, test: FlightTest) -> FlightResult:
+        return fly(adapnn_model(residual, gain, Ts=Ts), mpc, test)
 
     return select_gain_on_validation(fly_fn, grid, cases, rtol=rtol)
 
 
-def speed_runs(models: Iterable[PredictionModel], mpc: MPC, test: FlightTest, repeats: int) -> dict[str, dict[str, Any]]:
-    """Each model flown ``repeats`` times: median and 95th percentile of its steps, median real-time factor."""
-    if int(repeats) < 1:
-        raise ValueError(f"speed_repeats must be >= 1, got {repeats}")
-    timing = {}
-    for m in models:
-        runs = [test.fly(m, mpc) for _ in range(int(repeats))]
-        steps_ms = 1e3 * np.concatenate([r.t_linearize + r.t_solve for r in runs])
-        timing[m.name] = {"step_ms_median": float(np.median(steps_ms)), "step_ms_p95": float(np.percentile(steps_ms, 95)),
-                          "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
-                          "real_time_factor_each": [r.real_time_factor for r in runs]}
-    return timing
-
-
 def pooled_speed(flights: Mapping[str, Sequence[FlightResult]]) -> dict[str, dict[str, Any]]:
-    """Per model, the timing of all its flights pooled, as :func:`speed_runs` reports a model's repeats."""
+    """Per model, the timing of all its flights pooled: median and 95th percentile of the steps (linearize +
+    solve, ms), median real-time factor, number of flights."""
     timing = {}
     for name, runs in flights.items():
+        if not runs:
+            raise ValueError(f"model {name!r} has no flights to time")
         steps_ms = 1e3 * np.concatenate([r.t_linearize + r.t_solve for r in runs])
         timing[name] = {"step_ms_median": float(np.median(steps_ms)), "step_ms_p95": float(np.percentile(steps_ms, 95)),
                         "real_time_factor_median": float(np.median([r.real_time_factor for r in runs])),
@@ -190,8 +259,41 @@ def pooled_speed(flights: Mapping[str, Sequence[FlightResult]]) -> dict[str, dic
     return timing
 
 
+@dataclass(frozen=True)
+class PairedFlights(Mapping[str, list[FlightResult]]):
+    """Per model, its flights over trained networks x tests, in the order ``(network, test)``, test fastest.
+
+    A mapping model name -> flights; entry ``i`` of every model's list is the same unit (network, test), so
+    the lists pair entry by entry. :meth:`unit` gives one unit's flights, :meth:`index` its position.
+    """
+
+    by_model: dict[str, list[FlightResult]]
+    n_networks: int
+    n_tests: int
+
+    def __getitem__(self, name: str) -> list[FlightResult]:
+        return self.by_model[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.by_model)
+
+    def __len__(self) -> int:
+        return len(self.by_model)
+
+    def index(self, network: int, test: int = 0) -> int:
+        """The position of unit (``network``, ``test``) in every model's list."""
+        if not (0 <= network < self.n_networks and 0 <= test < self.n_tests):
+            raise IndexError(f"unit ({network}, {test}) outside {self.n_networks} networks x {self.n_tests} tests")
+        return network * self.n_tests + test
+
+    def unit(self, network: int, test: int = 0) -> dict[str, FlightResult]:
+        """Every model's flight of unit (``network``, ``test``)."""
+        i = self.index(network, test)
+        return {n: runs[i] for n, runs in self.by_model.items()}
+
+
 def paired_grid(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, tests: Sequence[FlightTest], mpc: MPC,
-                model_settings: Mapping[str, Any], adapnn_gamma: float) -> dict[str, list[FlightResult]]:
+                model_settings: Mapping[str, Any], adapnn_gamma: float) -> PairedFlights:
     """All seven models flown for every trained network x every test (one per disturbance): paired flights.
 
     Returns, per model, the flights in the order ``(seed, test)`` with the test varying fastest; models that
@@ -202,29 +304,28 @@ def paired_grid(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, tes
         raise ValueError("need at least one trained network and one test")
     models = paper_models(members[0][1], mlp, **model_settings)
     fixed = {m.name: m for m in models if m.name not in CARRYING}
-    fixed_flights = {n: [t.fly(m, mpc) for t in tests] for n, m in fixed.items()}
+    fixed_flights = {n: [fly(m, mpc, t) for t in tests] for n, m in fixed.items()}
     out: dict[str, list[FlightResult]] = {m.name: [] for m in models}  # the paper's order
     for _, net in members:
-        ms = {m.name: m for m in paper_models(net, mlp, **model_settings)}
-        ms["AdapNN"] = adapnn_model(net, adapnn_gamma, Ts=model_settings["Ts"])
+        ms = {m.name: m for m in paper_models(net, mlp, **model_settings, adapnn_gamma=adapnn_gamma)}
         for i, t in enumerate(tests):
             for n in fixed:
                 out[n].append(fixed_flights[n][i])
             for n in CARRYING:
-                out[n].append(t.fly(ms[n], mpc))
-    return out
+                out[n].append(fly(ms[n], mpc, t))
+    return PairedFlights(out, n_networks=len(members), n_tests=len(tests))
 
 
 def speed_summary(timing: Mapping[str, Mapping[str, Any]], *, repeats: int, thrust_bound: float, qp: str,
-                  backend: str, linearize_method: str, compile_s: float) -> dict[str, Any]:
+                  backend: Backend, compile_s: float) -> dict[str, Any]:
     """Worst and best model against :data:`SPEED_TARGETS`; ``met`` when the worst model meets both."""
     speed = {"per_model": timing, "repeats": int(repeats), "thrust_bound": thrust_bound,
              "step_ms_median_worst_model": max(v["step_ms_median"] for v in timing.values()),
              "step_ms_median_best_model": min(v["step_ms_median"] for v in timing.values()),
              "real_time_factor_worst_model": min(v["real_time_factor_median"] for v in timing.values()),
              "real_time_factor_best_model": max(v["real_time_factor_median"] for v in timing.values()),
-             "targets": dict(SPEED_TARGETS), "qp": qp, "backend": backend,
-             "linearize_method": linearize_method if backend == "torch" else "exact (forward mode, compiled)",
+             "targets": dict(SPEED_TARGETS), "qp": qp, "backend": backend.name,
+             "linearize_method": backend.linearization,
              "compile_s": compile_s}
     speed["met"] = (speed["step_ms_median_worst_model"] <= SPEED_TARGETS["step_ms_median"]) and (
         speed["real_time_factor_worst_model"] >= SPEED_TARGETS["real_time_factor"])

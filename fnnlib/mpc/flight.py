@@ -3,6 +3,7 @@ r"""The closed-loop flight test of Sec. 5.2: linearized MPC (Eq. (28)) with a pr
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -14,13 +15,13 @@ from tqdm import tqdm
 from fnnlib._validation import check_finite, check_positive
 from fnnlib.control.flatness import flat_reference
 from fnnlib.control.lissajous import lissajous
-from fnnlib.mpc.backends import FlightBackend, check_backend_name, make_backend
+from fnnlib.mpc.backends import Backend, FlightBackend
 from fnnlib.mpc.linearize import Linearization
-from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC, is_diverged
+from fnnlib.mpc.linearized import LinearizedMPC, MPCSolution, OSQPMPC, is_diverged
 from fnnlib.mpc.models import PredictionModel
 from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
 
-__all__ = ["FlightResult", "fly", "lissajous_reference", "tracking_rmse"]
+__all__ = ["FlightResult", "FlightTest", "fly", "lissajous_reference", "tracking_rmse"]
 
 
 def lissajous_reference(steps: int, N: int, *, Ts: float, params: QuadrotorParams,
@@ -57,7 +58,8 @@ class FlightResult:
     finite, as in a diverging flight) and the model was linearized along the
     reference instead. ``fallback_reasons`` counts the MPC's fallbacks per
     reason and ``n_reference_fallbacks`` those that flew the reference input
-    (see :meth:`~fnnlib.mpc.linearized.LinearizedMPC.solve`); :attr:`diverged`
+    (see :meth:`~fnnlib.mpc.linearized.LinearizedMPC.solve`), counted from this
+    flight's solutions (:func:`fallback_counts`); :attr:`diverged`
     marks a flight with too many fallbacks.
     """
 
@@ -81,7 +83,7 @@ class FlightResult:
 
     @property
     def fallback_share(self) -> float:
-        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`, issue 16)."""
+        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`)."""
         return self.n_fallbacks / len(self.u)
 
     @property
@@ -108,10 +110,44 @@ def tracking_rmse(x: np.ndarray, x_ref: np.ndarray) -> dict[str, float]:
             "mean_axis": float(per_axis.mean()), "norm": float(np.sqrt(np.mean(np.sum(e**2, axis=1))))}
 
 
-def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, x_r: Tensor, u_r: Tensor, *, steps: int,
-        Ts: float, substeps: int, backend: str, linearize_method: str | None = None, x0: Tensor | None = None,
+@dataclass(frozen=True)
+class FlightTest:
+    r"""What every flight of a test shares: the truth vehicle, the reference and the loop settings of :func:`fly`.
+
+    ``x_r`` (steps + N + 1, 12) and ``u_r`` (steps + N, 4) are the reference states and inputs on the control
+    grid (from flatness, :func:`lissajous_reference`); ``Ts`` the control step in s, the model's (the paper's:
+    0.02); ``substeps`` the truth's RK4 sub-steps per ``Ts`` (the paper run: 1); ``backend`` who does the
+    numerics of each step (:class:`~fnnlib.mpc.backends.Backend`: the torch reference with its linearization
+    method, or the compiled twins with exact Jacobians, the paper run). The models' online hooks are torch
+    either way.
+    """
+
+    truth: Quadrotor
+    x_r: Tensor
+    u_r: Tensor
+    steps: int
+    Ts: float
+    substeps: int
+    backend: Backend
+
+    def __post_init__(self) -> None:
+        check_positive(self.Ts, name="Ts")
+        if not isinstance(self.backend, Backend):
+            raise TypeError(f"backend must be a fnnlib.mpc.Backend, got {self.backend!r}")
+        if int(self.steps) < 1:
+            raise ValueError(f"steps must be >= 1, got {self.steps}")
+
+
+def fallback_counts(solutions: list[MPCSolution]) -> tuple[int, dict[str, int], int]:
+    """The fallbacks among a flight's solutions: how many, how many per reason (first seen first), how many
+    flew the reference input."""
+    reasons = Counter(s.reason for s in solutions if s.fallback)
+    return sum(s.fallback for s in solutions), dict(reasons), sum(s.reference_input for s in solutions)
+
+
+def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, test: FlightTest, *, x0: Tensor | None = None,
         progress: bool = False) -> FlightResult:
-    r"""Fly ``steps`` control steps of the MPC with ``model`` on the ``truth`` vehicle.
+    r"""Fly ``test.steps`` control steps of the MPC with ``model`` on the test's truth vehicle.
 
     At step ``t``: the model observes the measured state; the model is
     linearized along the previous plan shifted by one step (the reference at
@@ -122,28 +158,16 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
 
     Parameters
     ----------
-    x_r, u_r : Tensor, shapes (steps + N + 1, 12) and (steps + N, 4)
-        Reference states and inputs on the control grid (from flatness).
-    Ts : float
-        Control step in s; must be the model's (the paper's: 0.02).
-    substeps : int
-        RK4 sub-steps of the truth per ``Ts`` (the paper run: 1).
-    backend : {"torch", "numba"}
-        Who does the numerics of each step (:mod:`fnnlib.mpc.backends`): the torch reference, or its
-        compiled twins with exact Jacobians (the paper run). The models' online hooks are torch either way.
-    linearize_method : str, optional
-        :func:`~fnnlib.mpc.linearize.linearize`'s method; needed by the torch backend only.
+    test : FlightTest
+        The vehicle, the reference (shapes (steps + N + 1, 12) and (steps + N, 4) for the MPC's ``N``) and
+        the loop settings.
     x0 : Tensor, shape (12,), optional
         Initial state; default ``x_r[0]``.
     """
     t_start = time.perf_counter()
-    check_positive(Ts, name="Ts")
-    check_backend_name(backend)
-    steps, N = int(steps), int(mpc.N)
-    if steps < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}")
-    x_r = torch.as_tensor(x_r, dtype=torch.float64)
-    u_r = torch.as_tensor(u_r, dtype=torch.float64)
+    steps, N, Ts = int(test.steps), int(mpc.N), test.Ts
+    x_r = torch.as_tensor(test.x_r, dtype=torch.float64)
+    u_r = torch.as_tensor(test.u_r, dtype=torch.float64)
     if x_r.shape != (steps + N + 1, 12) or u_r.shape != (steps + N, 4):
         raise ValueError(f"reference must be x_r ({steps + N + 1}, 12) and u_r ({steps + N}, 4) for steps={steps}, "
                          f"N={N}; got {tuple(x_r.shape)} and {tuple(u_r.shape)}")
@@ -151,11 +175,9 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
     check_finite(u_r, name="u_r")
     x = (x_r[0] if x0 is None else torch.as_tensor(x0, dtype=torch.float64)).clone()
     check_finite(x, name="x0")
-    numerics: FlightBackend = make_backend(backend, model, truth, Ts=Ts, substeps=substeps, N=N,
-                                           linearize_method=linearize_method)
+    numerics: FlightBackend = test.backend.build(model, test.truth, Ts=Ts, substeps=test.substeps, N=N)
     model.reset()
     mpc.reset()
-    fallbacks_before = int(mpc.n_fallbacks)
     u_lb, u_ub = np.asarray(mpc.u_lb, dtype=np.float64), np.asarray(mpc.u_ub, dtype=np.float64)
     X_r, U_r = x_r.numpy(), u_r.numpy()
     as_t = torch.from_numpy  # the loop works in numpy; the models' hooks see torch views
@@ -171,7 +193,7 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
     n_reference = 0
     xs, us = [x], []
     xdot_true, xdot_pred, x_tilde, delta = [], [], [], []
-    t_lin, t_sol, statuses = np.zeros(steps), np.zeros(steps), []
+    t_lin, t_sol, solutions = np.zeros(steps), np.zeros(steps), []
     plan_x: np.ndarray | None = None
     plan_u: np.ndarray | None = None
     bar = tqdm(range(steps), desc=model.name, disable=not progress, leave=False)
@@ -195,7 +217,7 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         tic = time.perf_counter()
         sol = mpc.solve(x, lin.A, lin.B, lin.c, X_r[t + 1:t + N + 1], U_r[t:t + N])
         t_sol[t] = time.perf_counter() - tic
-        statuses.append(str(sol.status))
+        solutions.append(sol)
         plan_u = np.array(sol.u, dtype=np.float64)
         plan_x = np.array(sol.x, dtype=np.float64)
         plan_x[0] = x
@@ -215,9 +237,10 @@ def fly(model: PredictionModel, mpc: LinearizedMPC | OSQPMPC, truth: Quadrotor, 
         us.append(u)
         x = x_next
         xs.append(x)
+    n_fallbacks, reasons, n_reference_fallbacks = fallback_counts(solutions)
     return FlightResult(
         name=model.name, x=np.stack(xs), u=np.stack(us), x_ref=X_r[:steps + 1].copy(),
         xdot_true=np.stack(xdot_true), xdot_pred=np.stack(xdot_pred), x_tilde=np.stack(x_tilde),
-        delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=int(mpc.n_fallbacks) - fallbacks_before,
-        statuses=statuses, Ts=float(Ts), elapsed_s=time.perf_counter() - t_start, n_reference_linearizations=n_reference,
-        fallback_reasons=dict(mpc.fallback_reasons), n_reference_fallbacks=int(mpc.n_reference_fallbacks))
+        delta=np.stack(delta), t_linearize=t_lin, t_solve=t_sol, n_fallbacks=n_fallbacks,
+        statuses=[str(s.status) for s in solutions], Ts=float(Ts), elapsed_s=time.perf_counter() - t_start,
+        n_reference_linearizations=n_reference, fallback_reasons=reasons, n_reference_fallbacks=n_reference_fallbacks)

@@ -17,7 +17,7 @@ with the per-step weights :math:`Q_k, R_k` of one of two cost variants (``cost=`
     :math:`Q_N` (default :math:`Q`; the paper's :math:`l_N = l_x`) on :math:`x_N`, and
     :math:`R_k = R` (the paper's :math:`R = I`) on every input :math:`u_0..u_{N-1}`.
 ``"as_flown"``
-    The weighting of the authors' release, as issue 16 reports its cost loop:
+    The weighting of the authors' release, as its cost loop reads:
     :math:`Q_k = Q` for :math:`k = 1..N-1`, **no weight on** :math:`x_N`, and only the
     last input penalised, :math:`R_{N-1} = R`, :math:`R_k = 0` for :math:`k < N-1`. As
     :math:`u_{N-1}` moves only the unweighted :math:`x_N`, the inputs are in effect free
@@ -75,7 +75,7 @@ PLAN_TOL = 1e-3
 """Relative tolerance for a usable plan: an entry may exceed its box by ``PLAN_TOL * max(1, |bound|)`` and the
 dynamics residual may reach ``PLAN_TOL * (1 + |largest term|)``. Two orders above the solvers' default accuracy
 (eps 1e-5) and far below any physical margin of the quadrotor's boxes (thrust 0..4 or 6 N, angles pi/2); a stale or
-diverged solve (issue 16: u = 4.4e19 against a box of [-1, 1]) misses it by many orders."""
+diverged solve (one seen: u = 4.4e19 against a box of [-1, 1]) misses it by many orders."""
 
 FALLBACK_REASONS = ("data_not_finite", "data_too_large", "solver_error", "not_optimal", "solution_not_finite",
                     "outside_box", "dynamics_mismatch")
@@ -84,7 +84,7 @@ FALLBACK_REASONS = ("data_not_finite", "data_too_large", "solver_error", "not_op
 DIVERGED_FALLBACK_SHARE = 0.1
 """A flight whose share of fallback steps exceeds this is marked diverged (:func:`is_diverged`).
 
-A flight under a working controller has no fallbacks at all (issue 16: the one paper-profile flight with
+A flight under a working controller has no fallbacks at all (the one paper-profile flight with
 fallbacks is the runaway AdapNN at Gamma = 8, 278 of 300 steps, 93 %). Ten per cent is 30 of the paper's 300
 steps: three full horizons (N = 10) flown on the fallback instead of an optimal plan, more than one lost plan
 explains; beyond it the numbers describe the fallback, not the MPC with that model."""
@@ -123,6 +123,8 @@ class MPCSolution:
         Time the solver itself reports; NaN if unavailable.
     reason : str
         Why the solve fell back, one of :data:`FALLBACK_REASONS`; ``""`` for a usable plan.
+    reference_input : bool
+        True when the fallback flew the clipped reference input (no usable plan left).
     """
 
     u: np.ndarray
@@ -133,6 +135,7 @@ class MPCSolution:
     fallback: bool
     solver_time_s: float = math.nan
     reason: str = ""
+    reference_input: bool = False
 
 
 class _UnsafeData(Exception):
@@ -422,19 +425,21 @@ class _MPCBase:
                 status, reason = f"solver_error: {type(exc).__name__}: {exc}", "solver_error"
         if not reason:
             reason = self._plan_reason(status, x0, A, B, c, u, x)
+        reference_input = False
         if not reason:
             assert u is not None and x is not None
             u_plan, x_plan = np.array(u, dtype=np.float64), np.vstack([x0, x])
             self._good_u, self.n_consecutive_fallbacks = u_plan.copy(), 0
         else:
-            u_plan = self._fallback_inputs(u_r)
+            u_plan, reference_input = self._fallback_inputs(u_r)
             self.n_fallbacks += 1
             self.fallback_reasons[reason] += 1
             x_plan = self._rollout(x0, A, B, c, u_plan)
         self._plan = (x_plan, u_plan)
         return MPCSolution(u=u_plan.copy(), x=x_plan.copy(), status=status,
                            ok=not reason and status == cp.OPTIMAL, solve_time_s=time.perf_counter() - t0,
-                           fallback=bool(reason), solver_time_s=solver_time, reason=reason)
+                           fallback=bool(reason), solver_time_s=solver_time, reason=reason,
+                           reference_input=reference_input)
 
     def _plan_reason(self, status: str, x0: np.ndarray, A: np.ndarray, B: np.ndarray, c: np.ndarray,
                      u: np.ndarray | None, x: np.ndarray | None) -> str:
@@ -457,8 +462,10 @@ class _MPCBase:
             return "dynamics_mismatch"
         return ""
 
-    def _fallback_inputs(self, u_r: np.ndarray) -> np.ndarray:
-        """The fallback inputs of :meth:`solve` (the last usable plan for at most N steps, then the reference)."""
+    def _fallback_inputs(self, u_r: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The fallback inputs of :meth:`solve` (the last usable plan for at most N steps, then the reference).
+
+        Returns the inputs (N, m) and whether they are the reference's."""
         self.n_consecutive_fallbacks += 1
         k, N = self.n_consecutive_fallbacks, self.N
         u_ref = np.clip(u_r, self.u_lb, self.u_ub)
@@ -467,9 +474,9 @@ class _MPCBase:
             hold = self._plan[1][0] if self._plan is not None else mid
             u_ref = np.where(np.isfinite(u_ref), u_ref, hold)
         if self._good_u is not None and k < N:
-            return np.concatenate([self._good_u[k:], u_ref[N - k:]], axis=0)
+            return np.concatenate([self._good_u[k:], u_ref[N - k:]], axis=0), False
         self.n_reference_fallbacks += 1
-        return u_ref
+        return u_ref, True
 
     def _rollout(self, x0: np.ndarray, A: np.ndarray, B: np.ndarray, c: np.ndarray, u: np.ndarray) -> np.ndarray:
         """x_{k+1} = A_k x_k + B_k u_k + c_k from x0; x0 repeated if that is not finite."""

@@ -123,7 +123,7 @@ class AdaptiveNNModel(PredictionModel):
     :math:`\hat v_{t+1}` is the model's prediction from :math:`(x_t, u_t)` (there is no
     observer to supply :math:`\tilde x`).
 
-    **The gain's convention** (issue 16). Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
+    **The gain's convention**. Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
     stepped by explicit Euler over :math:`T_s` with the error above, so each step is
     :math:`\hat\chi \mathrel{+}= T_s \Gamma\, \tilde a_t \phi^\top = \Gamma\,(v_{t+1} - \hat v_{t+1})\,\phi^\top`
     (measurement minus prediction; :meth:`AdaptiveResidual.adapt`). The authors' release steps
@@ -278,14 +278,15 @@ class FeedbackCascadeModel(PredictionModel):
 
 
 def paper_models(residual: nn.Module, mlp: nn.Module, *, plant: Quadrotor, L: float | Tensor, beta: float, N: int,
-                 Gamma: float, Ts: float, substeps: int = 1) -> list[PredictionModel]:
+                 Gamma: float, Ts: float, substeps: int = 1, adapnn_gamma: float | None = None) -> list[PredictionModel]:
     """The seven prediction models of App. A.5.4 (see the module docstring), in the paper's order.
 
     ``residual`` is the neural ODE's :class:`~fnnlib.models.AeroResidual` (trained with App. A.1),
     ``mlp`` the single-step one. AdapNN and AdapFNN adapt the last layer of a copy of ``residual``
     (the same network as Neural and FNN, so the comparison isolates the online part). ``plant`` is the
     models' own vehicle (the paper's: ``Quadrotor(NOMINAL)``); the paper's ``L``, ``beta``, ``N``, ``Gamma``
-    and ``Ts`` are in :mod:`fnnlib.quadrotor_presets`.
+    and ``Ts`` are in :mod:`fnnlib.quadrotor_presets`. AdapNN adapts at ``adapnn_gamma`` where given (its gain
+    chosen on validation flights, :func:`~fnnlib.mpc.experiment.adapnn_gain_on_validation`), else at ``Gamma``.
     """
     kw = {"Ts": Ts, "substeps": substeps}
     nomi = PredictionModel("Nomi", plant, None, **kw)
@@ -295,7 +296,8 @@ def paper_models(residual: nn.Module, mlp: nn.Module, *, plant: Quadrotor, L: fl
         neural,
         PredictionModel("MLP", plant, mlp, **kw),
         FeedbackCascadeModel(nomi, L, beta, N, name="FB"),
-        AdaptiveNNModel("AdapNN", plant, AdaptiveResidual(residual, Gamma), **kw),
+        AdaptiveNNModel("AdapNN", plant, AdaptiveResidual(residual, Gamma if adapnn_gamma is None else adapnn_gamma),
+                        **kw),
         FeedbackCascadeModel(neural, L, beta, N, name="FNN"),
         FeedbackCascadeModel(PredictionModel("AdapNeural", plant, AdaptiveResidual(residual, Gamma), **kw), L, beta,
                              N, name="AdapFNN", adaptive=True),

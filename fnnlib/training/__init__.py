@@ -1,6 +1,6 @@
 """Training neural ODEs and neural feedback parts, and saving them."""
 
-from fnnlib.training.external import adjoint_gradient, train_with_inputs
+from fnnlib.training.external import InputRecipe, adjoint_gradient, train_with_inputs
 from fnnlib.training.checkpoint import (
     CheckpointError,
     load_checkpoint,
@@ -17,7 +17,9 @@ from fnnlib.training.feedback import (
     train_neural_feedback,
 )
 from fnnlib.training.neural_ode import PAPER_BOTTLE_RECIPE, PAPER_SPIRAL_RECIPE, QUICK_RECIPE, ODERecipe, TrainHistory, sample_segments, train_neural_ode
+from fnnlib.training.residual import PAPER_RESIDUAL, ResidualRecipe, train_residual_ensemble
 
 __all__ = ["CheckpointError", "adjoint_gradient", "train_with_inputs", "TrainHistory", "feedback_loss", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name", "sample_segments", "save_checkpoint",
            "train_neural_feedback", "train_neural_ode", "FeedbackRecipe", "ODERecipe", "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE",
-           "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model"]
+           "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model", "InputRecipe", "PAPER_RESIDUAL",
+           "ResidualRecipe", "train_residual_ensemble"]

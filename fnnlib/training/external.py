@@ -36,12 +36,12 @@ from torch import Tensor, nn
 from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_finite, check_positive
-from fnnlib.training.neural_ode import TrainHistory
+from fnnlib.training.neural_ode import Recipe, TrainHistory
 
 #: a discrete model ``x_{i+1} = f^d(x_i, I_i, theta)``: ``(B, n), (B, m) -> (B, n)``
 Step = Callable[[Tensor, Tensor], Tensor]
 
-__all__ = ["InputTrainHistory", "Step", "adjoint_gradient", "evaluate_loss", "make_segments", "rollout",
+__all__ = ["InputRecipe", "InputTrainHistory", "Step", "adjoint_gradient", "evaluate_loss", "make_segments", "rollout",
            "train_with_inputs", "trajectory_loss"]
 
 
@@ -356,41 +356,12 @@ def make_segments(x_r: Tensor, I: Tensor, segment_length: int) -> tuple[Tensor, 
     return x_seg, I_seg
 
 
-def train_with_inputs(
-    model: nn.Module,
-    step: Step,
-    trajectories: tuple[Tensor, Tensor],
-    *,
-    segment_length: int,
-    batch_size: int | None,
-    epochs: int,
-    lr: float,
-    seed: int,
-    W: Tensor | Sequence[float] | None = None,
-    progress: bool = True,
-    callback: Callable[[int, InputTrainHistory], bool | None] | None = None,
-) -> InputTrainHistory:
-    """Train ``model``'s parameters theta on trajectories with external inputs, Alg. 3.
+@dataclass(frozen=True)
+class InputRecipe(Recipe):
+    """How Alg. 3 trains on trajectories with external inputs (:func:`train_with_inputs`); checked when made.
 
-    The trajectories are sliced into ``M`` segments of ``segment_length``
-    steps (:func:`make_segments`). Every epoch shuffles the segments with a
-    generator seeded by ``seed`` and walks through them ``batch_size`` at a
-    time; each batch gets the adjoint gradient of Alg. 2
-    (:func:`adjoint_gradient`, all its segments rolled out together from their
-    recorded first states) and one Adam step
-    ``theta <- theta - alpha dH/dtheta``. The last batch of an epoch may be
-    smaller.
-
-    Parameters
+    Attributes
     ----------
-    model : nn.Module
-        Holds theta (its parameters with ``requires_grad``); trained in place.
-    step : callable
-        ``step(x, I) -> x_next``: ``x`` (B, n), ``I`` (B, m) -> (B, n), the
-        discrete closed loop built on ``model``.
-    trajectories : (Tensor, Tensor)
-        ``(x_r, I)``: recorded states of shape (K, T+1, n) and inputs of shape
-        (K, T, m). Cast to the dtype and device of ``model``'s parameters.
     segment_length : int
         Steps per segment ``s``, ``1 <= s <= T`` (the paper splits 200-node
         trajectories into two segments of 100).
@@ -402,6 +373,58 @@ def train_with_inputs(
         Passes over the segments (the paper runs 50).
     lr : float
         Adam learning rate.
+    """
+
+    segment_length: int
+    batch_size: int | None
+    epochs: int
+    lr: float
+
+    def __post_init__(self) -> None:
+        if int(self.segment_length) < 1:
+            raise ValueError(f"segment_length must be between 1 and the trajectory length T, got {self.segment_length}")
+        if self.batch_size is not None and int(self.batch_size) < 1:
+            raise ValueError(f"batch_size must be between 1 and the number of segments M, got {self.batch_size}")
+        if int(self.epochs) < 1:
+            raise ValueError(f"epochs must be >= 1, got {self.epochs}")
+        check_positive(self.lr, name="lr")
+
+
+def train_with_inputs(
+    model: nn.Module,
+    step: Step,
+    trajectories: tuple[Tensor, Tensor],
+    recipe: InputRecipe,
+    *,
+    seed: int,
+    W: Tensor | Sequence[float] | None = None,
+    progress: bool = True,
+    callback: Callable[[int, InputTrainHistory], bool | None] | None = None,
+) -> InputTrainHistory:
+    """Train ``model``'s parameters theta on trajectories with external inputs, Alg. 3.
+
+    The trajectories are sliced into ``M`` segments of ``recipe.segment_length``
+    steps (:func:`make_segments`). Every epoch shuffles the segments with a
+    generator seeded by ``seed`` and walks through them ``recipe.batch_size`` at a
+    time; each batch gets the adjoint gradient of Alg. 2
+    (:func:`adjoint_gradient`, all its segments rolled out together from their
+    recorded first states) and one Adam step
+    ``theta <- theta - alpha dH/dtheta`` (``alpha = recipe.lr``). The last batch of
+    an epoch may be smaller.
+
+    Parameters
+    ----------
+    model : nn.Module
+        Holds theta (its parameters with ``requires_grad``); trained in place.
+    step : callable
+        ``step(x, I) -> x_next``: ``x`` (B, n), ``I`` (B, m) -> (B, n), the
+        discrete closed loop built on ``model``.
+    trajectories : (Tensor, Tensor)
+        ``(x_r, I)``: recorded states of shape (K, T+1, n) and inputs of shape
+        (K, T, m). Cast to the dtype and device of ``model``'s parameters.
+    recipe : InputRecipe
+        Segment length, batch size, epochs and learning rate (the paper's, with the network's:
+        :data:`~fnnlib.training.residual.PAPER_RESIDUAL`).
     W : Tensor or sequence of float, shape (n,), optional
         Diagonal loss weights (default ones), e.g. ones on the 12 quadrotor
         states and zeros on the 6 controller states.
@@ -427,26 +450,26 @@ def train_with_inputs(
         raise TypeError(f"step must be callable as step(x, I), got {type(step).__name__}")
     if not isinstance(trajectories, (tuple, list)) or len(trajectories) != 2:
         raise TypeError("trajectories must be a pair (x_r of shape (K, T+1, n), I of shape (K, T, m))")
+    if not isinstance(recipe, InputRecipe):
+        raise TypeError(f"recipe must be an InputRecipe, got {type(recipe).__name__}")
     params = _trainable_params(model.parameters())
     x_r, I = trajectories
     _, T, n, _ = _check_pair(x_r, I)
-    if int(epochs) < 1:
-        raise ValueError(f"epochs must be >= 1, got {epochs}")
-    lr = check_positive(lr, name="lr")
+    epochs, lr = int(recipe.epochs), float(recipe.lr)
     dtype, device = params[0].dtype, params[0].device
     x_r, I = x_r.to(dtype=dtype, device=device), I.to(dtype=dtype, device=device)
     W = _check_W(W, n, x_r)
-    x_seg, I_seg = make_segments(x_r, I, segment_length)
+    x_seg, I_seg = make_segments(x_r, I, recipe.segment_length)
     M = x_seg.shape[0]
-    bs = M if batch_size is None else int(batch_size)
+    bs = M if recipe.batch_size is None else int(recipe.batch_size)
     if not 1 <= bs <= M:
-        raise ValueError(f"batch_size must be between 1 and the number of segments M = {M}, got {batch_size}")
+        raise ValueError(f"batch_size must be between 1 and the number of segments M = {M}, got {recipe.batch_size}")
 
     opt = torch.optim.Adam(params, lr=lr)
     gen = torch.Generator().manual_seed(int(seed))
     history = InputTrainHistory(segments=M, batch_size=bs)
     start = time.perf_counter()
-    bar = tqdm(range(int(epochs)), desc="train with inputs", disable=not progress, leave=False)
+    bar = tqdm(range(epochs), desc="train with inputs", disable=not progress, leave=False)
     for epoch in bar:
         t0 = time.perf_counter()
         order = torch.randperm(M, generator=gen).to(device)

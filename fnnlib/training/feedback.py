@@ -38,6 +38,14 @@ class FeedbackRecipe(Recipe):
     optimizer: str
     refresh_every: int
 
+    def __post_init__(self) -> None:
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {self.optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
+        if int(self.iterations) < 1 or int(self.batch_size) < 1 or int(self.refresh_every) < 1:
+            raise ValueError(f"need iterations, batch_size and refresh_every >= 1; got {self.iterations}, "
+                             f"{self.batch_size}, {self.refresh_every}")
+        check_positive(self.lr, name="lr")
+
 
 #: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,
 #: the rollout refreshed every iteration as Alg. 1 writes it.
@@ -173,15 +181,9 @@ def train_neural_feedback(
         raise ValueError(f"t has {t.numel()} points but X has {T} samples per case")
     if T < 2:
         raise ValueError("each case needs at least 2 samples")
-    if optimizer not in OPTIMIZERS:
-        raise ValueError(f"unknown optimizer {optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
-    if int(iterations) < 1 or int(batch_size) < 1 or int(refresh_every) < 1:
-        raise ValueError(f"need iterations, batch_size and refresh_every >= 1; got {iterations}, {batch_size}, "
-                         f"{refresh_every}")
-    pool = n_case * (T - 1)
+    pool = n_case * (T - 1)  # the recipe's own fields are checked when it is made
     if int(batch_size) > pool:
         raise ValueError(f"batch_size={batch_size} exceeds the {pool} available samples")
-    check_positive(lr, name="lr")
     if any(p is q for p in f.parameters() for q in h.parameters()):
         raise ValueError("f and h share parameters; the neural ODE must stay frozen")
     dtype = next(h.parameters()).dtype

@@ -78,6 +78,19 @@ class ODERecipe(Recipe):
     atol: float
     adjoint_seminorm: bool
 
+    def __post_init__(self) -> None:
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {self.optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"unknown loss {self.loss!r}; choose one of {sorted(LOSSES)}")
+        if self.method not in FIXED_STEP_METHODS | ADAPTIVE_METHODS:
+            raise ValueError(f"unknown solver {self.method!r}; choose one of "
+                             f"{sorted(FIXED_STEP_METHODS | ADAPTIVE_METHODS)}")
+        if int(self.iterations) < 1 or int(self.batch_size) < 1 or int(self.batch_time) < 2:
+            raise ValueError(f"need iterations >= 1, batch_size >= 1 and 2 <= batch_time <= T; got "
+                             f"{self.iterations}, {self.batch_size}, {self.batch_time}")
+        check_positive(self.lr, name="lr")
+
 
 #: The spiral's recipe (App. A.3.2 and the authors' release): RMSprop at 1e-3 on the L1 loss, 400 iterations of
 #: 20 segments of 10 samples, dopri5 with the adjoint method (seminorm backward) at rtol 1e-5, atol 1e-6.
@@ -211,18 +224,10 @@ def train_neural_ode(
     Ts = check_uniform_grid(t)
     if t.numel() != x.shape[1]:
         raise ValueError(f"t has {t.numel()} points but x has {x.shape[1]} samples")
-    if optimizer not in OPTIMIZERS:
-        raise ValueError(f"unknown optimizer {optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
-    if loss not in LOSSES:
-        raise ValueError(f"unknown loss {loss!r}; choose one of {sorted(LOSSES)}")
-    if method not in FIXED_STEP_METHODS | ADAPTIVE_METHODS:
-        raise ValueError(f"unknown solver {method!r}; choose one of {sorted(FIXED_STEP_METHODS | ADAPTIVE_METHODS)}")
     if adjoint and not isinstance(model, nn.Module):
         raise TypeError("the adjoint method needs model to be an nn.Module")
-    if int(iterations) < 1 or int(batch_size) < 1 or not 2 <= int(batch_time) <= x.shape[1]:
-        raise ValueError(f"need iterations >= 1, batch_size >= 1 and 2 <= batch_time <= T; got "
-                         f"{iterations}, {batch_size}, {batch_time} (T = {x.shape[1]})")
-    check_positive(lr, name="lr")
+    if int(batch_time) > x.shape[1]:  # the recipe's own fields are checked when it is made
+        raise ValueError(f"need 2 <= batch_time <= T; got {batch_time} (T = {x.shape[1]})")
 
     dtype = next(model.parameters()).dtype
     x = x.to(dtype)  # the data follow the model's precision (simulate returns float64)

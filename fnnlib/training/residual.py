@@ -14,16 +14,49 @@ from tqdm import tqdm
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import Flights
 from fnnlib.metrics import relative_rmse
+from fnnlib.models import ACTIVATIONS
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
+from fnnlib.quadrotor_presets import PAPER_RESIDUAL_RECIPE
 from fnnlib.systems.quadrotor import STATE_GROUPS, Quadrotor
-from fnnlib.training.external import InputTrainHistory, make_segments, rollout, train_with_inputs
+from fnnlib.training.external import InputRecipe, InputTrainHistory, make_segments, rollout, train_with_inputs
 
-__all__ = ["EnsembleFit", "closed_loop_step", "convergence_checks", "predict_flights", "state_group_errors",
+__all__ = ["PAPER_RESIDUAL", "EnsembleFit", "ResidualRecipe", "closed_loop_step", "convergence_checks", "predict_flights", "state_group_errors",
            "train_residual_ensemble", "train_single_step"]
 
 #: Loss weights of App. A.1's quadratic loss: the 12 vehicle states count, the 6 controller states do not
 #: (as in the authors' release).
 STATE_WEIGHTS = [1.0] * 12 + [0.0] * 6
+
+
+@dataclass(frozen=True)
+class ResidualRecipe(InputRecipe):
+    """The aerodynamic residual (:class:`~fnnlib.models.residual.AeroResidual`) and its training by Alg. 3.
+
+    Attributes
+    ----------
+    segment_length, batch_size, epochs, lr
+        As in :class:`~fnnlib.training.external.InputRecipe`.
+    hidden : tuple of int
+        Hidden layer widths (a list is stored as a tuple).
+    activation : str
+        One of :data:`fnnlib.models.ACTIVATIONS`.
+    """
+
+    hidden: tuple[int, ...]
+    activation: str
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "hidden", tuple(self.hidden))
+        if not self.hidden or any(isinstance(h, bool) or int(h) != h or h < 1 for h in self.hidden):
+            raise ValueError(f"hidden must be one or more positive layer widths, got {self.hidden}")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+
+
+#: The paper's residual and training (App. A.5.2; :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`):
+#: 36 x 36 tanh, segments of 20 steps, 80 segments per Adam update at 5e-3, 50 epochs.
+PAPER_RESIDUAL = ResidualRecipe(**PAPER_RESIDUAL_RECIPE)
 
 
 def closed_loop_step(residual: Callable[[Tensor], Tensor] | None, controller: DFBC, plant: Quadrotor, *,
@@ -68,9 +101,8 @@ def _member_losses(step: Callable[[Tensor, Tensor], Tensor], x_r: Tensor, I: Ten
     return (0.5 * (e**2).sum(dim=(1, 3)).mean(dim=0)).tolist()
 
 
-def train_residual_ensemble(seeds: Sequence[int], train: Flights, *, controller: DFBC, plant: Quadrotor,
-                            hidden: Sequence[int], activation: str, segment_length: int, batch_size: int | None,
-                            epochs: int, lr: float, val: Flights | None = None, val_every: int = 10,
+def train_residual_ensemble(seeds: Sequence[int], train: Flights, recipe: ResidualRecipe, *, controller: DFBC,
+                            plant: Quadrotor, val: Flights | None = None, val_every: int = 10,
                             dtype: torch.dtype = torch.float32, substeps: int = 1,
                             progress: bool = True) -> EnsembleFit:
     """Train one residual per seed (its random initialisation) with Alg. 3, all as one batch (Q1, Q6).
@@ -78,34 +110,35 @@ def train_residual_ensemble(seeds: Sequence[int], train: Flights, *, controller:
     Every member sees the same segment order (shuffled with ``seeds[0]``); they differ in their initial
     weights. Per-member training losses are recorded after every epoch, validation losses (full-length
     rollouts of the validation flights) before training, every ``val_every`` epochs and after the last.
-    The paper's recipe (``hidden`` to ``lr``) is :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`.
+    The paper's recipe is :data:`PAPER_RESIDUAL`.
     """
     if not seeds:
         raise ValueError("need at least one seed")
+    if not isinstance(recipe, ResidualRecipe):
+        raise TypeError(f"recipe must be a ResidualRecipe, got {type(recipe).__name__}")
     if val is not None and val.Ts != train.Ts:
         raise ValueError(f"validation flights have Ts = {val.Ts}, training flights Ts = {train.Ts}; they must match")
     members = []
     for s in seeds:
         torch.manual_seed(int(s))
-        members.append(AeroResidual(hidden, activation).to(dtype))
+        members.append(AeroResidual(recipe.hidden, recipe.activation).to(dtype))
     E = len(members)
     ens = EnsembleResidual(members).to(dtype)
     step = closed_loop_step(ens, controller, plant, Ts=train.Ts, substeps=substeps, members=E)
     tile = lambda X: X.to(dtype).repeat(1, 1, E)  # noqa: E731  (K, T, 18) -> (K, T, 18 E)
     x_r, I = tile(train.x), train.Psi.to(dtype)
-    x_seg, I_seg = make_segments(x_r, I, segment_length)
+    x_seg, I_seg = make_segments(x_r, I, recipe.segment_length)
     fit = EnsembleFit(members=[], history=None)  # type: ignore[arg-type]
 
     def record(epoch: int, hist: object = None) -> None:
         fit.member_loss.append(_member_losses(step, x_seg, I_seg, E))
-        if val is not None and ((epoch + 1) % int(val_every) == 0 or epoch + 1 == epochs):
+        if val is not None and ((epoch + 1) % int(val_every) == 0 or epoch + 1 == recipe.epochs):
             fit.val_epochs.append(epoch + 1)
             fit.val_loss.append(_member_losses(step, tile(val.x), val.Psi.to(dtype), E))
 
     tic = time.perf_counter()
     record(-1)
-    fit.history = train_with_inputs(ens, step, (x_r, I), segment_length=segment_length, batch_size=batch_size,
-                                    epochs=epochs, lr=lr, W=STATE_WEIGHTS * E, seed=int(seeds[0]),
+    fit.history = train_with_inputs(ens, step, (x_r, I), recipe, W=STATE_WEIGHTS * E, seed=int(seeds[0]),
                                     progress=progress, callback=lambda e, h: record(e))
     fit.seconds = time.perf_counter() - tic
     fit.members = [ens.member(e) for e in range(E)]

@@ -44,7 +44,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("spiral", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -264,7 +264,7 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 #   relative gain is larger there than without noise.
 # - **S4**: the feedback beats the neural ODE (i) at every $N \le$ `N` and (ii) at every $N \le$ `N_max`.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 e_nn_m, e_fb_m = e_nn.mean(-1).tolist(), e_fb.mean(-1).tolist()
 claims = [
     sec3.s1(s1_rel).replace(

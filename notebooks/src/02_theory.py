@@ -37,7 +37,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("theory", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import copy
 from pathlib import Path
 
@@ -242,7 +242,7 @@ fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
 # check is computed from the numbers above, one per seed, and holds when it holds in at least $S-1$ of the $S$
 # seeds; a guarantee must hold in every seed. The headline is the mean ± standard deviation over the seeds.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 fb, ct = "feedback", "continuous"
 claims = [
     sec3.s5(ball_x=s5["ball_x"], ball_f=s5["ball_f"],

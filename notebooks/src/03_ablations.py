@@ -51,7 +51,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("ablations", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -374,7 +374,7 @@ fig_s10 = F.save_figure(fig, out, "figS12_step_change")
 # *threshold* check on one run and holds when it holds in at least $S-1$ of the $S$ seeds. The headlines are
 # the mean ± standard deviation over the seeds.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 claims = [
     sec3.s7(outward_noisy=s7["outward_increase_noisy"],
             outward_noise_free=s7["outward_increase_noise_free"],

@@ -39,7 +39,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("observers", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import math
 from pathlib import Path
 
@@ -100,7 +100,7 @@ for s, model, meta in nets:
 # $x_{j+1} = x_j + T_s(f_{neural}(x_j) + \hat d_k)$ for $N$ steps from $(\hat x_{k|k}, \hat d_{k|k})$.
 # One such set of observers is built per seed, on that seed's network and $q_d$.
 
-# %% [tags: remove-output]
+# %% tags=["remove-output"]
 def make_observers(model, q_d):
     """The seven observers of one seed's network."""
     Q, R, P0 = [kf_q_x] * 2 + [q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [kf_p0_d] * 2
@@ -330,7 +330,7 @@ s11 = sec3.s11(design=design, equiv=equiv, rate_settled=rate_settled,
                same_data=finite and same_shape and all(len(tb) == len(obs) for tb, obs in zip(tables, observers)))
 s11.checks, s11.guarantees
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 numbers = {k: design[k] for k in ("luenberger_pole_err", "kf_L_rel_err_vs_dlqe", "filterpy_K_rel_err")}
 numbers |= {"lf_vs_twin_rel_diff": equiv["max_rel_diff_luenberger"], "linear_feedback_ranks": ranks,
             "rate_rmse_settled": rate_settled,

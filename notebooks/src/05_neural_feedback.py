@@ -57,7 +57,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("neural_feedback", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -329,7 +329,7 @@ held_out = {"params": p_flip[far].tolist(), "distance_steps": dist[far].tolist()
 # Each claim's rule is a function of `fnnbook.rules.sec4` (tested in `tests/rules/test_sec4.py`), fed one number per
 # seed (D4: one per seed and level); the headline is the mean ± spread over the seeds.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 ratio_dr = [d / n for d, n in zip(d12["rel_rmse_dr_neural_ode"], d12["rel_rmse_nominal_neural_ode"])]
 ratio_fb = [f / n for f, n in zip(d12["rel_rmse_neural_feedback"], d12["rel_rmse_nominal_neural_ode"])]
 claims = [

@@ -36,7 +36,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("bottle", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -46,13 +46,8 @@ import torch
 import fnnlib as F
 from fnnbook.rules import bottle as rules
 
-if data not in ("real", "synthetic"):
-    raise ValueError(f"data must be 'real' or 'synthetic', got {data!r}")
-if data == "real":
-    train, test = F.load_bottle(data_dir)  # checks SHA-256 and shapes before any work
-else:
-    n_tr, n_te, n_s = synthetic_sizes
-    train, test = F.synthetic_throws(n_tr, n_s, seed=seeds[0]), F.synthetic_throws(n_te, n_s, seed=seeds[0] + 1)
+# the real throws (SHA-256 and shapes checked before any work) or synthetic ones drawn with the first seed
+train, test = F.bottle_throws(data, data_dir=data_dir, synthetic_sizes=synthetic_sizes, seed=seeds[0])
 Ts = train.Ts
 F.decayed_gains(F.check_gain(L, 6, Ts), N, beta)  # refuse an unstable gain or bad decay up front
 if not 1 <= N < test.data.shape[1]:
@@ -177,7 +172,7 @@ acc_rmse
 #   test throws, per seed); (ii) its predicted positions "almost overlap" the truth: the mean 0.5 s position error
 #   is below 10 % of the mean distance flown in 0.5 s, in every seed.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
 claims = [

@@ -42,7 +42,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("quadrotor_learning", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -54,18 +54,20 @@ from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
 from fnnlib.models.residual import AeroResidual
 from fnnbook.rules import quadrotor as rules
-from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
+from fnnlib.mpc import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor_presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
                                       PAPER_MLP_RECIPE)
 from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
-from fnnlib.training.residual import (convergence_checks, predict_flights, state_group_errors, train_residual_ensemble,
-                                      train_single_step)
+from fnnlib.training.residual import (ResidualRecipe, convergence_checks, predict_flights, state_group_errors,
+                                      train_residual_ensemble, train_single_step)
 
 # %%
 if len(seeds) < 1 or len(set(seeds)) != len(seeds):
     raise ValueError(f"seeds must be distinct and non-empty, got {seeds}")
 if not 1 <= segment_length <= n_nodes:
     raise ValueError(f"segment_length must be in 1..{n_nodes}, got {segment_length}")
+recipe = ResidualRecipe(hidden=hidden, activation=activation, segment_length=segment_length, batch_size=batch_size,
+                        epochs=epochs, lr=lr)  # App. A.5.2's network and Alg. 3's training, checked
 truth = TRAINING_TRUTH.replace(drag=tuple(truth_drag))  # validates the drag (>= 0)
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
@@ -109,9 +111,8 @@ F.save_figure(fig, out, "training_flights")
 # judged: the paper's 30 min were measured on another machine and no baseline is timed here.
 
 # %%
-fit = train_residual_ensemble(seeds, train, controller=controller, plant=model_plant, hidden=hidden,
-                              activation=activation, segment_length=segment_length, batch_size=batch_size,
-                              epochs=epochs, lr=lr, val=val, val_every=val_every)
+fit = train_residual_ensemble(seeds, train, recipe, controller=controller, plant=model_plant, val=val,
+                              val_every=val_every)
 member_loss = np.array(fit.member_loss)  # (epochs + 1, E)
 val_loss = np.array(fit.val_loss)  # (len(val_epochs), E)
 best = int(np.argmin(val_loss[-1]))
@@ -195,7 +196,7 @@ for k in range(val.n_flights):
 # %% [markdown]
 # ## Verdicts
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 final, first = member_loss[-1], member_loss[0]
 feedback = FeedbackCascadeModel(PredictionModel("Neural", model_plant, residual, Ts=Ts), PAPER_L, PAPER_BETA, PAPER_HORIZON)
 n_feedback_params = rules.count_trainable(t for t in vars(feedback).values() if isinstance(t, torch.Tensor))

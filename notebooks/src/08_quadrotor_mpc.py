@@ -9,7 +9,7 @@
 # and a 0.3 N force on every axis. Claims **Q3** (tracking), **Q4** (first-step acceleration prediction) and
 # **Q5** (AdapFNN, Eqs. (29)-(30), Theorem 2). The residual networks come from the `quadrotor_learning` task.
 #
-# Eq. (28) is flown with two weightings (issue 16): **as written** in the paper (R = I on every input
+# Eq. (28) is flown with two weightings: **as written** in the paper (R = I on every input
 # u_0..u_{N-1}, Q_N = Q) and **as flown** by the authors' release (Q on x_1..x_{N-1}, no weight on x_N, only the
 # last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
@@ -58,22 +58,17 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("quadrotor_mpc", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 from pathlib import Path
 
 import numpy as np
 
 import fnnlib as F
+import fnnlib.mpc as M
 from fnnbook.rules import quadrotor as rules
-from fnnlib.mpc.compiled import warm_up
-from fnnlib.mpc.experiment import (CARRYING, FlightTest, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
-                                   disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
-                                   pooled_speed, speed_summary, theorem2_check)
-from fnnlib.mpc.flight import lissajous_reference, tracking_rmse
-from fnnlib.mpc.models import paper_models
-from fnnlib.mpc.tuning import randomization_coordinates, randomized_vehicles, validation_references
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, VALIDATION_RANDOMIZATION
-from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
+from fnnlib.mpc import randomized_vehicles, validation_references
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
+from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 # %%
 up = Path(upstream_dirs["quadrotor_learning"])
@@ -90,20 +85,19 @@ if u_max_judged not in u_max:
     raise ValueError(f"u_max_judged = {u_max_judged} must be one of u_max = {u_max}")
 
 # %%
-test_params = TEST_TRUTH.replace(mass=truth_mass, inertia=tuple(truth_inertia), drag=tuple(truth_drag),
-                                 force_disturbance=tuple(disturbance))
-forces = disturbance_realisations(disturbance, disturbance_draws, seed=disturbance_seed, spread=disturbance_spread)
-x_r, u_r = lissajous_reference(steps, N, Ts=Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
-tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=f)), x_r, u_r, steps=steps, Ts=Ts,
-                    substeps=truth_substeps, backend=backend, linearize_method=linearize_method) for f in forces]
+setup = M.flight_tests_from_settings(globals())  # the test vehicle, one test per disturbance (Sec. 5.2.2)
+test_params, forces, x_r, u_r, tests = setup.vehicle, setup.forces, setup.x_r, setup.u_r, setup.tests
+numerics = M.Backend(backend, linearize_method)
 models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)
 
 
+# %%
 def make_qp(cost, umax):
     """Eq. (28) with this run's weights and cost variant, thrust box [0, umax] and |Theta| <= theta_max."""
-    return make_mpc(qp, N, Q, R, cost=cost, u_max=umax, theta_max=theta_max, solver=solver)
+    return M.make_mpc(qp, N, Q, R, cost=cost, u_max=umax, theta_max=theta_max, solver=solver)
 
 
+# %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 hover = truth_mass * NOMINAL.g / 4
@@ -133,7 +127,7 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # release steps $T_s\Gamma_{rel}\,e\,\phi^\top$, so $\Gamma = T_s\Gamma_{rel}$ and the release's 8 is 0.16 here. The
 # grid `Gamma_adapnn_grid` brackets 0.16.
 #
-# **Protocol** (issue 16; `fnnlib.mpc.tuning`), fixed before any flight and blind to the test vehicle:
+# **Protocol** (`fnnlib.mpc.tuning`), fixed before any flight and blind to the test vehicle:
 # - *References*: `validation_flights` random minimum-snap flights drawn like the training data (App. A.5.4:
 #   waypoints in the training box, speeds up to 10 m/s), with their own seed `validation_seed`.
 # - *Vehicles*: `validation_vehicles` vehicles drawn by domain randomisation around the **training** vehicle, in
@@ -152,16 +146,19 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # checks that the cell below reads none of it.
 
 # %%
-compile_s = warm_up(residual, mlp) if backend == "numba" else 0.0
+compile_s = M.warm_up(residual, mlp) if backend == "numba" else 0.0
 val_vehicles = randomized_vehicles(TRAINING_TRUTH, validation_vehicles, seed=validation_vehicle_seed,
                                    **VALIDATION_RANDOMIZATION)
 val_refs = validation_references(validation_flights, validation_steps, N, seed=validation_seed, Ts=Ts,
                                  n_waypoints=validation_waypoints, box=PAPER_FLIGHT_DATA["box"],
                                  max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
-gamma_sel = {cost: adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_refs, val_vehicles,
-                                             make_qp(cost, u_max_judged), steps=validation_steps, Ts=Ts,
-                                             substeps=truth_substeps, backend=backend,
-                                             linearize_method=linearize_method, rtol=Gamma_rtol) for cost in costs}
+gamma_sel = {cost: M.adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_refs, val_vehicles,
+                                               make_qp(cost, u_max_judged), steps=validation_steps, Ts=Ts,
+                                               substeps=truth_substeps, backend=numerics, rtol=Gamma_rtol)
+             for cost in costs}
+
+
+# %%
 print(f"validation flights: {len(val_vehicles)} vehicle(s) x {len(val_refs)} reference(s); masses "
       + ", ".join(f"{v.mass:.2f}" for v in val_vehicles) + " kg; |force| "
       + ", ".join(f"{np.linalg.norm(v.force_disturbance):.2f}" for v in val_vehicles) + " N")
@@ -178,13 +175,13 @@ for cost, sel in gamma_sel.items():
 # +-1). Neither feeds the choice above.
 
 # %%
-oracle = {cost: adapnn_flights(residual, Gamma_adapnn_grid, make_qp(cost, u_max_judged), tests[0]) for cost in costs}
+oracle = {cost: M.adapnn_flights(residual, Gamma_adapnn_grid, make_qp(cost, u_max_judged), tests[0]) for cost in costs}
 for cost, runs in oracle.items():
-    best = min(runs, key=lambda g: tracking_rmse(runs[g].x, runs[g].x_ref)["mean_axis"])
+    best = min(runs, key=lambda g: M.tracking_rmse(runs[g].x, runs[g].x_ref)["mean_axis"])
     print(f"{cost}: test-flight RMSE by Gamma " + ", ".join(
-        f"{g}: {tracking_rmse(r.x, r.x_ref)['mean_axis']:.3f} {fallback_note(r)}" for g, r in runs.items())
+        f"{g}: {M.tracking_rmse(r.x, r.x_ref)['mean_axis']:.3f} {M.fallback_note(r)}" for g, r in runs.items())
           + f" -> oracle Gamma = {best} (validation chose {gamma_sel[cost].value})")
-test_in_range = randomization_coordinates(test_params, TRAINING_TRUTH, **VALIDATION_RANDOMIZATION)
+test_in_range = M.randomization_coordinates(test_params, TRAINING_TRUTH, **VALIDATION_RANDOMIZATION)
 print("test vehicle in the validation ranges, in half-widths (outside beyond +-1): " + "; ".join(
     f"{k} " + ", ".join(f"{c:+.2f}" for c in v) + (" (outside)" if max(map(abs, v)) > 1 else "")
     for k, v in test_in_range.items()))
@@ -202,25 +199,22 @@ print("test vehicle in the validation ranges, in half-widths (outside beyond +-1
 # paper's force; the verdicts use all the paired flights.
 
 # %%
-grid = {cost: paired_grid(members, mlp, tests=tests, mpc=make_qp(cost, u_max_judged), model_settings=models_kw,
-                          adapnn_gamma=gamma_sel[cost].value) for cost in costs}
-main = {cost: {n: runs[kept * len(tests)] for n, runs in g.items()} for cost, g in grid.items()}
-context = {}
-for umax in (u for u in u_max if u != u_max_judged):
-    for cost in costs:
-        ms = paper_models(residual, mlp, **models_kw)
-        ms[[m.name for m in ms].index("AdapNN")] = adapnn_model(residual, gamma_sel[cost].value, Ts=Ts)
-        context[(cost, umax)] = {m.name: tests[0].fly(m, make_qp(cost, umax)) for m in ms}
+grid = {cost: M.paired_grid(members, mlp, tests=tests, mpc=make_qp(cost, u_max_judged), model_settings=models_kw,
+                            adapnn_gamma=gamma_sel[cost].value) for cost in costs}
+main = {cost: g.unit(kept) for cost, g in grid.items()}  # the kept network under the paper's force
+context = {M.TableKey(cost, umax): {m.name: M.fly(m, make_qp(cost, umax), tests[0]) for m in
+                                    M.paper_models(residual, mlp, **models_kw, adapnn_gamma=gamma_sel[cost].value)}
+           for umax in u_max if umax != u_max_judged for cost in costs}
 
 # %%
-tables = {f"{cost}, {u_max_judged:g} N": fl for cost, fl in main.items()}
-tables.update({f"{cost}, {umax:g} N (context)": fl for (cost, umax), fl in context.items()})
-table = {k: {n: flight_row(r) for n, r in fl.items()} for k, fl in tables.items()}
+tables = {M.TableKey(cost, u_max_judged): fl for cost, fl in main.items()} | context
+table = {k: {n: M.flight_row(r) for n, r in fl.items()} for k, fl in tables.items()}
+judged = {cost: table[M.TableKey(cost, u_max_judged)] for cost in costs}  # the rows at the judged bound
 for k, fl in tables.items():
-    print(f"{k:28s} RMSE mean-axis  z     acc-pred  fallbacks")
+    print(f"{k.label(u_max_judged):28s} RMSE mean-axis  z     acc-pred  fallbacks")
     for n, r in fl.items():
         v = table[k][n]
-        print(f"  {n:8s} {v['mean_axis']:20.3f} {v['z']:6.3f} {v['acc_pred_rmse']:8.3f} {v['fallbacks']:6d} {fallback_note(r)}")
+        print(f"  {n:8s} {v.mean_axis:20.3f} {v.z:6.3f} {v.acc_pred_rmse:8.3f} {v.fallbacks:6d} {M.fallback_note(r)}")
 
 # %%
 t_grid = np.arange(steps + 1) * Ts
@@ -230,7 +224,7 @@ for cost, fl in main.items():
     axes[0].plot(x_r[:steps + 1, 0], x_r[:steps + 1, 1], "k", lw=2, label="reference")
     for n, r in fl.items():
         mark = " DIVERGED" if r.diverged else ""
-        axes[0].plot(r.x[:, 0], r.x[:, 1], lw=1, label=f"{n} ({table[f'{cost}, {u_max_judged:g} N'][n]['mean_axis']:.3f} m){mark}")
+        axes[0].plot(r.x[:, 0], r.x[:, 1], lw=1, label=f"{n} ({judged[cost][n].mean_axis:.3f} m){mark}")
         axes[1].plot(t_grid, np.linalg.norm(r.x[:, :3] - r.x_ref[:, :3], axis=1), lw=1, label=n)
     axes[0].set(xlabel="x [m]", ylabel="y [m]", title=f"Lissajous tracking, {cost}, thrust <= {u_max_judged:g} N (Fig. 7)")
     axes[1].set(xlabel="t [s]", ylabel="position error [m]", yscale="log")
@@ -254,8 +248,8 @@ axes[0].set(xlabel="t [s]", ylabel="z [m] (z down)", title="Nomi's altitude unde
 axes[1].set(xlabel="t [s]", ylabel="total thrust [N]")
 axes[0].legend(fontsize=7)
 F.save_figure(fig, out, "nomi_z_costs")
-z = {cost: table[f"{cost}, {u_max_judged:g} N"]["Nomi"]["z"] for cost in costs}
-share = {cost: z[cost] / table[f"{cost}, {u_max_judged:g} N"]["Nomi"]["mean_axis"] / 3 for cost in costs}
+z = {cost: judged[cost]["Nomi"].z for cost in costs}
+share = {cost: z[cost] / judged[cost]["Nomi"].mean_axis / 3 for cost in costs}
 print(" ".join(f"{cost}: Nomi's z RMSE {z[cost]:.3f} m, {100 * share[cost]:.0f} % of its summed per-axis RMSE, "
                f"mean total thrust {main[cost]['Nomi'].u.sum(axis=1).mean():.2f} N." for cost in costs)
       + f" The test vehicle needs {4 * hover:.2f} N to hover.")
@@ -282,9 +276,9 @@ for cost, fl in main.items():
 # flights; the targets are met when the worst model meets both.
 
 # %%
-timing = pooled_speed({n: [r for cost in costs for r in grid[cost][n]] for n in grid[costs[0]]})
-speed = speed_summary(timing, repeats=min(v["flights"] for v in timing.values()), thrust_bound=u_max_judged, qp=qp,
-                      backend=backend, linearize_method=linearize_method, compile_s=compile_s)
+timing = M.pooled_speed({n: [r for cost in costs for r in grid[cost][n]] for n in grid[costs[0]]})
+speed = M.speed_summary(timing, repeats=min(v["flights"] for v in timing.values()), thrust_bound=u_max_judged, qp=qp,
+                        backend=numerics, compile_s=compile_s)
 for n, v in timing.items():
     print(f"  {n:8s} linearize + solve {v['step_ms_median']:.2f} ms (p95 {v['step_ms_p95']:.2f}); x real time, "
           f"median of {v['flights']} flights: {v['real_time_factor_median']:.1f}")
@@ -303,11 +297,11 @@ print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['re
 
 # %%
 transient = int(round(transient_s / Ts))
-thm2 = {cost: [theorem2_check(r, L, transient) for r in g["AdapFNN"]] for cost, g in grid.items()}
+thm2 = {cost: [M.theorem2_check(r, L, transient) for r in g["AdapFNN"]] for cost, g in grid.items()}
 fig, ax = F.new_figure()
 for cost, fl in main.items():
     ax.semilogy(t_grid[:-1], np.linalg.norm(fl["AdapFNN"].x_tilde, axis=1), lw=1, label=f"AdapFNN, {cost}")
-    ax.axhline(thm2[cost][kept * len(tests)]["ball_x"], ls="--", lw=0.8, label=f"ball gamma / lambda_m(L), {cost}")
+    ax.axhline(thm2[cost][grid[cost].index(kept)]["ball_x"], ls="--", lw=0.8, label=f"ball gamma / lambda_m(L), {cost}")
 ax.axvline(transient_s, color="gray", lw=0.8)
 ax.set(xlabel="t [s]", ylabel="||x - x_hat||", title=f"Observation error, thrust <= {u_max_judged:g} N (Fig. S14)")
 ax.legend(fontsize=7)
@@ -318,9 +312,9 @@ F.save_figure(fig, out, "adapfnn")
 # One dot per (trained network, disturbance); the flights themselves are deterministic.
 
 # %%
-rmse = {cost: {n: [tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs] for n, runs in g.items()}
+rmse = {cost: {n: [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs] for n, runs in g.items()}
         for cost, g in grid.items()}
-acc = {cost: {n: [flight_row(r)["acc_pred_rmse"] for r in runs] for n, runs in g.items()} for cost, g in grid.items()}
+acc = {cost: {n: [M.acc_pred_rmse(r) for r in runs] for n, runs in g.items()} for cost, g in grid.items()}
 fig, axes = F.new_figure(1, len(costs))
 for ax, cost in zip(np.ravel(axes), costs):
     for i, n in enumerate(rmse[cost]):
@@ -337,7 +331,7 @@ _ = F.save_figure(fig, out, "seed_spread")
 # prediction beats each of the other five (Fig. S8). Q5: AdapFNN within 25 % of FNN in at least S - 1 pairs and
 # its mean RMSE >= FNN's; Theorem 2's ball is a guarantee.
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 r3 = {c: rules.q3_tracking(rmse[c], label=c) for c in costs}
 r4 = {c: rules.q4_prediction({n: acc[c][n] for n in rules.SIX}, label=c) for c in costs}
 r5 = {c: rules.q5_adaptive(rmse[c], [t["inside_fraction"] for t in thm2[c]], label=c) for c in costs}
@@ -350,13 +344,16 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
               if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the runs")
 
 # %%
+context_rows = [(k, rows) for k, rows in table.items() if k.u_max != u_max_judged]  # reported, never judged
+
+
 def merged(r, **fields):
     """One claim over the cost variants: every variant's checks and guarantees, its numbers by variant."""
     return r[costs[0]].replace(
         checks={k: v for c in costs for k, v in r[c].checks.items()},
         guarantees={k: v for c in costs for k, v in (r[c].guarantees or {}).items()},
         numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
-            k: {n: round(v["mean_axis"], 4) for n, v in rows.items()} for k, rows in table.items() if "context" in k}},
+            k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()} for k, rows in context_rows}},
         **fields)
 
 
@@ -379,7 +376,7 @@ claims = [
 
 # %%
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
-                metrics={"table": table, "speed": speed, "disturbances": forces,
+                metrics={"table": M.flight_table_json(table, u_max_judged), "speed": speed, "disturbances": forces,
                          "adapnn_gamma": {c: {"chosen": s.value, "validation": s.table} for c, s in gamma_sel.items()},
                          "adapnn_gamma_protocol": {
                              "rule": f"lowest median validation RMSE (diverged = worst); ties within {Gamma_rtol:g} "
@@ -388,7 +385,8 @@ F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
                              "vehicles": [{"mass": v.mass, "inertia": v.inertia, "drag": v.drag,
                                            "force": v.force_disturbance} for v in val_vehicles],
                              "test_vehicle_in_ranges": test_in_range},
-                         "adapnn_oracle_sweep": {c: {g: flight_row(r) for g, r in runs.items()} for c, runs in oracle.items()},
+                         "adapnn_oracle_sweep": {c: {g: M.flight_row(r).to_dict() for g, r in runs.items()}
+                                                 for c, runs in oracle.items()},
                          "paired_mean_axis_rmse_m": rmse, "paired_acc_pred_rmse": acc})
 for c in claims:
     print(c.id, c.verdict, c.checks)

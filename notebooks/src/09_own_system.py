@@ -56,7 +56,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("own_system", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -184,7 +184,7 @@ ax.set(xlabel="t [s]", ylabel="theta", title=f"pendulum, {N}-step predictions (s
 ax.legend(fontsize=7)
 fig_b1 = F.save_figure(fig, out, "own_system_b1")
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 errors = {"pendulum": {k: [r["errors"][k] for r in pendulum] for k in names},
           "spiral": {k: [r["errors"][k] for r in spiral] for k in names}}
 checks = b1(errors).checks

@@ -38,7 +38,7 @@ import fnnlib as F
 from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
 check_notebook_settings("tuned_gains", globals())
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 import time
 from pathlib import Path
 
@@ -48,6 +48,8 @@ import torch
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import beyond as rules
 
+
+# %% tags=["hide-input"]
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
@@ -78,15 +80,11 @@ seconds: dict[str, float] = {}
 # 1 ms, position error 0.5 s ahead); units are the test throws, each throw's error averaged over the five
 # networks (O1's "per throw").
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
 b_results, b_ran = upstream["bottle"], ran["bottle"]
 o1 = b_results.claim("O1").numbers
-if b_ran["data"] == "real":
-    b_train, b_test = F.load_bottle(data_dir)
-else:  # the bottle task's synthetic throws, drawn as it draws them
-    n_tr, n_te, n_s = b_ran["synthetic_sizes"]
-    b_train = F.synthetic_throws(n_tr, n_s, seed=b_ran["seeds"][0])
-    b_test = F.synthetic_throws(n_te, n_s, seed=b_ran["seeds"][0] + 1)
+b_train, b_test = F.bottle_throws(b_ran["data"], data_dir=data_dir, synthetic_sizes=b_ran["synthetic_sizes"],
+                                  seed=b_ran["seeds"][0])  # the bottle task's throws, chosen as it chose them
 if not 1 <= bottle_tune_throws <= b_train.state.shape[0]:
     raise ValueError(f"bottle_tune_throws must lie in 1..{b_train.state.shape[0]} (the training throws), "
                      f"got {bottle_tune_throws}")
@@ -112,6 +110,7 @@ def o1_errors(pred: torch.Tensor) -> torch.Tensor:
     return F.error_norm(pred[..., :3], x_b_test[:, bN:, :3].expand_as(pred[..., :3])).mean(-1)
 
 
+# %%
 t0 = time.perf_counter()
 b_tuned = [bottle_tune(s, net) for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_tune"] = time.perf_counter() - t0
@@ -137,54 +136,47 @@ print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k
 # test vehicle with the tuned gains, at the judged 6 N bound, for every network and disturbance of
 # `quadrotor_mpc` and each of its cost variants (Eq. (28) as written and as the release flies it: one B1
 # setting each, as Q3 judges both); the 4 N bound, context only in Q3-Q5, is not flown. The hand-tuned FNN
-# and the Neural model (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry;
-# one of its FNN flights is flown again first to check that the two set-ups agree. The tuning sees the
+# and the Neural model (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry:
+# the flight tests are built from that task's settings by the same function it uses. The tuning sees the
 # open-loop prediction error only, never the closed loop: gains that predict better need not fly better,
 # and the two cost variants close the loop differently.
 
-# %% [tags: hide-input]
+# %% tags=["hide-input"]
+import fnnlib.mpc as M
 from fnnlib.data.quadrotor import load_flights
-from fnnlib.mpc.compiled import warm_up
-from fnnlib.mpc.experiment import FlightTest, flight_row, make_mpc
-from fnnlib.mpc.flight import lissajous_reference
-from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
-from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the flight settings it flew
 quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
-q_rmse, forces = q_mpc["paired_mean_axis_rmse_m"], q_mpc["disturbances"]
+q_rmse = q_mpc["paired_mean_axis_rmse_m"]
 costs = list(q_rmse)
 member_files = F.read_results(up["quadrotor_learning"] / F.RESULTS_FILENAME).metrics["member_checkpoints"]
 members = [(int(meta["seed"]), net.double()) for net, meta in
            (F.load_checkpoint(up["quadrotor_learning"] / f, expected_kind="AeroResidual") for f in member_files)]
 flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
+
+
+# %% tags=["hide-input"]
 plant = Quadrotor(NOMINAL)
-test_params = TEST_TRUTH.replace(mass=m["truth_mass"], inertia=tuple(m["truth_inertia"]), drag=tuple(m["truth_drag"]))
-x_r, u_r = lissajous_reference(m["steps"], quad_N, Ts=quad_Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
-tests = [FlightTest(Quadrotor(test_params.replace(force_disturbance=tuple(f))), x_r, u_r, steps=m["steps"],
-                    Ts=quad_Ts, substeps=m["truth_substeps"], backend=m["backend"],
-                    linearize_method=m["linearize_method"]) for f in forces]
-mpcs = {cost: make_mpc(m["qp"], quad_N, m["Q"], m["R"], cost=cost, u_max=m["u_max_judged"], theta_max=m["theta_max"],
-                       solver=m["solver"]) for cost in costs}
-seconds["quad_compile"] = warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
+setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built as it builds them
+if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
+    raise ValueError(f"the disturbances of quadrotor_mpc's settings {setup.forces} are not those it flew "
+                     f"{q_mpc['disturbances']}")
+tests = setup.tests
+mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
+seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 
 
-def fnn_flight(net, L, beta, test: FlightTest, cost: str) -> dict:
+# %% tags=["hide-input"]
+def fnn_flight(net, L, beta, test: M.FlightTest, cost: str) -> M.FlightRow:
     """FNN (residual ``net``, gains ``L``, ``beta``) flown as `quadrotor_mpc` flies it: its row of the flight table."""
-    fnn = FeedbackCascadeModel(PredictionModel("Neural", plant, net, Ts=quad_Ts), L, beta, quad_N, name="FNN")
-    return flight_row(test.fly(fnn, mpcs[cost]))
-
-
-again = fnn_flight(members[0][1], quad_L, quad_beta, tests[0], costs[0])["mean_axis"]
-if not np.isclose(again, q_rmse[costs[0]]["FNN"][0], rtol=1e-9, atol=0):
-    raise ValueError(f"FNN flown again with the paper's gains gives {again:.6g} m, quadrotor_mpc measured "
-                     f"{q_rmse[costs[0]]['FNN'][0]:.6g} m: this chapter's flight settings differ from that task's")
+    fnn = M.fnn_model(net, L, beta, plant=plant, N=quad_N, Ts=quad_Ts)
+    return M.flight_row(M.fly(fnn, mpcs[cost], test))
 
 # %%
 def quad_tune(seed: int, net) -> F.TunedGains:
     """The network's (L, beta), tuned on the N-step error of training flights drawn with its seed."""
-    model = PredictionModel("Neural", plant, net, Ts=flights.Ts)
+    model = M.PredictionModel("Neural", plant, net, Ts=flights.Ts)
     which = torch.randperm(flights.n_flights, generator=F.make_generator(seed))[:quad_tune_flights]
     x, u = flights.x[which, :-1, :12], flights.u[which]  # vehicle states and the thrusts applied, (K, T, 12), (K, T, 4)
 
@@ -195,6 +187,7 @@ def quad_tune(seed: int, net) -> F.TunedGains:
                         iterations=quad_tune_iterations, lr=quad_tune_lr)
 
 
+# %%
 t0 = time.perf_counter()
 q_tuned = [quad_tune(s, net) for s, net in members]
 seconds["quad_tune"] = time.perf_counter() - t0
@@ -202,11 +195,15 @@ t0 = time.perf_counter()
 tuned_flights = {}
 for cost in costs:  # (network, disturbance) with the disturbance fastest, as quadrotor_mpc pairs them
     rows = [fnn_flight(net, torch.tensor(r.L), r.beta, t, cost) for (_, net), r in zip(members, q_tuned) for t in tests]
-    tuned_flights[cost] = [{k: row[k] for k in ("fallbacks", "fallback_reasons", "diverged")} for row in rows]
-    errors[f"quadrotor {cost}"] = {"tuned": [row["mean_axis"] for row in rows],
+    tuned_flights[cost] = [{"fallbacks": row.fallbacks, "fallback_reasons": row.fallback_reasons,
+                            "diverged": row.diverged} for row in rows]
+    errors[f"quadrotor {cost}"] = {"tuned": [row.mean_axis for row in rows],
                                    "hand": q_rmse[cost]["FNN"], "open_loop": q_rmse[cost]["Neural"]}
 seconds["quad_fly"] = time.perf_counter() - t0
 tuned_values["quadrotor"] = [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for (s, _), r in zip(members, q_tuned)]
+
+
+# %%
 print(", ".join(f"{k}: " + ", ".join(f"{p} {np.mean(v):.4f} m" for p, v in e.items())
                 for k, e in errors.items() if k.startswith("quadrotor")))
 print("tuned flights with fallbacks: " + ", ".join(f"{cost} {sum(f['fallbacks'] > 0 for f in fl)}, diverged "
@@ -240,7 +237,7 @@ fig_b1 = F.save_figure(fig, out, "b1_tuned_vs_hand")
 # %% [markdown]
 # ## Verdict
 
-# %% [tags: nbval-check-output]
+# %% tags=["nbval-check-output"]
 rule = rules.b1(errors)
 paired = rules.b1_paired(errors)
 claims = [rule.replace(figure=fig_b1, title="L and beta tuned from data",

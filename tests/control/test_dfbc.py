@@ -49,7 +49,7 @@ def lissajous_flights() -> dict[str, float]:
     x18 = ctrl.initial_closed_loop_state(on_reference(Psi[0]))
     out = {}
     for name, params in (("nominal", NOMINAL), ("training_truth", TRAINING_TRUTH)):
-        X, U = ctrl.fly(x18, Psi[:-1], Quadrotor(params), Ts=TS)
+        X, U = ctrl.rollout(x18, Psi[:-1], Quadrotor(params), Ts=TS)
         out[name] = rmse(X, Psi)
         out[name + "_umax"] = float(U.max())
     return out
@@ -73,7 +73,7 @@ def test_regulates_a_position_offset_and_needs_the_position_gain() -> None:
     x0[:3] = 0.3
     finals = []
     for ctrl in (paper_dfbc(), paper_dfbc(Kp=0.0, Kv=(8.0, 8.0, 5.6))):
-        X, _ = ctrl.fly(ctrl.initial_closed_loop_state(x0), hover, Quadrotor(NOMINAL), Ts=TS)
+        X, _ = ctrl.rollout(ctrl.initial_closed_loop_state(x0), hover, Quadrotor(NOMINAL), Ts=TS)
         finals.append(float(X[-1, :3].norm()) / float(x0[:3].norm()))
     # with Kp = diag(2, 2, 1.4), Kv = 4 Kp the slow closed-loop pole is about -0.27 1/s:
     # measured 48 % of the offset left after 3 s; without Kp nothing pulls back (100 %)
@@ -99,7 +99,7 @@ def test_no_derivative_kick_on_the_reference() -> None:
 
 def test_hover_start_from_rest_stays_at_rest() -> None:
     ctrl = paper_dfbc()
-    X, U = ctrl.fly(ctrl.initial_closed_loop_state(torch.zeros(12, dtype=F64)), torch.zeros(25, 12, dtype=F64),
+    X, U = ctrl.rollout(ctrl.initial_closed_loop_state(torch.zeros(12, dtype=F64)), torch.zeros(25, 12, dtype=F64),
                     Quadrotor(NOMINAL), Ts=TS)
     assert torch.allclose(X, torch.zeros(26, 18, dtype=F64), atol=1e-12)
     assert torch.allclose(U, Quadrotor(NOMINAL).hover_input().expand(25, 4), atol=1e-12)
@@ -120,7 +120,7 @@ def test_closed_loop_pieces_agree() -> None:
     ctrl, plant = paper_dfbc(), Quadrotor(TRAINING_TRUTH)
     Psi = lissajous(torch.arange(6, dtype=F64) * TS)
     x18 = ctrl.initial_closed_loop_state(on_reference(Psi[0]) + 0.05)
-    X, U = ctrl.fly(x18, Psi[:-1], plant, Ts=TS, substeps=2)
+    X, U = ctrl.rollout(x18, Psi[:-1], plant, Ts=TS, substeps=2)
     assert X.shape == (6, 18) and U.shape == (5, 4)
     u0, z_dot = ctrl.control(x18[:12], x18[12:], Psi[0])
     assert torch.allclose(U[0], u0, atol=1e-14)
@@ -143,8 +143,8 @@ def test_the_residual_enters_the_plant_and_is_differentiable() -> None:
     def a_res_fn(x: torch.Tensor) -> torch.Tensor:
         return (theta / NOMINAL.mass).expand(*x.shape[:-1], 3)
 
-    X, _ = ctrl.fly(x18, Psi[:-1], Quadrotor(NOMINAL), Ts=TS, a_res_fn=a_res_fn)
-    X_F, _ = ctrl.fly(x18, Psi[:-1], disturbed, Ts=TS)
+    X, _ = ctrl.rollout(x18, Psi[:-1], Quadrotor(NOMINAL), Ts=TS, a_res_fn=a_res_fn)
+    X_F, _ = ctrl.rollout(x18, Psi[:-1], disturbed, Ts=TS)
     assert torch.allclose(X.detach(), X_F, atol=1e-13)
     (grad,) = torch.autograd.grad(X[-1, :3].sum(), theta)
     assert torch.isfinite(grad).all() and float(grad.abs().min()) > 0
@@ -156,12 +156,12 @@ def test_batch_equals_separate_flights_and_float32() -> None:
     Psi = torch.stack([lissajous(t + 0.4 * i) for i in range(5)])  # (5, 11, 12)
     g = torch.Generator().manual_seed(0)
     x0 = on_reference(Psi[:, 0]) + 0.05 * torch.randn(5, 12, generator=g, dtype=F64)
-    X, U = ctrl.fly(ctrl.initial_closed_loop_state(x0), Psi[:, :-1], plant, Ts=TS)
+    X, U = ctrl.rollout(ctrl.initial_closed_loop_state(x0), Psi[:, :-1], plant, Ts=TS)
     assert X.shape == (5, 11, 18) and U.shape == (5, 10, 4)
     for i in range(5):
-        Xi, Ui = ctrl.fly(ctrl.initial_closed_loop_state(x0[i]), Psi[i, :-1], plant, Ts=TS)
+        Xi, Ui = ctrl.rollout(ctrl.initial_closed_loop_state(x0[i]), Psi[i, :-1], plant, Ts=TS)
         assert torch.allclose(X[i], Xi, atol=1e-12) and torch.allclose(U[i], Ui, atol=1e-12)
-    X32, _ = ctrl.fly(ctrl.initial_closed_loop_state(x0.float()), Psi[:, :-1].float(), plant, Ts=TS)
+    X32, _ = ctrl.rollout(ctrl.initial_closed_loop_state(x0.float()), Psi[:, :-1].float(), plant, Ts=TS)
     assert X32.dtype == torch.float32 and torch.allclose(X32.double(), X, atol=1e-4)
 
 
@@ -176,16 +176,16 @@ def test_bad_inputs_are_refused() -> None:
     bad = x18.clone()
     bad[4] = float("nan")
     with pytest.raises(ValueError, match="NaN"):
-        ctrl.fly(bad, Psi, plant, Ts=TS)
+        ctrl.rollout(bad, Psi, plant, Ts=TS)
     with pytest.raises(ValueError, match=r"x18 must have shape \(\.\.\., 18\)"):
-        ctrl.fly(x18[:12], Psi, plant, Ts=TS)
+        ctrl.rollout(x18[:12], Psi, plant, Ts=TS)
     with pytest.raises(ValueError, match=r"\(\.\.\., 12\)"):
         ctrl.control(torch.zeros(12, dtype=F64), torch.zeros(6, dtype=F64), Psi[0, :9])
     with pytest.raises(ValueError, match="Ts"):
-        ctrl.fly(x18, Psi, plant, Ts=-0.02)
+        ctrl.rollout(x18, Psi, plant, Ts=-0.02)
     with pytest.raises(ValueError, match="substeps"):
         ctrl.closed_loop_step(x18, Psi[0], plant, Ts=TS, substeps=0)
     with pytest.raises(TypeError, match="Quadrotor"):
         ctrl.closed_loop(x18, Psi[0], NOMINAL)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="broadcast"):
-        ctrl.fly(x18.expand(3, 18), Psi.expand(2, 4, 12), plant, Ts=TS)
+        ctrl.rollout(x18.expand(3, 18), Psi.expand(2, 4, 12), plant, Ts=TS)

@@ -10,7 +10,7 @@ import pytest
 import torch
 from scipy.io import savemat
 
-from fnnlib.data import BOTTLE_FILES, DataError, load_bottle, synthetic_throws
+from fnnlib.data import BOTTLE_FILES, DataError, bottle_throws, load_bottle, synthetic_throws
 
 ROOT = Path(__file__).resolve().parents[2]
 REAL_DIRS = [ROOT.parent / "shared" / "data", ROOT / "data"]
@@ -27,6 +27,17 @@ def _write_fake(folder: Path, shapes: dict[str, tuple[int, ...]] | None = None) 
 def test_missing_files_say_where_they_come_from(tmp_path: Path) -> None:
     with pytest.raises(DataError, match=r"missing Training_dataset\.mat, Testing_dataset\.mat.*authors' code"):
         load_bottle(tmp_path)
+
+
+def test_one_data_choice_for_the_throws(tmp_path: Path) -> None:
+    """bottle_throws: synthetic throws drawn with seed and seed + 1, the real ones read (and checked) from data_dir."""
+    train, test = bottle_throws("synthetic", data_dir=tmp_path, synthetic_sizes=[3, 2, 40], seed=4)
+    for got, want in ((train, synthetic_throws(3, 40, seed=4)), (test, synthetic_throws(2, 40, seed=5))):
+        assert torch.equal(got.data, want.data) and got.Ts == want.Ts
+    with pytest.raises(DataError, match="missing"):
+        bottle_throws("real", data_dir=tmp_path, synthetic_sizes=[3, 2, 40], seed=4)
+    with pytest.raises(ValueError, match="data must be one of"):
+        bottle_throws("fake", data_dir=tmp_path, synthetic_sizes=[3, 2, 40], seed=4)
 
 
 def test_a_file_failing_its_checksum_is_refused(tmp_path: Path) -> None:

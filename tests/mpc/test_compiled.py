@@ -12,10 +12,11 @@ from torch import nn
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
 from fnnlib.mpc import OSQPMPC
 from fnnlib.mpc.compiled import CompiledModel, CompiledQuadrotor, residual_layers, warm_up
-from fnnlib.mpc.flight import fly, lissajous_reference
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.flight import FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearize import linearize
 from fnnlib.mpc.models import paper_models
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64
@@ -160,10 +161,11 @@ def _mid_flight_models(reference) -> list:
     x_r, u_r = reference
     models = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
                           Gamma=4.0)
-    mpc = OSQPMPC(N, np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3), np.ones(4), cost="as_written", u_lb=np.zeros(4),
+    mpc = OSQPMPC(N, np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"]), cost="as_written", u_lb=np.zeros(4),
                   u_ub=np.full(4, 6.0))
     for m in models:
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 7], u_r[:N + 6], steps=6, Ts=TS, substeps=1, backend="numba")
+        fly(m, mpc, FlightTest(Quadrotor(TEST_TRUTH), x_r[:N + 7], u_r[:N + 6], steps=6, Ts=TS, substeps=1,
+                               backend=Backend("numba")))
     return models
 
 
@@ -196,7 +198,7 @@ def test_numba_flight_equals_the_torch_flight(reference):
     """The same 30-step flight on both backends (torch with exact autograd Jacobians) for the models with
     feedback and adaptation; the loop's wall time is recorded on both."""
     x_r, u_r = reference
-    Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
+    Q = np.array(PAPER_MPC_WEIGHTS["Q"])
     steps = 30
     for name in ("Nomi", "FNN", "AdapFNN", "AdapNN"):
         runs = {}
@@ -204,8 +206,9 @@ def test_numba_flight_equals_the_torch_flight(reference):
             m = {mm.name: mm for mm in paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS,
                           Gamma=4.0)}[name]
             mpc = OSQPMPC(N, Q, np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
-            runs[backend] = fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps,
-                                Ts=TS, substeps=1, linearize_method="reverse", backend=backend)
+            test = FlightTest(Quadrotor(TEST_TRUTH), x_r[:steps + N + 1], u_r[:steps + N], steps=steps, Ts=TS,
+                              substeps=1, backend=Backend(backend, "reverse"))
+            runs[backend] = fly(m, mpc, test)
         a, b = runs["torch"], runs["numba"]
         np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-8, err_msg=name)
         np.testing.assert_allclose(b.u, a.u, rtol=0, atol=1e-6, err_msg=name)
@@ -221,9 +224,14 @@ def test_fly_refuses_an_unknown_backend_a_mismatched_Ts_and_a_torch_backend_with
     x_r, u_r = reference
     m = paper_models(_net(0), _net(5), plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Ts=TS, Gamma=4.0)[0]
     mpc = OSQPMPC(N, np.ones(12), np.ones(4), cost="as_written", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+    def test(Ts: float, backend: Backend) -> FlightTest:
+        return FlightTest(Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=Ts, substeps=1, backend=backend)
+
     with pytest.raises(ValueError, match="backend"):
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=TS, substeps=1, backend="jax")
+        Backend("jax")
     with pytest.raises(ValueError, match="Ts"):
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=0.01, substeps=1, backend="numba")
+        fly(m, mpc, test(0.01, Backend("numba")))
     with pytest.raises(ValueError, match="linearize_method"):
-        fly(m, mpc, Quadrotor(TEST_TRUTH), x_r[:N + 3], u_r[:N + 2], steps=2, Ts=TS, substeps=1, backend="torch")
+        Backend("torch")
+    with pytest.raises(TypeError, match="Backend"):
+        test(TS, "torch")  # type: ignore[arg-type]

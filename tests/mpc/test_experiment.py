@@ -9,11 +9,13 @@ import pytest
 import torch
 
 from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightTest, acc_pred_rmse, adapnn_flights,
-                                   adapnn_gain_on_validation, adapnn_model,
-                                   disturbance_realisations, fallback_note, flight_row, make_mpc, paired_grid,
-                                   pooled_speed, speed_runs, speed_summary, theorem2_check)
-from fnnlib.mpc.flight import FlightResult, fly, lissajous_reference
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, TableKey, acc_pred_rmse, adapnn_flights,
+                                   adapnn_gain_on_validation, adapnn_model, disturbance_realisations, fallback_note,
+                                   flight_row, flight_table_json, flight_tests_from_settings, fnn_model, make_mpc,
+                                   mpc_from_settings, paired_grid, pooled_speed, speed_summary, theorem2_check)
+from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
+from fnnlib.mpc.models import paper_models
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.tuning import randomized_vehicles
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
@@ -48,14 +50,25 @@ def test_flight_row_holds_tracking_prediction_and_timing():
     r = _result()
     row = flight_row(r)
     # x_ref = x + 0.1 on every axis: every RMSE is 0.1, the norm's sqrt(3) 0.1
-    assert row["mean_axis"] == pytest.approx(0.1) and row["norm"] == pytest.approx(0.1 * math.sqrt(3))
+    assert row.mean_axis == pytest.approx(0.1) and row.norm == pytest.approx(0.1 * math.sqrt(3))
     e = r.xdot_pred[:, 3:6] - r.xdot_true[:, 3:6]
-    assert row["acc_pred_rmse"] == acc_pred_rmse(r) == pytest.approx(math.sqrt((e**2).sum(1).mean()), rel=1e-15)
-    assert row["step_ms_median"] == pytest.approx(3.0) and row["fallbacks"] == 1
-    assert row["real_time_factor"] == pytest.approx(50 * 0.02 / 0.5)
-    assert not row["diverged"] and fallback_note(r) == ""
+    assert row.acc_pred_rmse == acc_pred_rmse(r) == pytest.approx(math.sqrt((e**2).sum(1).mean()), rel=1e-15)
+    assert row.step_ms_median == pytest.approx(3.0) and row.fallbacks == 1
+    assert row.real_time_factor == pytest.approx(50 * 0.02 / 0.5)
+    assert not row.diverged and fallback_note(r) == ""
     r.n_fallbacks, r.fallback_reasons = 10, {"not_optimal": 10}  # 10 of 50 steps: past the diverged share
-    assert flight_row(r)["diverged"] and fallback_note(r) == "DIVERGED [not_optimal 10]"
+    assert flight_row(r).diverged and fallback_note(r) == "DIVERGED [not_optimal 10]"
+
+
+def test_flight_table_is_keyed_by_cost_and_bound_and_serialises_as_before():
+    row = flight_row(_result())
+    d = row.to_dict()
+    assert list(d)[:6] == ["x", "y", "z", "mean_axis", "norm", "acc_pred_rmse"] and list(d)[-1] == "real_time_factor"
+    assert d["mean_axis"] == row.mean_axis and isinstance(row, FlightRow)
+    table = {TableKey("as_flown", 6.0): {"Nomi": row}, TableKey("as_flown", 4.0): {"Nomi": row}}
+    assert list(flight_table_json(table, 6.0)) == ["as_flown, 6 N", "as_flown, 4 N (context)"]
+    assert flight_table_json(table, 6.0)["as_flown, 6 N"]["Nomi"] == d
+    assert TableKey("as_written", 4.0) == ("as_written", 4.0)
 
 
 def test_pooled_speed_pools_every_flight_of_a_model():
@@ -64,6 +77,8 @@ def test_pooled_speed_pools_every_flight_of_a_model():
     t = pooled_speed({"m": [a, b]})["m"]
     assert t["flights"] == 2 and t["step_ms_median"] == pytest.approx(4.0)  # medians of 3 ms and 5 ms steps: 4
     assert t["real_time_factor_median"] == pytest.approx(50 * 0.02 / 0.5)
+    with pytest.raises(ValueError, match="no flights"):
+        pooled_speed({"m": []})
 
 
 def test_disturbances_start_with_the_papers_and_vary_size_and_direction():
@@ -80,14 +95,13 @@ def test_disturbances_start_with_the_papers_and_vary_size_and_direction():
 def test_speed_summary_is_met_only_when_the_worst_model_meets_both_targets():
     fast = {"step_ms_median": 1.0, "real_time_factor_median": 9.0}
     slow = {"step_ms_median": SPEED_TARGETS["step_ms_median"] + 1, "real_time_factor_median": 9.0}
-    kw = dict(repeats=3, thrust_bound=6.0, qp="osqp", backend="numba", linearize_method="forward", compile_s=0.1)
+    kw = dict(repeats=3, thrust_bound=6.0, qp="osqp", backend=Backend("numba", "forward"), compile_s=0.1)
     good, bad = speed_summary({"A": fast, "B": fast}, **kw), speed_summary({"A": fast, "B": slow}, **kw)
     assert good["met"] and not bad["met"]
     assert bad["step_ms_median_worst_model"] == slow["step_ms_median"] and bad["step_ms_median_best_model"] == 1.0
     assert bad["linearize_method"] == "exact (forward mode, compiled)"
-    assert speed_summary({"A": fast}, **{**kw, "backend": "torch"})["linearize_method"] == "forward"
-    with pytest.raises(ValueError, match="speed_repeats"):
-        speed_runs([], None, None, 0)  # type: ignore[arg-type]
+    assert bad["backend"] == "numba"
+    assert speed_summary({"A": fast}, **{**kw, "backend": Backend("torch", "forward")})["linearize_method"] == "forward"
 
 
 def test_theorem2_check_counts_the_ball_after_the_transient():
@@ -108,8 +122,7 @@ def _tiny(steps: int, N: int = 3, truth=TEST_TRUTH) -> tuple:
     torch.manual_seed(0)
     net = AeroResidual((4,), "tanh").double()
     x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
-    test = FlightTest(Quadrotor(truth), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend="torch",
-                      linearize_method="forward")
+    test = FlightTest(Quadrotor(truth), x_r, u_r, steps=steps, Ts=0.02, substeps=1, backend=Backend("torch", "forward"))
     mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
                    theta_max=1.5, solver="OSQP")
     return net, test, mpc
@@ -129,7 +142,7 @@ def test_paired_grid_pairs_every_model_over_networks_and_tests():
     N, steps = 3, 3
     x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
     tests = [FlightTest(Quadrotor(TEST_TRUTH.replace(force_disturbance=F)), x_r, u_r, steps=steps, Ts=0.02, substeps=1,
-                        backend="torch", linearize_method="forward") for F in ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2))]
+                        backend=Backend("torch", "forward")) for F in ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2))]
     mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
                    theta_max=1.5, solver="OSQP")
     kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Gamma=0.16, Ts=0.02)
@@ -137,6 +150,12 @@ def test_paired_grid_pairs_every_model_over_networks_and_tests():
     assert list(grid) == [*SIX, "AdapFNN"] and all(len(v) == 4 for v in grid.values())
     assert grid["Nomi"][0] is grid["Nomi"][2] and not np.array_equal(grid["Nomi"][0].x, grid["Nomi"][1].x)
     assert not np.array_equal(grid["FNN"][0].x, grid["FNN"][2].x)  # another network, the same test
+    assert grid.index(1) == 2 and grid.index(1, 1) == 3 and grid.unit(1)["FNN"] is grid["FNN"][2]
+    with pytest.raises(IndexError):
+        grid.index(2)
+    # AdapNN flies at adapnn_gamma: as paper_models builds it with that gain
+    again = paper_models(nets[1][1], nets[0][1], **kw, adapnn_gamma=0.16)[4]
+    assert again.name == "AdapNN" and np.array_equal(fly(again, mpc, tests[1]).x, grid.unit(1, 1)["AdapNN"].x)
     with pytest.raises(ValueError, match="at least one"):
         paired_grid([], nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
 
@@ -147,13 +166,60 @@ def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> N
     refs = [lissajous_reference(steps + 2, N, Ts=0.02, params=NOMINAL, curve={**PAPER_LISSAJOUS, "r_x": r})
             for r in (1.0, 2.0)]
     vehicles = randomized_vehicles(TRAINING_TRUTH, 2, seed=3, **VALIDATION_RANDOMIZATION)
-    loop = dict(Ts=0.02, substeps=1, backend="torch", linearize_method="forward")
+    loop = dict(Ts=0.02, substeps=1, backend=Backend("torch", "forward"))
     sel = adapnn_gain_on_validation(net, [0.04, 0.16], refs, vehicles, mpc, steps=steps + 2, rtol=0.0, **loop)
     assert sel.value in (0.04, 0.16) and set(sel.table) == {0.04, 0.16}
     per_flight = sel.table[0.16]["rmse_per_flight"]
     assert len(per_flight) == 4 and len(set(per_flight)) == 4  # 2 vehicles x 2 references, all different
     # the order is vehicle, then reference; each entry is that vehicle flying that reference
     v, (x_v, u_v) = vehicles[1], refs[0]
-    flown = fly(adapnn_model(net, 0.16, Ts=0.02), mpc, Quadrotor(v), x_v, u_v, steps=steps + 2, **loop)
-    assert per_flight[2] == pytest.approx(flight_row(flown)["mean_axis"], rel=1e-12)
+    flown = fly(adapnn_model(net, 0.16, Ts=0.02), mpc, FlightTest(Quadrotor(v), x_v, u_v, steps=steps + 2, **loop))
+    assert per_flight[2] == pytest.approx(flight_row(flown).mean_axis, rel=1e-12)
     assert sel.table[0.16]["rmse"] == pytest.approx(float(np.median(per_flight)))
+
+
+def _settings(**changes) -> dict:
+    """quadrotor_mpc's flight settings with tiny sizes (the names of its parameters cell)."""
+    from fnnlib.quadrotor_presets import PAPER_MPC_WEIGHTS
+
+    s = {"steps": 3, "N": 3, "Ts": 0.02, "truth_mass": TEST_TRUTH.mass, "truth_inertia": list(TEST_TRUTH.inertia),
+         "truth_drag": list(TEST_TRUTH.drag), "disturbance": list(TEST_TRUTH.force_disturbance), "disturbance_draws": 1,
+         "disturbance_seed": 11, "disturbance_spread": 0.5, "truth_substeps": 1, "backend": "torch",
+         "linearize_method": "forward", "qp": "osqp", "Q": PAPER_MPC_WEIGHTS["Q"], "R": PAPER_MPC_WEIGHTS["R"],
+         "theta_max": PAPER_THETA_MAX, "solver": "OSQP"}
+    return {**s, **changes}
+
+
+def test_flight_tests_from_settings_build_the_test_vehicle_per_disturbance():
+    s = _settings()
+    setup = flight_tests_from_settings(s)
+    assert setup.forces == disturbance_realisations(s["disturbance"], 1, seed=11, spread=0.5)
+    assert len(setup.tests) == 2 and setup.vehicle == TEST_TRUTH
+    assert [t.truth.params.force_disturbance for t in setup.tests] == setup.forces
+    assert setup.x_r.shape == (3 + 3 + 1, 12) and setup.tests[0].backend == Backend("torch", "forward")
+    x_r, _ = lissajous_reference(3, 3, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    assert torch.equal(setup.x_r, x_r)
+    assert flight_tests_from_settings(_settings(truth_mass=0.9)).tests[0].truth.params.mass == 0.9
+
+
+def test_fnn_flown_again_from_the_settings_is_the_paired_grids_flight():
+    """What the tuned-gains chapter relies on: its FNN flight, built from quadrotor_mpc's settings with the
+    paper's gains, is bit for bit the FNN flight quadrotor_mpc flies (first network, first disturbance)."""
+    torch.manual_seed(0)
+    nets = [("0", AeroResidual((4,), "tanh").double()), ("1", AeroResidual((4,), "tanh").double())]
+    s = _settings()
+    tests = flight_tests_from_settings(s).tests
+    kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=s["N"], Gamma=0.16, Ts=s["Ts"])
+    grid = paired_grid(nets, nets[0][1], tests=tests, mpc=mpc_from_settings(s, cost="as_flown", u_max=6.0),
+                       model_settings=kw, adapnn_gamma=0.16)
+    # as the tuned-gains chapter builds it: again from the settings, its own MPC, fnn_model
+    again_tests = flight_tests_from_settings(dict(s))
+    mpc = mpc_from_settings(s, cost="as_flown", u_max=6.0)
+    for i, (_, net) in enumerate(nets):
+        again = fly(fnn_model(net, 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, again_tests.tests[1])
+        flown = grid.unit(i, 1)["FNN"]
+        assert np.array_equal(again.x, flown.x) and flight_row(again).mean_axis == flight_row(flown).mean_axis
+    # and the check can fail: other settings fly another flight
+    other = flight_tests_from_settings(_settings(truth_mass=0.9)).tests[1]
+    moved = fly(fnn_model(nets[0][1], 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, other)
+    assert not np.array_equal(moved.x, grid.unit(0, 1)["FNN"].x)

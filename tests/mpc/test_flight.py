@@ -11,16 +11,17 @@ import torch
 from fnnlib.control.flatness import flat_reference
 from fnnlib.control.lissajous import lissajous
 from fnnlib.mpc import LinearizedMPC, OSQPMPC
-from fnnlib.mpc.flight import FlightResult, fly, lissajous_reference, tracking_rmse
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64
 N, TS, STEPS = 10, 0.02, 15
 #: the loop settings these tests fly with unless they say otherwise: the torch reference, central
 #: differences, 4 RK4 sub-steps of the truth
-LOOP = {"Ts": TS, "substeps": 4, "backend": "torch", "linearize_method": "central"}
+LOOP = {"Ts": TS, "substeps": 4, "backend": Backend("torch", "central")}
 HOVER_EACH = NOMINAL.mass * NOMINAL.g / 4
 
 
@@ -29,16 +30,19 @@ def _mpc(cls: type = LinearizedMPC, cost: str = "as_written", **options: float) 
 
     Q = diag(100 x3, 50 x6, 1 x3), R = I, 0 <= u <= 4, |Theta| <= pi/2.
     """
-    Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
+    Q, R = np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"])
     x_lb, x_ub = np.full(12, -np.inf), np.full(12, np.inf)
-    x_lb[6:9], x_ub[6:9] = -np.pi / 2, np.pi / 2
-    return cls(N, Q, np.ones(4), cost=cost, u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub,
+    x_lb[6:9], x_ub[6:9] = -PAPER_THETA_MAX, PAPER_THETA_MAX
+    return cls(N, Q, R, cost=cost, u_lb=np.zeros(4), u_ub=np.full(4, 4.0), x_lb=x_lb, x_ub=x_ub,
                **options)
 
 
-def _fly(model, mpc, truth, x_r, u_r, **options):
-    """:func:`fly` with :data:`LOOP`, some settings changed."""
-    return fly(model, mpc, truth, x_r, u_r, **{**LOOP, **options})
+def _fly(model, mpc, truth, x_r, u_r, *, x0=None, linearize_method=None, **options):
+    """:func:`fly` on a :class:`FlightTest` with :data:`LOOP`, some settings changed."""
+    loop = {**LOOP, **options}
+    if linearize_method is not None:
+        loop["backend"] = Backend("torch", linearize_method)
+    return fly(model, mpc, FlightTest(truth, x_r, u_r, **loop), x0=x0)
 
 
 def _nominal_model() -> PredictionModel:

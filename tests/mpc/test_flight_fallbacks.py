@@ -6,18 +6,19 @@ import numpy as np
 import pytest
 
 from fnnlib.mpc import OSQPMPC
-from fnnlib.mpc.flight import fly, lissajous_reference
+from fnnlib.mpc.backends import Backend
+from fnnlib.mpc.flight import FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearized import DIVERGED_FALLBACK_SHARE
 from fnnlib.mpc.models import PredictionModel
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_TS
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_TS
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 N, STEPS = 10, 20
 
 
 def _mpc() -> OSQPMPC:
-    Q = np.array([100.0] * 3 + [50.0] * 6 + [1.0] * 3)
-    return OSQPMPC(N, Q, np.ones(4), cost="as_flown", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
+    Q, R = np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"])
+    return OSQPMPC(N, Q, R, cost="as_flown", u_lb=np.zeros(4), u_ub=np.full(4, 6.0))
 
 
 @pytest.mark.parametrize("n_bad", [0, 2, 14])
@@ -36,8 +37,9 @@ def test_flight_counts_fallbacks_by_reason_and_marks_divergence(n_bad: int, monk
         return real(x0, A, B, c, xr, ur)
 
     monkeypatch.setattr(mpc, "solve", solve)
-    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL), Ts=PAPER_TS), mpc, Quadrotor(NOMINAL), x_r, u_r, steps=STEPS,
-              Ts=PAPER_TS, substeps=1, backend="torch", linearize_method="central")
+    test = FlightTest(Quadrotor(NOMINAL), x_r, u_r, steps=STEPS, Ts=PAPER_TS, substeps=1,
+                      backend=Backend("torch", "central"))
+    res = fly(PredictionModel("Nomi", Quadrotor(NOMINAL), Ts=PAPER_TS), mpc, test)
     assert res.n_fallbacks == n_bad
     assert res.fallback_reasons == ({"data_too_large": n_bad} if n_bad else {})
     assert res.n_reference_fallbacks == max(0, n_bad - (N - 1))  # the plan covers N - 1 fallback steps

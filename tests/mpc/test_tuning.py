@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, load_nbbuild
+from conftest import ROOT
+from notebook_source import read_source
 
 import fnnlib as F
 from fnnlib.models.residual import AeroResidual
@@ -239,7 +240,7 @@ def _upstream(root: Path) -> Path:
 
 def _gamma_choice(up: Path, out: Path, **changes) -> dict:
     """Notebook 08's cells up to AdapNN's validation choice, run with tiny sizes and ``changes``."""
-    cells = [c for c in load_nbbuild().build(SOURCE).cells if c.cell_type == "code"]
+    cells = [c for c in read_source(SOURCE).cells if c.cell_type == "code"]
     ns: dict = {}
     exec(cells[0].source, ns)  # the parameters cell, then what papermill would inject
     ns.update({"profile": "smoke", "out_dir": str(out), "upstream_dirs": {"quadrotor_learning": str(up)}, "steps": 4,

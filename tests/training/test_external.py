@@ -11,6 +11,7 @@ from torch import Tensor, nn
 
 from fnnlib.models import mlp
 from fnnlib.training.external import (
+    InputRecipe,
     InputTrainHistory,
     adjoint_gradient,
     evaluate_loss,
@@ -174,7 +175,7 @@ def test_training_recovers_a_known_drag():
     step = lambda x, u: rk4(model, x, u, Ts)  # noqa: E731
     W = torch.tensor([1.0, 1, 1, 1, 0, 0], dtype=F64)
     before = evaluate_loss(step, x_val, I_val, W)
-    h = train_with_inputs(model, step, (x_r, I), segment_length=20, batch_size=6, epochs=15, lr=3e-2, W=W,
+    h = train_with_inputs(model, step, (x_r, I), InputRecipe(segment_length=20, batch_size=6, epochs=15, lr=3e-2), W=W,
                           seed=0, progress=False)
     after = evaluate_loss(step, x_val, I_val, W)
     assert isinstance(h, InputTrainHistory)
@@ -193,9 +194,11 @@ def _train_small(seed: int, **kw) -> tuple[InputTrainHistory, list[Tensor]]:
     x_r, I = _integrator_data(4, 40, 0.05, seed=3)
     torch.manual_seed(5)
     model = DoubleIntegratorLoop(hidden=8).double()
-    settings = dict(segment_length=10, batch_size=3, epochs=2, lr=1e-2, seed=seed, progress=False)
+    settings = dict(segment_length=10, batch_size=3, epochs=2, lr=1e-2)
+    other = {k: kw.pop(k) for k in list(kw) if k not in settings}
     settings.update(kw)
-    h = train_with_inputs(model, lambda x, u: rk4(model, x, u, 0.05), (x_r, I), **settings)
+    h = train_with_inputs(model, lambda x, u: rk4(model, x, u, 0.05), (x_r, I), InputRecipe(**settings), seed=seed,
+                          progress=False, **other)
     return h, [p.detach().clone() for p in model.parameters()]
 
 
@@ -275,10 +278,11 @@ def test_bad_inputs_are_refused_before_work(tiny, change, kw, message):
         I[0, 4, 1] = float("nan")
     elif change == "x_2d":
         x_r = x_r[0]
-    settings = dict(segment_length=5, batch_size=2, epochs=1, lr=1e-3, seed=0, progress=False)
+    settings = dict(segment_length=5, batch_size=2, epochs=1, lr=1e-3)
+    W = kw.pop("W", None)
     settings.update(kw)
     with pytest.raises(ValueError, match=message):
-        train_with_inputs(model, step, (x_r, I), **settings)
+        train_with_inputs(model, step, (x_r, I), InputRecipe(**settings), W=W, seed=0, progress=False)
     assert all(torch.equal(a, b) for a, b in zip(before, model.parameters()))
 
 
@@ -290,11 +294,12 @@ def test_bad_step_model_and_trajectories_are_refused(tiny):
         adjoint_gradient(step, [], x_r[:, 0], I, x_r)
     with pytest.raises(ValueError, match=r"x1 must have shape \(B, n\) = \(2, 6\)"):
         adjoint_gradient(step, model.parameters(), x_r[:, 0, :4], I, x_r)
+    recipe = InputRecipe(segment_length=5, batch_size=1, epochs=1, lr=1e-3)
     with pytest.raises(TypeError, match="model must be an nn.Module"):
-        train_with_inputs(step, step, (x_r, I), segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
-                          progress=False)
+        train_with_inputs(step, step, (x_r, I), recipe, seed=0, progress=False)
     with pytest.raises(TypeError, match="trajectories must be a pair"):
-        train_with_inputs(model, step, x_r, segment_length=5, batch_size=1, epochs=1, lr=1e-3, seed=0,
-                          progress=False)
+        train_with_inputs(model, step, x_r, recipe, seed=0, progress=False)
+    with pytest.raises(TypeError, match="InputRecipe"):
+        train_with_inputs(model, step, (x_r, I), recipe.as_dict(), seed=0, progress=False)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"I must have shape \(B, T, m\)"):
         evaluate_loss(step, x_r, I[0])

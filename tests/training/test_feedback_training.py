@@ -174,3 +174,11 @@ def test_domain_randomized_ensemble_follows_each_model_trained_alone():
         train_neural_ode(alone, t, X, recipe, seed=seeds[0], progress=False)
         for a, b in zip(ens.member(e).parameters(), alone.parameters()):
             torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("kw, match", [(dict(optimizer="sgd"), "unknown optimizer"),
+                                       (dict(refresh_every=0), "refresh_every"), (dict(iterations=0), "iterations"),
+                                       (dict(lr=0.0), "lr must be a finite positive number")])
+def test_a_feedback_recipe_checks_its_fields_when_made(kw, match):
+    with pytest.raises(ValueError, match=match):
+        PAPER_FEEDBACK_RECIPE.replace(**kw)

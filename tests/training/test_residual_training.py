@@ -12,6 +12,7 @@ from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import Flights, make_flights
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
 from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_RESIDUAL_RECIPE, PAPER_TS
+from fnnlib.training.residual import PAPER_RESIDUAL, ResidualRecipe
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 from fnnlib.training.external import make_segments, rollout
 from fnnlib.training.residual import (closed_loop_step, convergence_checks, predict_flights, state_group_errors,
@@ -20,7 +21,7 @@ from fnnlib.training.residual import (closed_loop_step, convergence_checks, pred
 F64 = torch.float64
 CTRL, PLANT = DFBC(NOMINAL, **PAPER_DFBC_GAINS), Quadrotor(NOMINAL)
 #: the paper's recipe with a short run's settings
-RECIPE = {**PAPER_RESIDUAL_RECIPE, "progress": False}
+RECIPE = PAPER_RESIDUAL
 
 
 def _flights(n_flights: int, n_nodes: int, **changes: object) -> Flights:
@@ -96,8 +97,8 @@ def test_prediction_at_the_default_step_too():
 
 def test_train_residual_ensemble_tiny(flights):
     val = _subset(flights, slice(0, 1))
-    fit = train_residual_ensemble([0, 1], flights, controller=CTRL, plant=PLANT,
-                                  **{**RECIPE, "segment_length": 10, "batch_size": 8, "epochs": 2}, val=val)
+    fit = train_residual_ensemble([0, 1], flights, RECIPE.replace(segment_length=10, batch_size=8, epochs=2),
+                                  controller=CTRL, plant=PLANT, val=val, progress=False)
     assert len(fit.members) == 2 and all(type(m) is AeroResidual for m in fit.members)
     assert all(m.config == {"hidden": [36, 36], "activation": "tanh"} for m in fit.members)
     assert next(fit.members[0].parameters()).dtype == torch.float32
@@ -126,11 +127,11 @@ def test_train_residual_ensemble_tiny(flights):
 def test_each_member_trains_as_it_would_alone(flights):
     """Q1's batching: member e of an ensemble ends where training it alone ends (full batches, float64)."""
     data = _subset(flights, slice(0, 2))
-    kw = dict(controller=CTRL, plant=PLANT, **{**RECIPE, "hidden": (8, 8), "segment_length": 10, "batch_size": None,
-                                               "epochs": 2}, dtype=F64)
-    ens = train_residual_ensemble([0, 1], data, **kw)
+    recipe = RECIPE.replace(hidden=(8, 8), segment_length=10, batch_size=None, epochs=2)
+    kw = dict(controller=CTRL, plant=PLANT, progress=False, dtype=F64)
+    ens = train_residual_ensemble([0, 1], data, recipe, **kw)
     for e, seed in enumerate((0, 1)):
-        alone = train_residual_ensemble([seed], data, **kw)
+        alone = train_residual_ensemble([seed], data, recipe, **kw)
         for p, q in zip(ens.members[e].parameters(), alone.members[0].parameters()):
             torch.testing.assert_close(p, q, rtol=1e-9, atol=1e-12)
         for row_ens, row_alone in zip(ens.member_loss, alone.member_loss):
@@ -139,11 +140,23 @@ def test_each_member_trains_as_it_would_alone(flights):
 
 def test_train_residual_ensemble_checks(flights):
     with pytest.raises(ValueError, match="seed"):
-        train_residual_ensemble([], flights, controller=CTRL, plant=PLANT, **RECIPE)
+        train_residual_ensemble([], flights, RECIPE, controller=CTRL, plant=PLANT, progress=False)
     other = _flights(1, 12, Ts=0.04, seed=0, n_waypoints=2)
     with pytest.raises(ValueError, match="Ts"):
-        train_residual_ensemble([0], flights, controller=CTRL, plant=PLANT, val=other,
-                                **{**RECIPE, "epochs": 1, "segment_length": 10, "batch_size": None})
+        train_residual_ensemble([0], flights, RECIPE.replace(epochs=1, segment_length=10, batch_size=None),
+                                controller=CTRL, plant=PLANT, val=other, progress=False)
+    with pytest.raises(TypeError, match="ResidualRecipe"):
+        train_residual_ensemble([0], flights, dict(PAPER_RESIDUAL_RECIPE), controller=CTRL, plant=PLANT)  # type: ignore[arg-type]
+
+
+def test_the_paper_residual_recipe_is_the_presets_and_checks_its_fields():
+    assert PAPER_RESIDUAL.as_dict() == {**PAPER_RESIDUAL_RECIPE}
+    assert RECIPE.replace(hidden=[8, 8]).hidden == (8, 8)
+    for change, match in (({"hidden": ()}, "hidden"), ({"hidden": (8, 0)}, "hidden"), ({"activation": "sin"}, "activation"),
+                          ({"epochs": 0}, "epochs"), ({"lr": 0.0}, "lr"), ({"batch_size": 0}, "batch_size"),
+                          ({"segment_length": 0}, "segment_length")):
+        with pytest.raises(ValueError, match=match):
+            ResidualRecipe(**{**PAPER_RESIDUAL_RECIPE, **change})
 
 
 # --------------------------------------------------------------------------- train_single_step

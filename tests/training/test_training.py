@@ -163,3 +163,14 @@ def test_sample_segments_reproducible_and_exhaustive():
     assert every.shape == (3, 8, 2)
     with pytest.raises(ValueError, match="batch_size=9 exceeds the 8 available segments"):
         sample_segments(x, 9, 3, torch.Generator().manual_seed(0))
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(optimizer="sgd"), "unknown optimizer"), (dict(loss="huber"), "unknown loss"),
+    (dict(method="rk45"), "unknown solver"), (dict(iterations=0), "need iterations >= 1"),
+    (dict(batch_time=1), r"2 <= batch_time"), (dict(lr=-1.0), "lr must be a finite positive number"),
+])
+def test_a_recipe_checks_its_fields_when_made(kw, match):
+    """No data needed: a bad recipe is refused where it is written, before any training."""
+    with pytest.raises(ValueError, match=match):
+        PAPER_SPIRAL_RECIPE.replace(**kw)
