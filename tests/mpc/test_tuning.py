@@ -246,7 +246,7 @@ def _gamma_choice(up: Path, out: Path, **changes) -> dict:
     ns.update({"profile": "smoke", "out_dir": str(out), "upstream_dirs": {"quadrotor_learning": str(up)}, "steps": 4,
                "N": 3, "u_max": [6.0], "costs": ["as_flown"], "Gamma_adapnn_grid": [0.04, 2.56],
                "validation_flights": 1, "validation_steps": 50, "validation_waypoints": 2, "validation_vehicles": 2,
-               "disturbance_draws": 0, "backend": "torch", "qp": "osqp", **changes})
+               "disturbance_draws": 0, "backend": "torch", "qp": "osqp", "transient_s": 0.02, **changes})
     for cell in cells[1:]:
         exec(cell.source, ns)
         if "gamma_sel" in ns:
