@@ -1,6 +1,6 @@
 """Claim verdicts and the per-task results JSON read by the scoreboard.
 
-A notebook decomposes each claim of ``CLAIMS.md`` into named boolean checks,
+A notebook decomposes each claim of the registry (``claims.yaml``) into named boolean checks,
 each computed from measured numbers by a rule stated in the notebook.  The
 verdict is derived from the checks alone, never set by hand:
 
@@ -125,7 +125,7 @@ def claim_result(
     Parameters
     ----------
     claim_id : str
-        The ID in ``CLAIMS.md``, e.g. ``"S2"``.
+        The ID in the claims registry (``claims.yaml``), e.g. ``"S2"``.
     checks : mapping of str to bool
         Named sub-checks, each computed from ``numbers``.
     numbers : mapping
