@@ -89,7 +89,7 @@ PAPER_RESIDUAL_RECIPE = MappingProxyType({"hidden": (36, 36), "activation": "tan
 PAPER_MLP_RECIPE = MappingProxyType({"epochs": 300, "lr": 1e-3, "batch_size": 256})
 """The single-step MLP baseline's training (Adam on shuffled mini-batches)."""
 
-# -- validation vehicles for choosing baseline settings (issue 16; not in the paper)
+# -- validation vehicles for choosing baseline settings (not in the paper)
 VALIDATION_RANDOMIZATION = MappingProxyType({"mass": 0.5, "inertia": 0.5, "drag": 0.5, "force_per_weight": 0.1})
 r"""Domain randomisation of the validation vehicles on which a baseline's settings (AdapNN's :math:`\Gamma`) are chosen.
 

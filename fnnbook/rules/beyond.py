@@ -102,7 +102,7 @@ def b1_paired(errors: Errors) -> dict[str, dict]:
 
 
 MIN_SEEDS = 5
-"""B2's least number of independent seeds (or paired units) behind a claim's headline (issue 15: at least 5)."""
+"""B2's least number of independent seeds (or paired units) behind a claim's headline (at least 5)."""
 
 
 def b2(headlines: Mapping[str, Mapping[str, Any] | None], *, min_seeds: int = MIN_SEEDS) -> dict[str, Any]:

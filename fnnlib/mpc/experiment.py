@@ -77,7 +77,7 @@ def make_mpc(qp: str, N: int, Q: Sequence[float], R: Sequence[float], *, cost: s
 
 
 def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int, spread: float) -> list[tuple[float, ...]]:
-    """The paper's constant force and ``n_drawn`` drawn around it (issue 16: Q3-Q5 over disturbances).
+    """The paper's constant force and ``n_drawn`` drawn around it (Q3-Q5 judged over disturbances).
 
     Each drawn force has every axis uniform in ``paper * (1 +- spread)`` (``numpy.random.default_rng(seed)``),
     so both its size and its direction vary around the paper's 0.3 N per axis. The paper's force comes first.

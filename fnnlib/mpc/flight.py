@@ -81,7 +81,7 @@ class FlightResult:
 
     @property
     def fallback_share(self) -> float:
-        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`, issue 16)."""
+        """Share of the steps that flew the MPC's fallback (reasons in :attr:`fallback_reasons`)."""
         return self.n_fallbacks / len(self.u)
 
     @property

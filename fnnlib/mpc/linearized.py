@@ -17,7 +17,7 @@ with the per-step weights :math:`Q_k, R_k` of one of two cost variants (``cost=`
     :math:`Q_N` (default :math:`Q`; the paper's :math:`l_N = l_x`) on :math:`x_N`, and
     :math:`R_k = R` (the paper's :math:`R = I`) on every input :math:`u_0..u_{N-1}`.
 ``"as_flown"``
-    The weighting of the authors' release, as issue 16 reports its cost loop:
+    The weighting of the authors' release, as its cost loop reads:
     :math:`Q_k = Q` for :math:`k = 1..N-1`, **no weight on** :math:`x_N`, and only the
     last input penalised, :math:`R_{N-1} = R`, :math:`R_k = 0` for :math:`k < N-1`. As
     :math:`u_{N-1}` moves only the unweighted :math:`x_N`, the inputs are in effect free
@@ -75,7 +75,7 @@ PLAN_TOL = 1e-3
 """Relative tolerance for a usable plan: an entry may exceed its box by ``PLAN_TOL * max(1, |bound|)`` and the
 dynamics residual may reach ``PLAN_TOL * (1 + |largest term|)``. Two orders above the solvers' default accuracy
 (eps 1e-5) and far below any physical margin of the quadrotor's boxes (thrust 0..4 or 6 N, angles pi/2); a stale or
-diverged solve (issue 16: u = 4.4e19 against a box of [-1, 1]) misses it by many orders."""
+diverged solve (one seen: u = 4.4e19 against a box of [-1, 1]) misses it by many orders."""
 
 FALLBACK_REASONS = ("data_not_finite", "data_too_large", "solver_error", "not_optimal", "solution_not_finite",
                     "outside_box", "dynamics_mismatch")
@@ -84,7 +84,7 @@ FALLBACK_REASONS = ("data_not_finite", "data_too_large", "solver_error", "not_op
 DIVERGED_FALLBACK_SHARE = 0.1
 """A flight whose share of fallback steps exceeds this is marked diverged (:func:`is_diverged`).
 
-A flight under a working controller has no fallbacks at all (issue 16: the one paper-profile flight with
+A flight under a working controller has no fallbacks at all (in the paper profile the one flight with
 fallbacks is the runaway AdapNN at Gamma = 8, 278 of 300 steps, 93 %). Ten per cent is 30 of the paper's 300
 steps: three full horizons (N = 10) flown on the fallback instead of an optimal plan, more than one lost plan
 explains; beyond it the numbers describe the fallback, not the MPC with that model."""

@@ -123,7 +123,7 @@ class AdaptiveNNModel(PredictionModel):
     :math:`\hat v_{t+1}` is the model's prediction from :math:`(x_t, u_t)` (there is no
     observer to supply :math:`\tilde x`).
 
-    **The gain's convention** (issue 16). Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
+    **The gain's convention.** Eq. (30), :math:`\dot{\hat\chi} = \Gamma\,\Xi^\top\tilde x`, is
     stepped by explicit Euler over :math:`T_s` with the error above, so each step is
     :math:`\hat\chi \mathrel{+}= T_s \Gamma\, \tilde a_t \phi^\top = \Gamma\,(v_{t+1} - \hat v_{t+1})\,\phi^\top`
     (measurement minus prediction; :meth:`AdaptiveResidual.adapt`). The authors' release steps

@@ -1,4 +1,4 @@
-r"""Baseline settings chosen away from the test flight (issue 16): validation flights from the training distribution.
+r"""Baseline settings chosen away from the test flight: validation flights from the training distribution.
 
 The paper tunes AdapNN "for optimal performance"; choosing its gain :math:`\Gamma` of Eq. (30) on the
 test Lissajous flight itself would hand the baseline knowledge of the test, and so would a validation vehicle

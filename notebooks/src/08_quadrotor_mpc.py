@@ -9,7 +9,7 @@
 # and a 0.3 N force on every axis. Claims **Q3** (tracking), **Q4** (first-step acceleration prediction) and
 # **Q5** (AdapFNN, Eqs. (29)-(30), Theorem 2). The residual networks come from the `quadrotor_learning` task.
 #
-# Eq. (28) is flown with two weightings (issue 16): **as written** in the paper (R = I on every input
+# Eq. (28) is flown with two weightings: **as written** in the paper (R = I on every input
 # u_0..u_{N-1}, Q_N = Q) and **as flown** by the authors' release (Q on x_1..x_{N-1}, no weight on x_N, only the
 # last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
@@ -133,7 +133,7 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # release steps $T_s\Gamma_{rel}\,e\,\phi^\top$, so $\Gamma = T_s\Gamma_{rel}$ and the release's 8 is 0.16 here. The
 # grid `Gamma_adapnn_grid` brackets 0.16.
 #
-# **Protocol** (issue 16; `fnnlib.mpc.tuning`), fixed before any flight and blind to the test vehicle:
+# **Protocol** (`fnnlib.mpc.tuning`), fixed before any flight and blind to the test vehicle:
 # - *References*: `validation_flights` random minimum-snap flights drawn like the training data (App. A.5.4:
 #   waypoints in the training box, speeds up to 10 m/s), with their own seed `validation_seed`.
 # - *Vehicles*: `validation_vehicles` vehicles drawn by domain randomisation around the **training** vehicle, in

@@ -108,7 +108,7 @@ def _copy_book(tmp_path: Path) -> Path:
 
 def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
     book = _copy_book(tmp_path)
-    toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book).read_text())
+    toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book, api=False).read_text())  # API: tests/reader
     assert toc["root"] == "intro"
     assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Results"]  # beta: no output
     assert toc["parts"][0]["chapters"] == [{"file": "_generated/alpha/alpha"}]
