@@ -43,7 +43,7 @@ class Claim:
     text : str
         The paper's statement, paraphrased.
     figure : str
-        The paper's figure.
+        The paper's figure ("" where the registry says ``none ...``: the paper has no figure for it).
     section : str
         Where the paper makes the claim (section, appendix).
     settings : str
@@ -99,7 +99,8 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
     if not _ID_RE.match(values["id"]):
         raise ValueError(f"{where}: claim ID {values['id']!r} is not letters followed by a number")
     own = _text(entry["settings"], where, "settings") if "settings" in entry else ""
-    return Claim(id=values["id"], group=group, text=values["statement"], figure=values["figure"],
+    figure = "" if values["figure"].lower().startswith("none") else values["figure"]
+    return Claim(id=values["id"], group=group, text=values["statement"], figure=figure,
                  section=values["section"], settings=" ".join(p for p in (group_settings, own) if p),
                  task=values["task"],
                  notebook=_text(entry["notebook"], where, "notebook") if "notebook" in entry else "")

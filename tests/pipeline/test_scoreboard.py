@@ -51,6 +51,7 @@ def test_read_claims(claims_file: Path) -> None:
     assert claims[0].settings == "Some settings." and claims[1].settings == "Some settings. N = 50."
     assert claims[1].text == "feedback beats | the ODE" and claims[1].notebook == ""
     assert claims[2].group == "Beyond the paper" and claims[2].task == "tuned"
+    assert claims[2].figure == ""  # "none": the paper has no figure for it
 
 
 @pytest.mark.parametrize(("registry", "message"), [
