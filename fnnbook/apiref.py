@@ -1,10 +1,11 @@
 """The book's API reference page: every public name of fnnlib, grouped as ARCHITECTURE.md groups the library.
 
 The names are fnnlib's flat public face (``fnnlib._api.__all__``); each name's group is the subpackage
-``fnnlib/_api.py`` imports it from. The page is one MyST file of Sphinx directives: per group an
-``autosummary`` table (no generated pages) and an ``autofunction`` / ``autoclass`` entry per callable
-(numpydoc docstrings read by napoleon, their math rendered by MathJax); a constant is documented by its
-``#:`` comment, read from the module that defines it.
+``fnnlib/_api.py`` imports it from. The page is one MyST file of Sphinx directives: per group a summary
+table (each name with its docstring's first paragraph, math included) and an ``autofunction`` /
+``autoclass`` entry per callable (numpydoc docstrings read by napoleon, their math rendered by MathJax); a
+constant is documented by its ``#:`` comment, read from the module that defines it. (Sphinx's autosummary
+would cut each summary at the first ". ", which here is mostly "Eq. (7)".)
 """
 
 from __future__ import annotations
@@ -158,10 +159,12 @@ def render_api_page(names: list[PublicName] | None = None) -> str:
         group = [n for n in names if GROUPS[n.source] == title]
         if not group:
             continue
-        out += [f"## {title}", "", "```{eval-rst}"]
-        callables = [f"   fnnlib.{n.name}" for n in group if n.kind != "data"]
-        if callables:
-            out += [".. autosummary::", "   :nosignatures:", "", *callables, ""]
+        out += [f"## {title}", "", "```{eval-rst}", ".. list-table::", "   :widths: 30 70",
+                "   :class: api-summary", ""]
+        for item in group:
+            first = " ".join(item.doc.split("\n\n", 1)[0].split())
+            out += [f"   * - :py:obj:`~fnnlib.{item.name}`", f"     - {first}"]
+        out.append("")
         for item in group:
             out += _entry(item)
         out += ["```", ""]
