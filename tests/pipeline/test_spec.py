@@ -61,7 +61,7 @@ def _from_shared_block(spec: PipelineSpec, name: str) -> bool:
 def test_shared_blocks_merge_into_profiles(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     make_pipeline()
     (tmp_path / "pipeline.yaml").write_text("""\
-claims_file: CLAIMS.md
+claims_file: claims.yaml
 output_root: outputs
 shared:
   small: &small {value: 7, scale: 0.5}
