@@ -45,8 +45,8 @@ def _write_pipeline(root: Path, points: int, work: int) -> Path:
                 nbformat.v4.new_code_cell(BODY)]
     (root / "notebooks").mkdir(parents=True)
     nbformat.write(nb, root / "notebooks" / "toy.ipynb")
-    (root / "CLAIMS.md").write_text("# Claims\n")
-    doc = {"claims_file": "CLAIMS.md", "output_root": "outputs",
+    (root / "claims.yaml").write_text("groups: []\n")
+    doc = {"claims_file": "claims.yaml", "output_root": "outputs",
            "parts": [{"title": "Toy", "tasks": ["toy"]}],
            "tasks": {"toy": {"title": "Toy", "notebook": "notebooks/toy.ipynb", "products": ["result.json"],
                              "grid": {"seed": list(range(points))}, "parameters": {"toy": {"work": work}}}}}

@@ -1,8 +1,9 @@
-"""``fnn-pipeline data fetch``: download the authors' published throws (Sec. 5.1) and check them.
+"""``fnn-pipeline data fetch``: download the published throws (Sec. 5.1) and check them.
 
-The files come from a pinned commit of the paper authors' code release and
-must match the SHA-256 sums pinned in :data:`fnnlib.data.bottle.BOTTLE_FILES`;
-a file that does not is refused and nothing is left in the data directory.
+The two files lie, byte-identical, in two public repositories, each pinned at a commit: the authors'
+official code release, then the repository the paper's review pointed to. :mod:`pooch` downloads each file
+from the first source that serves it, once (no retries), and keeps it only when its SHA-256 is the one
+pinned in :data:`fnnlib.data.bottle.BOTTLE_FILES`; a refused file leaves nothing in the data directory.
 
 >>> fetch_bottle("data")      # doctest: +SKIP
 [PosixPath('data/bottle/Training_dataset.mat'), PosixPath('data/bottle/Testing_dataset.mat')]
@@ -10,44 +11,77 @@ a file that does not is refused and nothing is left in the data directory.
 
 from __future__ import annotations
 
-import hashlib
 import os
-import urllib.error
-import urllib.request
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from fnnlib.data.bottle import BOTTLE_FILES, DataError
-from fnnlib.io import atomic_write, file_sha256
+from fnnlib.io import file_sha256
 
-__all__ = ["BOTTLE_RELEASE", "BOTTLE_URL", "fetch_bottle"]
+__all__ = ["BOTTLE_SOURCES", "fetch_bottle"]
 
-#: the authors' release holding the throws: ``owner/repository/commit`` on GitHub (one place to correct)
-BOTTLE_RELEASE = "anonymity-tempo/Feedback_NN_irregular_object/3f314167516c26bea8e1ad86a8f84ada911900bd"
-#: where the files lie in that release; ``{name}`` is a key of BOTTLE_FILES
-BOTTLE_URL = f"https://raw.githubusercontent.com/{BOTTLE_RELEASE}/Dataset_construction/{{name}}"
+_RAW = "https://raw.githubusercontent.com"
+#: where the throws are published, tried in this order: label -> URL template with ``{name}`` (a key of
+#: BOTTLE_FILES); each at a pinned commit, so the files cannot change under the pinned SHA-256
+BOTTLE_SOURCES: dict[str, str] = {
+    "official release": f"{_RAW}/JIAjindou/Feedback-neural-network/395154347267c7088fcdcecd89f6df1355758117/"
+                        "irregular_object/Dataset_construction/{name}",
+    "review repository": f"{_RAW}/anonymity-tempo/Feedback_NN_irregular_object/"
+                         "3f314167516c26bea8e1ad86a8f84ada911900bd/Dataset_construction/{name}",
+}
+
+
+def _why(exc: Exception) -> str:
+    """A download failure in a few words."""
+    import requests  # noqa: PLC0415 (pooch's HTTP client)
+
+    if isinstance(exc, requests.HTTPError) and exc.response is not None:
+        return f"HTTP {exc.response.status_code}"
+    if isinstance(exc, requests.Timeout):
+        return "timed out"
+    if isinstance(exc, requests.ConnectionError):
+        return "no connection"
+    if isinstance(exc, ValueError):  # pooch's hash check
+        return "SHA-256 is not the pinned one, file refused"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _download(url: str, folder: Path, name: str, digest: str, timeout: float) -> None:
+    """One attempt at ``url``: pooch writes to a temporary file, checks its SHA-256, then moves it in place."""
+    import pooch  # noqa: PLC0415 (only the fetch needs it)
+
+    logger = pooch.get_logger()  # pooch's own logger says "Downloading ..." at INFO: our echo says it once
+    level = logger.level
+    logger.setLevel("WARNING")
+    try:
+        pooch.retrieve(url, known_hash=f"sha256:{digest}", fname=name, path=folder,
+                       downloader=pooch.HTTPDownloader(progressbar=False, timeout=timeout))
+    finally:
+        logger.setLevel(level)
 
 
 def fetch_bottle(
     data_dir: str | os.PathLike[str],
     *,
-    url: str = BOTTLE_URL,
+    sources: Mapping[str, str] | None = None,
     timeout: float = 60.0,
     echo: Callable[[str], None] = print,
 ) -> list[Path]:
     """Download each file of :data:`~fnnlib.data.bottle.BOTTLE_FILES` into ``<data_dir>/bottle/``.
 
-    A file already there with the pinned SHA-256 is kept; any other is
-    replaced only by a download whose SHA-256 matches.
+    A file already there with the pinned SHA-256 is kept; otherwise each source is tried once, in order,
+    until one serves the file with the pinned SHA-256.
 
     Parameters
     ----------
     data_dir : path-like
         The data directory (``--data-dir``; the pipeline's ``data_dir``).
-    url : str
-        URL template with ``{name}`` (default: the pinned release).
+    sources : mapping of str to str, optional
+        Label -> URL template with ``{name}``, tried in order (default: :data:`BOTTLE_SOURCES`).
     timeout : float
         Seconds per request.
+    echo : callable
+        Receives one line per file.
 
     Returns
     -------
@@ -57,10 +91,14 @@ def fetch_bottle(
     Raises
     ------
     DataError
-        If a file cannot be downloaded or its SHA-256 is not the pinned one.
+        If no source serves a file with the pinned SHA-256 (the message names each source's failure).
     """
-    if "{name}" not in url:
-        raise DataError(f"the URL template must contain {{name}}, got {url!r}")
+    sources = dict(BOTTLE_SOURCES if sources is None else sources)
+    bad = [label for label, url in sources.items() if "{name}" not in url]
+    if not sources or bad:
+        raise DataError(f"each source must be a URL template containing {{name}}; got {sources!r}")
+    import requests  # noqa: PLC0415 (pooch's HTTP client)
+
     folder = Path(data_dir) / "bottle"
     done = []
     for name, (_, _, digest) in BOTTLE_FILES.items():
@@ -69,20 +107,16 @@ def fetch_bottle(
             echo(f"{path}: present, SHA-256 ok")
             done.append(path)
             continue
-        source = url.format(name=name)
-        h = hashlib.sha256()
-        try:
-            with urllib.request.urlopen(source, timeout=timeout) as response, atomic_write(path) as fh:
-                for block in iter(lambda: response.read(1 << 20), b""):
-                    h.update(block)
-                    fh.write(block)
-                if h.hexdigest() != digest:
-                    raise DataError(f"{source}: SHA-256 {h.hexdigest()} is not the pinned {digest}; "
-                                    "refusing the file (nothing written)")
-        except urllib.error.URLError as exc:  # HTTPError included
-            raise DataError(f"cannot download {source}: {exc}") from exc
-        except (OSError, TimeoutError) as exc:
-            raise DataError(f"cannot download {source}: {exc}") from exc
-        echo(f"{path}: downloaded, SHA-256 ok")
-        done.append(path)
+        failures = []
+        for label, url in sources.items():
+            try:
+                _download(url.format(name=name), folder, name, digest, timeout)
+            except (requests.RequestException, ValueError, OSError) as exc:  # ValueError: pooch's hash check
+                failures.append(f"{label} ({url.format(name=name)}): {_why(exc)}")
+                continue
+            echo(f"{path}: downloaded from the {label}, SHA-256 ok")
+            done.append(path)
+            break
+        else:
+            raise DataError(f"cannot download {name}: " + "; ".join(failures))
     return done

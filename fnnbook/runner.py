@@ -207,7 +207,10 @@ def _fingerprint(task: Task, params: Mapping[str, Any], upstream: Mapping[str, s
 def _known_claims(claims_file: Path) -> set[str] | None:
     if not claims_file.is_file():
         return None
-    return {c.id for c in read_claims(claims_file)}
+    try:
+        return {c.id for c in read_claims(claims_file)}
+    except ValueError as exc:  # the registry is off its schema: say so before anything runs
+        raise PipelineError(str(exc)) from exc
 
 
 def check(

@@ -1,9 +1,8 @@
-"""The scoreboard: every claim of ``CLAIMS.md`` with its measured verdict.
+"""The scoreboard: every claim of the registry (``claims.yaml``) with its measured verdict.
 
-``CLAIMS.md`` lists claims in markdown tables, one ``## section`` per group,
-rows like ``| S1 | claim text | Fig. 4c |``.  Each task's ``results.json``
-(:mod:`fnnlib.results`) reports verdicts for some IDs; the rest are
-shown as "not run".
+The registry lists the claims by group, each with the paper's statement (paraphrased), where the paper makes
+it, its settings and the task that judges it (:func:`read_claims`).  Each task's ``results.json``
+(:mod:`fnnlib.results`) reports verdicts for some IDs; the rest are shown as "not run".
 """
 
 from __future__ import annotations
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
+import yaml
 
 from fnnbook.rules import beyond
 from fnnlib.results import VERDICTS, ClaimResult, Results
@@ -38,24 +38,36 @@ _BADGE = {"reproduced": "success", "partly": "warning", "not reproduced": "dange
 
 @dataclass(frozen=True)
 class Claim:
-    """One row of a claims table.
+    """One claim of the registry.
 
     Attributes
     ----------
     id : str
         E.g. ``"S2"``.
     group : str
-        The ``##`` section the table sits in.
+        The group (scoreboard section) the claim belongs to.
     text : str
-        The claim (second column).
+        The paper's statement, paraphrased.
     figure : str
-        The paper's figure (third column, when its header names a figure).
+        The paper's figure ("" where the registry says ``none ...``: the paper has no figure for it).
+    section : str
+        Where the paper makes the claim (section, appendix).
+    settings : str
+        The paper's settings for it (the group's, then the claim's own).
+    task : str
+        The pipeline task that judges it (``"scoreboard"``: computed by the book).
+    notebook : str
+        That task's notebook source ("" when none).
     """
 
     id: str
     group: str
     text: str
     figure: str
+    section: str = ""
+    settings: str = ""
+    task: str = ""
+    notebook: str = ""
 
 
 @dataclass(frozen=True)
@@ -72,20 +84,45 @@ class ScoreRow:
     result: ClaimResult | None
 
 
-def _cells(line: str) -> list[str]:
-    body = line.strip()[1:]
-    if body.endswith("|"):
-        body = body[:-1]
-    return [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", body)]
+#: fields every claim of the registry must give (non-empty); ``settings`` and ``notebook`` are optional
+CLAIM_FIELDS = ("id", "statement", "section", "figure", "task")
+_OPTIONAL_FIELDS = ("settings", "notebook")
+
+
+def _text(value: Any, where: str, name: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"{where}: {name!r} must be a non-empty string, got {value!r}")
+    return " ".join(value.split())
+
+
+def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
+    if not isinstance(entry, Mapping):
+        raise ValueError(f"{where}: a claim must be a mapping, got {entry!r}")
+    unknown = sorted(set(entry) - set(CLAIM_FIELDS) - set(_OPTIONAL_FIELDS))
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {unknown}; a claim has {CLAIM_FIELDS + _OPTIONAL_FIELDS}")
+    values = {name: _text(entry.get(name), where, name) for name in CLAIM_FIELDS}
+    if not _ID_RE.match(values["id"]):
+        raise ValueError(f"{where}: claim ID {values['id']!r} is not letters followed by a number")
+    own = _text(entry["settings"], where, "settings") if "settings" in entry else ""
+    figure = "" if values["figure"].lower().startswith("none") else values["figure"]
+    return Claim(id=values["id"], group=group, text=values["statement"], figure=figure,
+                 section=values["section"], settings=" ".join(p for p in (group_settings, own) if p),
+                 task=values["task"],
+                 notebook=_text(entry["notebook"], where, "notebook") if "notebook" in entry else "")
 
 
 def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
-    """Parse every claim ID from the markdown tables of a claims file.
+    """Read every claim of a claims registry (YAML, see ``claims.yaml`` at the repository root).
+
+    The file holds ``groups:``, a list (possibly empty) of ``{name, settings, claims}``; each claim gives ``id``,
+    ``statement``, ``section``, ``figure`` and ``task`` (all non-empty), optionally ``settings`` and
+    ``notebook``.
 
     Parameters
     ----------
     path : path-like
-        The claims file (``CLAIMS.md``).
+        The registry.
 
     Returns
     -------
@@ -95,33 +132,29 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
     Raises
     ------
     ValueError
-        If an ID occurs twice.
+        If the file does not follow the schema, a required field is empty, or an ID occurs twice.
     """
+    where = str(path)
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{where}: not a YAML claims registry: {exc}") from exc
+    groups = data.get("groups") if isinstance(data, Mapping) else None
+    if not isinstance(groups, list):
+        raise ValueError(f"{where}: expected a list under 'groups'")
     claims: list[Claim] = []
     seen: set[str] = set()
-    group = ""
-    header: list[str] = []
-    for line in Path(path).read_text(encoding="utf-8").splitlines():
-        stripped = line.strip()
-        if stripped.startswith("#"):
-            group = stripped.lstrip("#").strip()
-            header = []
-            continue
-        if not stripped.startswith("|"):
-            header = []
-            continue
-        cells = _cells(stripped)
-        if not header:
-            header = [c.lower() for c in cells]
-            continue
-        if not cells or not _ID_RE.match(cells[0]):
-            continue  # separator row or a table without IDs
-        if cells[0] in seen:
-            raise ValueError(f"{path}: claim ID {cells[0]!r} appears twice")
-        seen.add(cells[0])
-        figure = cells[2] if len(cells) > 2 and len(header) > 2 and "figure" in header[2] else ""
-        claims.append(Claim(id=cells[0], group=group, text=cells[1] if len(cells) > 1 else "",
-                            figure=figure))
+    for i, group in enumerate(groups):
+        if not isinstance(group, Mapping) or not isinstance(group.get("claims"), list):
+            raise ValueError(f"{where}: group {i} must be a mapping with a list under 'claims'")
+        name = _text(group.get("name"), f"{where}: group {i}", "name")
+        settings = _text(group.get("settings"), f"{where}: group {name!r}", "settings")
+        for j, entry in enumerate(group["claims"]):
+            claim = _claim(entry, name, settings, f"{where}: group {name!r}, claim {j}")
+            if claim.id in seen:
+                raise ValueError(f"{where}: claim ID {claim.id!r} appears twice")
+            seen.add(claim.id)
+            claims.append(claim)
     return claims
 
 

@@ -49,7 +49,7 @@ class Task:
     notebook : Path
         Absolute path of the source notebook.
     claims : tuple of str
-        Claim IDs (``CLAIMS.md``) the task's ``results.json`` must report.
+        Claim IDs (of the claims registry, ``claims.yaml``) the task's ``results.json`` must report.
     upstream : tuple of str
         Tasks whose outputs this task reads.
     products : tuple of str

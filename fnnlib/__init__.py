@@ -16,6 +16,13 @@ from typing import Any
 
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # written once, in pyproject.toml; read from the installed package's metadata
+        from importlib.metadata import PackageNotFoundError, version  # noqa: PLC0415
+
+        try:
+            return version("fnnlib")
+        except PackageNotFoundError:  # a source tree on sys.path that was never installed
+            return "0+unknown"
     if not name.startswith("__") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
         return importlib.import_module(f"{__name__}.{name}")  # a submodule (``from fnnlib import io``)
     api = importlib.import_module("fnnlib._api")  # loads every subpackage, each set as an attribute here

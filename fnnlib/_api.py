@@ -93,8 +93,6 @@ from fnnlib.training import (
     train_neural_ode,
 )
 
-__version__ = "0.1.0"
-
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
     "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",

@@ -1,6 +1,6 @@
 """Claim verdicts and the per-task results JSON read by the scoreboard.
 
-A notebook decomposes each claim of ``CLAIMS.md`` into named boolean checks,
+A notebook decomposes each claim of the registry (``claims.yaml``) into named boolean checks,
 each computed from measured numbers by a rule stated in the notebook.  The
 verdict is derived from the checks alone, never set by hand:
 
@@ -170,7 +170,7 @@ class ClaimResult:
     Attributes
     ----------
     id : str
-        The claim's ID, e.g. ``"S2"``.
+        The claim's ID in the claims registry (``claims.yaml``), e.g. ``"S2"``.
     checks : mapping of str to bool
         Named sub-checks, each computed from the measured numbers; they alone decide :attr:`verdict`.
     rule : str

@@ -1,16 +1,24 @@
-"""Fixtures shared across the suite: the smoke-profile outputs, run once per pytest run.
+"""Fixtures shared across the suite: the smoke-profile outputs, run once per pytest run, as a new user would.
 
-``smoke_outputs`` runs pipeline tasks in the smoke profile into one output
-root shared by every test of the run, including every pytest-xdist worker:
-one file lock per task lets one worker execute it while others run other
-tasks, and the runner skips a task whose outputs are up to date, so each task
-runs once however many tests (the task tests, nbval, the book in the
-browser) need it.
+``smoke_outputs`` first copies the repository's files (tracked, and untracked
+but not ignored: what a clone of the working tree holds) into an empty
+temporary folder with nothing beside it, and runs the pipeline there, with
+the defaults of its own ``pipeline.yaml`` (claims registry, data directory,
+output root, all inside the copy); the notebooks' kernels import the copy's
+``fnnlib``. So the task tests, nbval and the book in the browser all show
+that the repository alone suffices. The run is shared by every test of the
+run, including every pytest-xdist worker: one file lock per task lets one
+worker execute it while others run other tasks, and the runner skips a task
+whose outputs are up to date, so each task runs once however many tests need
+it.
 """
 
 from __future__ import annotations
 
+import fnmatch
 import os
+import shutil
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,15 +76,56 @@ class SmokeOutputs:
         return self.spec.output_dir(SMOKE, task)
 
 
+def repository_files(root: Path = ROOT) -> list[str]:
+    """The repository's files relative to ``root``: tracked, and untracked but not ignored.
+
+    ``git ls-files -co --exclude-standard``; outside a git checkout (an unpacked archive), every file but
+    those matching a pattern of ``.gitignore``.
+    """
+    try:
+        listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=root, check=True,
+                                capture_output=True).stdout.decode().split("\0")
+        return sorted(p for p in listed if p and (root / p).is_file())  # a deleted tracked file is listed too
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    patterns = [line.strip().rstrip("/") for line in (root / ".gitignore").read_text(encoding="utf-8").splitlines()
+                if line.strip() and not line.startswith("#")]
+
+    def ignored(rel: Path) -> bool:
+        return any(fnmatch.fnmatch(rel.as_posix(), pat) if "/" in pat else
+                   any(fnmatch.fnmatch(part, pat) for part in rel.parts) for pat in patterns)
+
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                  if p.is_file() and ".git" not in p.relative_to(root).parts and not ignored(p.relative_to(root)))
+
+
+def bare_copy(dest: Path) -> Path:
+    """Copy :func:`repository_files` into ``dest`` (created, must not exist); returns ``dest``."""
+    dest.mkdir(parents=True)
+    for rel in repository_files():
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / rel, dest / rel)
+    return dest
+
+
 @pytest.fixture(scope="session")
 def smoke_outputs(tmp_path_factory: pytest.TempPathFactory) -> SmokeOutputs:
-    """One smoke output root for the whole run (shared by the xdist workers of one run)."""
+    """The smoke runs of the whole run, in a bare copy of the repository (shared by the xdist workers).
+
+    ``<run>/new-user/`` holds the copy and nothing else; its ``pipeline.yaml`` is used as it is.
+    """
     base = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         base = base.parent  # the run's folder, above each worker's own basetemp
-    root = base / "smoke-outputs"
-    root.mkdir(exist_ok=True)
-    return SmokeOutputs(load_spec(PIPELINE).with_paths(output_root=root))
+    repo = base / "new-user" / ROOT.name
+    with FileLock(str(base / "new-user.lock")):
+        if not (base / "new-user.copied").is_file():
+            bare_copy(repo)
+            (base / "new-user.copied").touch()
+    # the notebooks' kernels (and the book's autodoc) import the copy's fnnlib, not this checkout's
+    path = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(repo), *([path] if path else [])])
+    return SmokeOutputs(load_spec(repo / "pipeline.yaml"))
 
 
 def _depth(task: str, upstream: dict[str, list[str]]) -> int:

@@ -109,7 +109,7 @@ def b1_paired(errors: Errors) -> dict[str, dict]:
 
 
 MIN_SEEDS = 5
-"""B2's least number of independent seeds (or paired units) behind a claim's headline (issue 15: at least 5)."""
+"""B2's least number of independent seeds (or paired units) behind a claim's headline (at least 5)."""
 
 
 def b2(headlines: Mapping[str, Headline | None], *, min_seeds: int = MIN_SEEDS) -> ClaimResult:

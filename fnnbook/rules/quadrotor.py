@@ -1,4 +1,4 @@
-r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out (issue 15).
+r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out.
 
 Each rule returns a :class:`~fnnlib.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
 plausible run;

@@ -18,7 +18,7 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
 
 
 def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str) -> nn.Sequential:
-    """A multilayer perceptron ``n_in -> hidden... -> n_out`` with the named activation.
+    """A multilayer perceptron ``n_in -> *hidden -> n_out`` with the named activation.
 
     ``hidden=(50, 50)`` gives three linear layers 2-50-50-2 for the spiral.
     """

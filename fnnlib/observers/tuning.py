@@ -1,4 +1,4 @@
-r"""Observer settings from training data only (issue 16): the Kalman filter's process noise on the disturbance.
+r"""Observer settings from training data only: the Kalman filter's process noise on the disturbance.
 
 The Kalman baselines (:mod:`fnnlib.observers.kalman`) model the residual :math:`\Delta f = \dot x - f_{neural}(x)`
 as a disturbance state with a random walk, :math:`d_{k+1} = d_k + w_k`, :math:`w_k \sim \mathcal N(0, q_d I)`.

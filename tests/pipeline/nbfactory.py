@@ -10,13 +10,12 @@ import nbformat
 
 MakePipeline = Callable[..., Path]  # the make_pipeline fixture (conftest.py)
 
-CLAIMS_MD = """# Claims
-
-## Group one
-| ID | claim | paper figure |
-|---|---|---|
-| S1 | the first claim | Fig. 1 |
-| S2 | the second claim | Fig. 2 |
+CLAIMS_YAML = """groups:
+  - name: Group one
+    settings: the group's settings
+    claims:
+      - {id: S1, statement: the first claim, section: Sec. 1, figure: Fig. 1, task: leaf}
+      - {id: S2, statement: the second claim, section: Sec. 2, figure: Fig. 2, task: child}
 """
 
 # A task that writes results.json (claim S1) and value.txt; `fail` makes it raise.

@@ -18,18 +18,18 @@ from fnnlib.results import ClaimResult, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
 
-CLAIMS = """# Claims
-
-## Spiral (Sec. 3)
-| ID | claim | paper figure |
-|---|---|---|
-| S1 | the neural ODE fits the nominal dynamics (change rate) | Fig. 4c |
-| S2 | feedback lowers the N=50 multi-step error; gamma/lambda_min(L) | Fig. 4d-f |
-
-## Beyond the paper
-| ID | what | why |
-|---|---|---|
-| B1 | tune L and beta | the paper's stated limitation |
+CLAIMS = """groups:
+  - name: Spiral (Sec. 3)
+    settings: the spiral
+    claims:
+      - {id: S1, statement: the neural ODE fits the nominal dynamics (change rate), section: Sec. 3.1,
+         figure: Fig. 4c, task: alpha}
+      - {id: S2, statement: "feedback lowers the N=50 multi-step error; gamma/lambda_min(L)", section: Sec. 3.3,
+         figure: Fig. 4d-f, task: beta}
+  - name: Beyond the paper
+    settings: ours
+    claims:
+      - {id: B1, statement: tune L and beta, section: Sec. 7, figure: none, task: alpha}
 """
 
 
@@ -78,9 +78,9 @@ def fake_outputs(tmp_path: Path) -> PipelineSpec:
                                               metadata={"tags": ["parameters"]})]
         (tmp_path / "notebooks").mkdir(exist_ok=True)
         nbformat.write(nb, tmp_path / "notebooks" / f"{name}.ipynb")
-    (tmp_path / "CLAIMS.md").write_text(CLAIMS)
+    (tmp_path / "claims.yaml").write_text(CLAIMS)
     task = {"notebook": "", "upstream": [], "products": ["results.json"], "parameters": {"paper": {}}}
-    doc = {"claims_file": "CLAIMS.md", "output_root": "outputs",
+    doc = {"claims_file": "claims.yaml", "output_root": "outputs",
            "parts": [{"title": "Linear feedback (Sec. 3)", "tasks": ["alpha"]},
                      {"title": "Neural feedback (Sec. 4)", "tasks": ["beta"]}],
            "tasks": {"alpha": {**task, "title": "Alpha", "notebook": "notebooks/alpha.ipynb",
@@ -108,7 +108,7 @@ def _copy_book(tmp_path: Path) -> Path:
 
 def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
     book = _copy_book(tmp_path)
-    toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book).read_text())
+    toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book, api=False).read_text())  # API: tests/reader
     assert toc["root"] == "intro"
     assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Results"]  # beta: no output
     assert toc["parts"][0]["chapters"] == [{"file": "_generated/alpha/alpha"}]

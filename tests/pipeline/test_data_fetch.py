@@ -1,8 +1,10 @@
-"""`fnn-pipeline data fetch` against a local HTTP server on 127.0.0.1: good, corrupt and missing files."""
+"""`fnn-pipeline data fetch` (pooch) against HTTP servers on 127.0.0.1: a source that lacks the files, a
+corrupt file, no server at all, and the sources tried in order."""
 
 from __future__ import annotations
 
 import hashlib
+import socket
 import threading
 from collections.abc import Iterator
 from functools import partial
@@ -23,61 +25,95 @@ class _Quiet(SimpleHTTPRequestHandler):
 
 
 @pytest.fixture
-def server(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[str, Path]]:
-    """Serve tmp_path/www; pin the SHA-256 of the GOOD files."""
-    www = tmp_path / "www"
-    www.mkdir()
+def www(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[str, Path]]:
+    """Serve tmp_path/www (URL prefix returned); pin the SHA-256 of the GOOD files."""
+    root = tmp_path / "www"
+    for mirror in ("first", "second"):
+        (root / mirror).mkdir(parents=True)
     pinned = {name: ("var", (1, 1, 1), hashlib.sha256(data).hexdigest()) for name, data in GOOD.items()}
     monkeypatch.setattr(fnnbook.data, "BOTTLE_FILES", pinned)
-    httpd = ThreadingHTTPServer(("127.0.0.1", 0), partial(_Quiet, directory=str(www)))
-    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), partial(_Quiet, directory=str(root)))
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
     thread.start()
     try:
-        yield f"http://127.0.0.1:{httpd.server_address[1]}/{{name}}", www
+        yield f"http://127.0.0.1:{httpd.server_address[1]}", root
     finally:
         httpd.shutdown()
         httpd.server_close()
         thread.join()
 
 
-def _fetch(url: str, data: Path) -> int:
-    return main(["data", "fetch", "--data-dir", str(data), "--url", url])
+def _fetch(data: Path, *urls: str, optional: bool = False) -> int:
+    args = ["data", "fetch", "--data-dir", str(data)] + [a for u in urls for a in ("--url", u)]
+    return main(args + (["--optional"] if optional else []))
 
 
-def test_good_files_are_placed_and_kept(server: tuple[str, Path], tmp_path: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
-    url, www = server
-    for name, data in GOOD.items():
-        (www / name).write_bytes(data)
-    assert _fetch(url, tmp_path / "data") == 0
+def _put(folder: Path, files: dict[str, bytes]) -> None:
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+
+
+def _empty(folder: Path) -> bool:
+    return not folder.exists() or not any(folder.iterdir())  # no file, no temporary file
+
+
+def test_first_source_missing_second_serves(www: tuple[str, Path], tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    url, root = www
+    _put(root / "second", GOOD)
+    assert _fetch(tmp_path / "data", f"{url}/first/{{name}}", f"{url}/second/{{name}}") == 0
     for name, data in GOOD.items():
         assert (tmp_path / "data" / "bottle" / name).read_bytes() == data
-    assert capsys.readouterr().out.count("downloaded, SHA-256 ok") == 2
-    (www / "Training_dataset.mat").unlink()  # already there and right: not downloaded again
-    assert _fetch(url, tmp_path / "data") == 0
+    out = capsys.readouterr()
+    assert out.out.count("downloaded from the --url 2, SHA-256 ok") == 2 and out.err == ""  # pooch says nothing
+    for name in GOOD:  # already there and right: not downloaded again
+        (root / "second" / name).unlink()
+    assert _fetch(tmp_path / "data", f"{url}/first/{{name}}") == 0
     assert capsys.readouterr().out.count("present, SHA-256 ok") == 2
 
 
-def test_corrupt_file_is_refused_and_nothing_is_left(server: tuple[str, Path], tmp_path: Path,
-                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    url, www = server
-    (www / "Training_dataset.mat").write_bytes(b"training throws, truncat")
-    (www / "Testing_dataset.mat").write_bytes(GOOD["Testing_dataset.mat"])
-    assert _fetch(url, tmp_path / "data") == 2
-    assert "is not the pinned" in capsys.readouterr().err
-    folder = tmp_path / "data" / "bottle"
-    assert not folder.exists() or not any(folder.iterdir())  # no file, no temporary file
-
-
-def test_missing_file_is_a_clear_error(server: tuple[str, Path], tmp_path: Path,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
-    url, _ = server
-    assert _fetch(url, tmp_path / "data") == 2
+def test_corrupt_file_is_refused_and_the_next_source_tried(www: tuple[str, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    url, root = www
+    _put(root / "first", {**GOOD, "Training_dataset.mat": b"training throws, truncat"})
+    assert _fetch(tmp_path / "data", f"{url}/first/{{name}}") == 2
     err = capsys.readouterr().err
-    assert "cannot download http://127.0.0.1:" in err and "404" in err
+    assert "cannot download Training_dataset.mat: --url 1 (http://127.0.0.1:" in err
+    assert "SHA-256 is not the pinned one, file refused" in err
+    assert _empty(tmp_path / "data" / "bottle")
+    _put(root / "second", GOOD)  # a good copy further down the list is taken
+    assert _fetch(tmp_path / "data", f"{url}/first/{{name}}", f"{url}/second/{{name}}") == 0
+    out = capsys.readouterr().out
+    assert "Training_dataset.mat: downloaded from the --url 2" in out
+    assert "Testing_dataset.mat: downloaded from the --url 1" in out
 
 
-def test_the_default_source_is_pinned() -> None:
-    owner, repo, commit = fnnbook.data.BOTTLE_RELEASE.split("/")
-    assert len(commit) == 40 and int(commit, 16) >= 0
-    assert fnnbook.data.BOTTLE_URL.startswith(f"https://raw.githubusercontent.com/{owner}/{repo}/{commit}/")
+def test_no_server_is_an_error_or_one_line_with_optional(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket() as sock:  # a port nothing listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    dead = f"http://127.0.0.1:{port}/{{name}}"
+    assert _fetch(tmp_path / "data", dead, dead) == 2
+    err = capsys.readouterr().err
+    assert err.count("no connection") == 2 and err.startswith("error: cannot download Training_dataset.mat")
+    assert _fetch(tmp_path / "data", dead, optional=True) == 0
+    out = capsys.readouterr()
+    assert out.err == "" and out.out.count("\n") == 1  # one line, and the caller goes on
+    assert out.out.startswith("note: going on without the bottle throws") and "'not run: data missing'" in out.out
+    assert _empty(tmp_path / "data" / "bottle")
+
+
+def test_a_source_without_name_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert _fetch(tmp_path / "data", "http://127.0.0.1:1/file.mat") == 2
+    assert "must be a URL template containing {name}" in capsys.readouterr().err
+
+
+def test_the_official_release_comes_first_both_pinned() -> None:
+    (first, official), (second, review) = fnnbook.data.BOTTLE_SOURCES.items()
+    assert (first, second) == ("official release", "review repository")
+    assert official.startswith("https://raw.githubusercontent.com/JIAjindou/Feedback-neural-network/"
+                               "395154347267c7088fcdcecd89f6df1355758117/irregular_object/Dataset_construction/")
+    commit = review.split("/")[5]
+    assert review.startswith("https://raw.githubusercontent.com/anonymity-tempo/") and len(commit) == 40
+    assert all(url.endswith("/{name}") for url in (official, review))

@@ -70,7 +70,7 @@ def test_notebook_value_checks_run_before_anything(name: str, value: object, mes
                                                    tmp_path: Path) -> None:
     """The real spiral notebook's checks (fnnbook.settings.check_notebook_settings), on a copy of pipeline.yaml."""
     doc = yaml.safe_load((REPO / "pipeline.yaml").read_text())
-    doc["claims_file"] = str(REPO / "pipeline.yaml")  # any file; no claim IDs are needed here
+    doc["claims_file"] = str(REPO / "claims.yaml")
     for task in doc["tasks"].values():
         task["notebook"] = str(REPO / task["notebook"])
         task["claims"] = []

@@ -197,7 +197,7 @@ def test_unknown_claim_id_is_an_error(make_pipeline: MakePipeline) -> None:
     task = leaf_task()
     task["claims"] = ["S1", "S9"]
     spec = load_spec(make_pipeline({"leaf": task}))
-    with pytest.raises(PipelineError, match=r"task 'leaf' declares claim 'S9', which is not in CLAIMS.md"):
+    with pytest.raises(PipelineError, match=r"task 'leaf' declares claim 'S9', which is not in claims.yaml"):
         check(spec, "smoke")
 
 

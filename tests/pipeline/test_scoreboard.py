@@ -15,28 +15,34 @@ from fnnlib.results import ClaimResult, GuaranteeFailed, Results, headline_numbe
 def _results(task: str, *claims: ClaimResult) -> dict[str, Results]:
     return {task: Results(task=task, profile="smoke", claims=claims)}
 
-CLAIMS = """# What the book must reproduce
-
-Intro text with a | pipe that is not a table.
-
-## Spiral (Sec. 3-4)
-Some settings.
-
-| ID | claim | paper figure |
-|---|---|---|
-| S1 | the neural ODE fits | Fig. 4c |
-| S2 | feedback beats \\| the ODE | Fig. 4d-f |
-
-## Beyond the paper
-| ID | what | why |
-|---|---|---|
-| B1 | tune L | the paper's limitation |
+CLAIMS = """# a comment | with a pipe
+groups:
+  - name: Spiral (Sec. 3-4)
+    settings: Some settings.
+    claims:
+      - id: S1
+        statement: the neural ODE fits
+        section: Sec. 3.1
+        figure: Fig. 4c
+        task: spiral
+        notebook: notebooks/src/01_spiral.py
+      - id: S2
+        statement: >-
+          feedback beats | the ODE
+        section: Sec. 3.3
+        figure: Fig. 4d-f
+        settings: N = 50.
+        task: spiral
+  - name: Beyond the paper
+    settings: Ours.
+    claims:
+      - {id: B1, statement: tune L, section: Sec. 7, figure: none, task: tuned}
 """
 
 
 @pytest.fixture
 def claims_file(tmp_path: Path) -> Path:
-    path = tmp_path / "CLAIMS.md"
+    path = tmp_path / "claims.yaml"
     path.write_text(CLAIMS)
     return path
 
@@ -46,23 +52,33 @@ def test_read_claims(claims_file: Path) -> None:
     assert [c.id for c in claims] == ["S1", "S2", "B1"]
     assert claims[0].group == "Spiral (Sec. 3-4)"
     assert claims[0].text == "the neural ODE fits" and claims[0].figure == "Fig. 4c"
-    assert claims[1].text == "feedback beats | the ODE"  # unescaped
-    assert claims[2].group == "Beyond the paper" and claims[2].figure == ""  # "why" is no figure
+    assert claims[0].section == "Sec. 3.1" and claims[0].notebook == "notebooks/src/01_spiral.py"
+    assert claims[0].settings == "Some settings." and claims[1].settings == "Some settings. N = 50."
+    assert claims[1].text == "feedback beats | the ODE" and claims[1].notebook == ""
+    assert claims[2].group == "Beyond the paper" and claims[2].task == "tuned"
+    assert claims[2].figure == ""  # "none": the paper has no figure for it
 
 
-def test_duplicate_id_is_an_error(tmp_path: Path) -> None:
-    path = tmp_path / "CLAIMS.md"
-    path.write_text("## A\n| ID | claim | paper figure |\n|---|---|---|\n| S1 | x | y |\n| S1 | z | w |\n")
-    with pytest.raises(ValueError, match="claim ID 'S1' appears twice"):
+@pytest.mark.parametrize(("registry", "message"), [
+    ("groups:\n  - {name: A, settings: s, claims: [{id: S1, statement: x, section: y, figure: z, task: t},"
+     " {id: S1, statement: x, section: y, figure: z, task: t}]}\n", "claim ID 'S1' appears twice"),
+    ("groups:\n  - {name: A, settings: s, claims: [{id: S1, statement: '  ', section: y, figure: z, task: t}]}\n",
+     "'statement' must be a non-empty string"),
+    ("groups:\n  - {name: A, settings: s, claims: [{id: S1, statement: x, figure: z, task: t}]}\n",
+     "'section' must be a non-empty string"),
+    ("groups:\n  - {name: A, settings: s, claims: [{id: s-1, statement: x, section: y, figure: z, task: t}]}\n",
+     "is not letters followed by a number"),
+    ("groups:\n  - {name: A, settings: s, claims: [{id: S1, statement: x, section: y, figure: z, task: t,"
+     " paper: p}]}\n", r"unknown field\(s\) \['paper'\]"),
+    ("groups:\n  - {name: A, claims: []}\n", "'settings' must be a non-empty string"),
+    ("| S1 | a markdown table | Fig. 1 |\n", "not a YAML claims registry"),
+    ("# Claims\n\n## Spiral\n", "expected a list under 'groups'"),
+])
+def test_a_registry_off_the_schema_is_refused(registry: str, message: str, tmp_path: Path) -> None:
+    path = tmp_path / "claims.yaml"
+    path.write_text(registry)
+    with pytest.raises(ValueError, match=message):
         read_claims(path)
-
-
-def test_repository_claims_file_parses() -> None:
-    path = Path(__file__).resolve().parents[2] / ".." / "shared" / "CLAIMS.md"
-    if not path.is_file():
-        pytest.skip("no shared CLAIMS.md beside the repository")
-    ids = [c.id for c in read_claims(path)]
-    assert ids[:2] == ["S1", "S2"] and "D1" in ids and "Q6" in ids and "B3" in ids
 
 
 def _row_lines(page: str, cid: str) -> tuple[str, str]:

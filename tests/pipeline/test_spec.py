@@ -17,7 +17,7 @@ def test_loads_and_resolves_paths(make_pipeline: MakePipeline, tmp_path: Path) -
     assert list(spec.tasks) == ["leaf", "child"]  # upstream first, whatever the file order
     assert spec.root == tmp_path
     assert spec.output_root == tmp_path / "outputs"
-    assert spec.claims_file == tmp_path / "CLAIMS.md"
+    assert spec.claims_file == tmp_path / "claims.yaml"
     assert spec.data_dir == tmp_path / "data"
     assert spec.tasks["leaf"].notebook == tmp_path / "notebooks" / "leaf.ipynb"
     assert spec.tasks["leaf"].products == ("results.json", "value.txt")
@@ -61,7 +61,7 @@ def _from_shared_block(spec: PipelineSpec, name: str) -> bool:
 def test_shared_blocks_merge_into_profiles(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     make_pipeline()
     (tmp_path / "pipeline.yaml").write_text("""\
-claims_file: CLAIMS.md
+claims_file: claims.yaml
 output_root: outputs
 shared:
   small: &small {value: 7, scale: 0.5}

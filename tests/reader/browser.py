@@ -26,7 +26,7 @@ from urllib.parse import unquote, urlsplit
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
 INSTALL = "apt-get update && apt-get install -y chromium chromium-driver  (as root; .ci/run does this on CI)"
-LOCAL_SCHEMES = ("file", "data", "blob", "about", "chrome", "devtools")
+LOCAL_SCHEMES = ("file", "data", "blob", "about", "chrome", "chrome-untrusted", "devtools")  # chrome*: the browser's own pages
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-default-apps", "--disable-dev-shm-usage", "--window-size=1400,1000",

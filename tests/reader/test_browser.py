@@ -1,8 +1,9 @@
 """The smoke-profile book as a reader sees it: quiet pages, and every page read in headless Chromium.
 
 The book is built once per run from the shared smoke outputs (``smoke_outputs``
-in ``tests/conftest.py``) and read by Debian's chromium through Selenium with
-the network unused (see :mod:`reader.browser`). Without chromium and
+in ``tests/conftest.py``), in the bare copy of the repository they ran in (a
+new user's clone: nothing outside it is read), and read by Debian's chromium
+through Selenium with the network unused (see :mod:`reader.browser`). Without chromium and
 chromium-driver the browser tests are skipped with the command that installs
 them. ``BOOK_SCREENSHOTS=DIR`` saves the scoreboard and the spiral page as
 whole-page PNGs there.
@@ -20,9 +21,9 @@ from bs4 import BeautifulSoup
 from filelock import FileLock
 
 from fnnbook.book import assemble_book, build_book
+from fnnbook.scoreboard import read_claims
 from reader.browser import missing_browser, read_book
 
-REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
 SMOKE = "smoke"
 #: what solver, kernel or library chatter looks like in an executed cell's output
 NOISE = re.compile(r"ERROR in osqp|Problem data validation|\bWarning\b|Traceback \(most recent call last\)")
@@ -30,20 +31,32 @@ NOISE = re.compile(r"ERROR in osqp|Problem data validation|\bWarning\b|Traceback
 
 @pytest.fixture(scope="session")
 def smoke_book(smoke_outputs) -> Path:
-    """The book built from this run's smoke outputs (once for all xdist workers); its ``_build/html``."""
-    if not smoke_outputs.spec.claims_file.is_file():  # the scoreboard lists the claims of the shared CLAIMS.md
-        pytest.skip(f"no claims file at {smoke_outputs.spec.claims_file}: the book cannot be built here")
-    book = smoke_outputs.spec.output_root.parent / "smoke-book"
+    """The book of the bare copy, built from this run's smoke outputs (once for all xdist workers), as
+    ``fnn-pipeline book`` builds it there; its ``_build/html``."""
+    book = smoke_outputs.spec.root / "book"
     html = book / "_build" / "html"
     report = smoke_outputs.run()  # every task (each under its own lock), before taking the book's
     assert report.ok, [(o.task, o.status, o.message) for o in report.outcomes]
-    with FileLock(str(smoke_outputs.spec.output_root.parent / "smoke-book.lock")):
+    with FileLock(str(smoke_outputs.spec.output_root / "book.lock")):
         if not (html / "index.html").is_file():
-            shutil.rmtree(book, ignore_errors=True)
-            shutil.copytree(REPO_BOOK, book, ignore=shutil.ignore_patterns("_build", "_generated", "_toc.yml"))
             assemble_book(smoke_outputs.spec, SMOKE, book)
             build_book(book, quiet=True)
     return html
+
+
+@pytest.mark.notebook
+def test_a_new_user_gets_the_whole_book_from_the_repository_alone(smoke_book: Path, smoke_outputs) -> None:
+    """The copy has nothing beside it; what the run read lies inside it; the scoreboard lists every claim."""
+    spec = smoke_outputs.spec
+    assert [p.name for p in spec.root.parent.iterdir()] == [spec.root.name]
+    for path in (spec.claims_file, spec.output_root, spec.data_dir, smoke_book):
+        assert path.resolve().is_relative_to(spec.root.resolve()), f"{path} is outside the copy"
+    ids = [c.id for c in read_claims(spec.claims_file)]
+    scoreboard = (smoke_book / "_generated" / "scoreboard.html").read_text(encoding="utf-8")
+    assert len(ids) == 26
+    listed = [cid for cid in ids if f'id="claim-{cid.lower()}"' in scoreboard]
+    assert listed == ids, f"not on the scoreboard: {sorted(set(ids) - set(listed))}"
+    assert (smoke_book / "_generated" / "api.html").is_file()
 
 
 def _browser() -> None:
