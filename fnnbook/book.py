@@ -18,7 +18,8 @@ from typing import Any
 
 import yaml
 
-from fnnbook.runner import read_status
+from fnnbook.layout import read_status
+from fnnbook.outcome import Status
 from fnnbook.scoreboard import (SEEDS_CHECK_ID, SELF_CHECK_ID, plot_verdicts, read_claims, render_scoreboard,
                                score_rows, seeds_check, self_check)
 from fnnbook.spec import PipelineError, PipelineSpec
@@ -159,7 +160,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
             executed = out / f"{name}.ipynb"
             if not out.is_dir():
                 why = status.get(name, {}).get("message")
-                if why and status[name].get("status") == "not run":  # e.g. its data are missing: say so
+                if why and status[name].get("status") == Status.NOT_RUN:  # e.g. its data are missing: say so
                     (generated / name).mkdir()
                     (generated / name / f"{name}.md").write_text(_not_run_page(spec.tasks[name].title, why),
                                                                  encoding="utf-8")

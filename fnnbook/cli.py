@@ -26,6 +26,7 @@ from fnnbook.book import assemble_book, build_book
 from fnnbook.data import BOTTLE_URL, fetch_bottle
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
+from fnnbook.outcome import Status
 from fnnbook.runner import check, is_up_to_date, read_status
 from fnnbook.spec import PipelineError, PipelineSpec, load_spec
 from fnnlib.data.bottle import DataError
@@ -153,7 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
             assemble_book(spec, args.profile, book_dir)
             not_run = {t: s["message"] for t, s in read_status(spec, args.profile).items()
-                       if s.get("status") in ("failed", "not run")}
+                       if s.get("status") in (Status.FAILED, Status.NOT_RUN)}
             for task, why in not_run.items():
                 print(f"note: {task} is shown as not run or from an older run ({why})")
             start = time.perf_counter()

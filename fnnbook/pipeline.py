@@ -13,8 +13,11 @@ import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from fnnbook.executor import run_on_dask
-from fnnbook.runner import (Plan, RunReport, TaskOutcome, execute, logs_dir, check, decide, summary, task_threads,
-                            write_status)
+from fnnbook.execution import execute
+from fnnbook.kernel import task_threads
+from fnnbook.layout import logs_dir, write_status
+from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, progress_line, summary
+from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["run", "run_here"]
@@ -87,7 +90,7 @@ def run(
     verdict = decide(spec, plan, force=force)
     if threads is None:  # on a cluster given by address, the local core count says nothing: 1
         threads = 1 if scheduler is not None else task_threads(workers)
-    if (scheduler is not None or workers > 1) and any(v == "run" for v in verdict.values()):
+    if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
         outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
                                echo=echo, progress_bar=progress_bar)
     else:
@@ -98,45 +101,28 @@ def run(
     return report
 
 
-def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, threads: int,
-              echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
+def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, threads: int,
+             echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
     """Today's path: the tasks one after another in this process."""
     n = len(plan.order)
     outcomes: dict[str, TaskOutcome] = {}
-    bad: set[str] = set()
     for i, name in enumerate(plan.order, 1):
-        task = spec.tasks[name]
         out = spec.output_dir(plan.profile, name)
-        prefix = f"[{i}/{n}] {name} ..."
-        blocked = [u for u in task.upstream if u in bad]
-        if verdict[name].startswith("not run"):
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=verdict[name][len("not run: "):])
-            echo(f"{prefix} {verdict[name]}")
-            continue
-        if blocked:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=f"upstream {blocked[0]} failed")
-            echo(f"{prefix} not run (upstream {blocked[0]} failed)")
-            continue
-        if verdict[name] == "skipped":
-            outcomes[name] = TaskOutcome(name, "skipped", 0.0, out)
-            echo(f"{prefix} skipped (up to date)")
-            continue
-        echo(prefix)
-        log = logs_dir(spec, plan.profile) / f"{name}.log"
-        try:
-            seconds, error = execute(spec, plan, name, progress_bar, threads)
-        except BaseException:
-            outcomes[name] = TaskOutcome(name, "failed", 0.0, out, log, "interrupted")
-            echo(f"{prefix} FAILED (interrupted; see log {log})")
-            echo(summary(RunReport(plan.profile, tuple(outcomes.values()))))
-            raise
-        if error:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "failed", seconds, out, log, error)
-            echo(f"{prefix} FAILED (see log {log})\n    {error}")
+        if verdict[name].action is not Action.RUN:
+            outcomes[name] = verdict[name].outcome(name, out)
+        elif (up := blocked_by(spec.tasks[name], outcomes)) is not None:
+            outcomes[name] = blocked(name, out, up, outcomes)
         else:
-            outcomes[name] = TaskOutcome(name, "ok", seconds, out, log)
-            echo(f"{prefix} ok ({seconds:.1f} s)")
+            echo(f"[{i}/{n}] {name} ...")
+            log = logs_dir(spec, plan.profile) / f"{name}.log"
+            try:
+                seconds, error = execute(spec, plan, name, progress_bar, threads)
+            except BaseException:
+                outcomes[name] = TaskOutcome(name, Status.FAILED, 0.0, out, log, "interrupted")
+                echo(f"[{i}/{n}] {name} ... FAILED (interrupted; see log {log})")
+                echo(summary(RunReport(plan.profile, tuple(outcomes.values()))))
+                raise
+            outcomes[name] = (TaskOutcome(name, Status.FAILED, seconds, out, log, error) if error
+                              else TaskOutcome(name, Status.OK, seconds, out, log))
+        echo(progress_line(i, n, outcomes[name]))
     return outcomes
