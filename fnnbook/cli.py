@@ -144,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             report = run(spec, args.profile, args.tasks or None, force=args.force,
                          progress_bar=not args.no_progress, workers=workers, scheduler=args.scheduler,
                          threads=args.threads, echo=lambda line: print(line, flush=True))
-            return 0 if report.ok else 1
+            return 2 if report.io_error else (0 if report.ok else 1)
         if args.command == "data":
             if spec.data_dir is None:
                 raise PipelineError("the pipeline has no data_dir; pass --data-dir DIR")
@@ -163,6 +163,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
     except (PipelineError, DataError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the file system's (read-only, full, no permission): one line, not a traceback
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

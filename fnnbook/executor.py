@@ -28,10 +28,11 @@ import psutil
 from distributed import Client, Future, LocalCluster, wait
 from tqdm import tqdm
 
-from fnnbook.execution import execute_task
+from fnnbook.execution import execute_task, ignoring_interrupts
 from fnnbook.kernel import cpu_count, kill_kernels
 from fnnbook.layout import logs_dir, mark_killed, staging_dir
-from fnnbook.outcome import Action, Decision, Status, TaskOutcome, blocked, blocked_by, progress_line
+from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
+                             progress_line)
 from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -135,6 +136,14 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decis
             if postfix != shown:  # redraw on change only: a log file gets one line per change, not one a second
                 bar.set_postfix(postfix, refresh=True)
                 shown = postfix
+    except KeyboardInterrupt:
+        with ignoring_interrupts():  # a second Ctrl-C: the cancel still runs to its end
+            bar.close()
+            _cancel(client, futures, spec, plan, pending)
+            logs = logs_dir(spec, plan.profile)
+            stopped = {n: interrupted(n, spec.output_dir(plan.profile, n), logs / f"{n}.log")
+                       for n in pending.values()}
+        raise Interrupted({**outcomes, **stopped}) from None
     except BaseException:
         bar.close()
         _cancel(client, futures, spec, plan, pending)
@@ -156,7 +165,7 @@ def _outcome(spec: PipelineSpec, plan: Plan, name: str, fut: Future,
     if type(exc).__name__ == "KilledWorker":
         why = "the worker process running it died (twice, with the retry); outputs untouched"
     mark_killed(log, why)
-    shutil.rmtree(staging_dir(spec, plan.profile, name), ignore_errors=True)
+    shutil.rmtree(staging_dir(spec, plan.profile, name, plan.run), ignore_errors=True)
     return TaskOutcome(name, Status.FAILED, 0.0, out, log, why)
 
 

@@ -3,33 +3,49 @@
 ::
 
     <task>/                 last good outputs (products, <task>.ipynb, .fingerprint.json)
-    .staging/<task>/        the run in progress; swapped in only on success
+    .staging/<run>/<task>/  a run in progress, in a folder of its own; swapped in only on success
+    .locks/<task>.lock      held by the one run that may write <task>/ and its log (``.holder``: who)
     _logs/<task>.log        log of the last attempt (kernel output, error)
     _logs/<task>.ipynb      the executed notebook of a failed attempt
     _status.json            how each task of the last run fared (read by the book)
+
+One writer per output: a run holds the lock of every task it runs or reads (its tasks and their upstream
+tasks, taken in name order, so two runs never wait on each other in a circle) from its decisions to its
+summary; the book holds every task's lock while it reads. A second run on the same tasks waits, and says
+which process it waits for; runs of disjoint tasks go side by side.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
+import socket
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+from filelock import FileLock, Timeout
+
 from fnnbook.outcome import RunReport
-from fnnbook.spec import PipelineSpec
+from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write
 
-__all__ = ["STATUS_FILE", "logs_dir", "mark_killed", "point_to_final", "read_status", "recover", "staging_dir",
-           "swap", "write_status"]
+__all__ = ["STATUS_FILE", "clear_stale", "holding", "logs_dir", "mark_killed", "point_to_final", "read_status",
+           "recover", "staging_dir", "swap", "write_status"]
+
+LOCKS = ".locks"
 
 STATUS_FILE = "_status.json"
 _END_MARKERS = ("\n--- ok after ", "\n--- FAILED")
 
 
-def staging_dir(spec: PipelineSpec, profile: str, task: str) -> Path:
-    return spec.output_root / profile / ".staging" / task
+def staging_dir(spec: PipelineSpec, profile: str, task: str, run: str) -> Path:
+    """Where run ``run`` writes ``task``'s outputs before the swap (no other run writes there)."""
+    return spec.output_root / profile / ".staging" / run / task
 
 
 def logs_dir(spec: PipelineSpec, profile: str) -> Path:
@@ -38,15 +54,71 @@ def logs_dir(spec: PipelineSpec, profile: str) -> Path:
 
 
 def recover(spec: PipelineSpec, profile: str, task: str) -> None:
-    """Put back an output folder left aside by an interrupted swap."""
+    """Put back an output folder left aside by an interrupted swap (of any run: the caller holds the lock)."""
     final = spec.output_dir(profile, task)
-    old = staging_dir(spec, profile, task).with_name(f"{task}.old")
-    if old.is_dir():
+    for old in (spec.output_root / profile / ".staging").glob(f"*/{task}.old"):
         if final.exists():
             shutil.rmtree(old)
         else:
             os.rename(old, final)
 
+
+def clear_stale(spec: PipelineSpec, profile: str, tasks: Iterable[str], run: str) -> None:
+    """Remove what killed runs left in staging for ``tasks`` (the caller holds their locks), swaps put back."""
+    staging = spec.output_root / profile / ".staging"
+    for task in tasks:
+        recover(spec, profile, task)
+        for left in staging.glob(f"*/{task}"):
+            if left.parent.name != run:
+                shutil.rmtree(left, ignore_errors=True)
+    for folder in staging.glob("*"):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only when empty: another run's folder may still hold its tasks
+
+
+def _holder(path: Path) -> str:
+    try:
+        who = json.loads(path.read_text(encoding="utf-8"))
+        return f"pid {who['pid']} on {who['host']} ({who['command']}, since {who['since']})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process (no holder record)"
+
+
+@contextlib.contextmanager
+def holding(spec: PipelineSpec, profile: str, tasks: Iterable[str], *,
+            echo: Callable[[str], None] = print) -> Iterator[None]:
+    """Hold the writer lock of each of ``tasks``' outputs, waiting (and saying for whom) while another has it.
+
+    Raises
+    ------
+    PipelineError
+        If the output root cannot hold the lock files (read-only, full, no permission).
+    """
+    folder = spec.output_root / profile / LOCKS
+    with contextlib.ExitStack() as held:
+        for task in sorted(set(tasks)):
+            lock = FileLock(folder / f"{task}.lock")
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                try:
+                    lock.acquire(timeout=0)
+                except Timeout:
+                    echo(f"waiting: the outputs of {task} are being written by "
+                         f"{_holder(folder / f'{task}.holder')}")
+                    lock.acquire()
+                held.callback(lock.release)
+                who = {"pid": os.getpid(), "host": socket.gethostname(), "command": " ".join(sys.argv),
+                       "since": time.strftime("%Y-%m-%d %H:%M:%S")}
+                with atomic_write(folder / f"{task}.holder", "w") as fh:
+                    fh.write(json.dumps(who) + "\n")
+            except OSError as exc:
+                raise PipelineError(f"cannot write to the output root {spec.output_root}: {_why(exc)}") from exc
+        yield
+
+
+def _why(exc: OSError) -> str:
+    """An OSError in one line: what failed on which file."""
+    return f"{exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else "")
 
 
 def swap(staging: Path, final: Path) -> None:
@@ -106,15 +178,13 @@ def mark_killed(log: Path, why: str) -> None:
 def write_status(spec: PipelineSpec, report: RunReport) -> Path:
     """Record each task's last outcome in ``<output_root>/<profile>/_status.json`` (the book reads it)."""
     path = spec.output_root / report.profile / STATUS_FILE
-    try:
-        status = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        status = {}
-    for o in report.outcomes:
-        status[o.task] = {"status": str(o.status), "message": o.message}
+    mine = {o.task: {"status": str(o.status), "message": o.message} for o in report.outcomes}
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(path, "w") as fh:
-        fh.write(json.dumps(status, indent=2, sort_keys=True) + "\n")
+    with FileLock(path.with_name(f".{STATUS_FILE}.lock")):  # runs of disjoint tasks share this file
+        status = read_status(spec, report.profile)
+        status.update(mine)
+        with atomic_write(path, "w") as fh:
+            fh.write(json.dumps(status, indent=2, sort_keys=True) + "\n")
     return path
 
 

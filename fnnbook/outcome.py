@@ -14,7 +14,7 @@ from typing import Protocol
 
 from fnnbook.spec import Task
 
-__all__ = ["Action", "Decision", "RunReport", "Status", "TaskOutcome", "blocked", "blocked_by", "progress_line",
+__all__ = ["Action", "Decision", "Interrupted", "RunReport", "Status", "TaskOutcome", "blocked", "blocked_by", "interrupted", "progress_line",
            "summary"]
 
 
@@ -79,7 +79,8 @@ class Decision:
 
 @dataclass(frozen=True)
 class TaskOutcome:
-    """How one task fared. ``data_missing``: not run only because data files are missing here."""
+    """How one task fared. ``data_missing``: not run only because data files are missing here;
+    ``io_error``: failed on the file system (read-only or full disk, no permission), not in the science."""
 
     task: str
     status: Status
@@ -88,6 +89,8 @@ class TaskOutcome:
     log: Path | None = None
     message: str = ""
     data_missing: bool = False
+    io_error: bool = False
+    interrupted: bool = False
 
     @property
     def blocks(self) -> bool:
@@ -112,12 +115,30 @@ class RunReport:
         return all(o.status in (Status.OK, Status.SKIPPED) or (o.status == Status.NOT_RUN and o.data_missing)
                    for o in self.outcomes)
 
+    @property
+    def io_error(self) -> bool:
+        """True when a task failed on the file system (the command line exits with 2)."""
+        return any(o.io_error for o in self.outcomes)
+
     def outcome(self, task: str) -> TaskOutcome:
         """The outcome of ``task``."""
         for o in self.outcomes:
             if o.task == task:
                 return o
         raise KeyError(task)
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a run, carrying the outcomes so far (so the run is still recorded)."""
+
+    def __init__(self, outcomes: Mapping[str, TaskOutcome]) -> None:
+        super().__init__("interrupted")
+        self.outcomes = dict(outcomes)
+
+
+def interrupted(task: str, out_dir: Path, log: Path | None) -> TaskOutcome:
+    """The outcome of a task stopped by Ctrl-C."""
+    return TaskOutcome(task, Status.FAILED, 0.0, out_dir, log, "interrupted", interrupted=True)
 
 
 def blocked_by(task: Task, known: Mapping[str, _Upstream]) -> str | None:
@@ -135,7 +156,8 @@ def blocked(task: str, out_dir: Path, upstream: str, known: Mapping[str, _Upstre
 def progress_line(index: int, total: int, o: TaskOutcome) -> str:
     """``[i/n] task ... ok (1.2 s)``, and the like for each status."""
     text = {Status.OK: f"ok ({o.seconds:.1f} s)", Status.SKIPPED: "skipped (up to date)",
-            Status.FAILED: f"FAILED (see log {o.log})\n    {o.message}",
+            Status.FAILED: (f"FAILED (interrupted; see log {o.log})" if o.interrupted
+                            else f"FAILED (see log {o.log})\n    {o.message}"),
             Status.NOT_RUN: f"not run ({o.message})"}[o.status]
     return f"[{index}/{total}] {o.task} ... {text}"
 

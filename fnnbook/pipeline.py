@@ -9,14 +9,16 @@ summary and ``_status.json``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from fnnbook.executor import run_on_dask
-from fnnbook.execution import execute
+from fnnbook.execution import execute, ignoring_interrupts
 from fnnbook.kernel import task_threads
-from fnnbook.layout import logs_dir, write_status
-from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, progress_line, summary
+from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, write_status
+from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
+                             progress_line, summary)
 from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -87,23 +89,50 @@ def run(
     if workers < 1 or (threads is not None and threads < 1):
         raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
     plan = check(spec, profile, tasks, sources=sources)
-    verdict = decide(spec, plan, force=force)
     if threads is None:  # on a cluster given by address, the local core count says nothing: 1
         threads = 1 if scheduler is not None else task_threads(workers)
-    if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
-        outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
-                               echo=echo, progress_bar=progress_bar)
-    else:
-        outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-    report = RunReport(profile, tuple(outcomes[n] for n in plan.order))
-    write_status(spec, report)
+    with holding(spec, profile, plan.order, echo=echo):
+        try:
+            clear_stale(spec, profile, plan.order, plan.run)
+        except OSError as exc:
+            raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
+        verdict = decide(spec, plan, force=force)
+        try:
+            if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
+                outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
+                                       echo=echo, progress_bar=progress_bar)
+            else:
+                outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
+        except Interrupted as stop:
+            with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
+                _finish(spec, plan, stop.outcomes, echo)
+            raise KeyboardInterrupt from None
+        return _finish(spec, plan, outcomes, echo)
+
+
+def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome],
+            echo: Callable[[str], None]) -> RunReport:
+    """Record the outcomes in ``_status.json`` (one clear line if that fails), echo the summary."""
+    report = RunReport(plan.profile, tuple(outcomes[n] for n in plan.order if n in outcomes))
+    with contextlib.suppress(OSError):
+        (spec.output_root / plan.profile / ".staging" / plan.run).rmdir()  # empty by now
+    try:
+        write_status(spec, report)
+    except OSError as exc:
+        echo(f"note: could not record the outcomes in {STATUS_FILE} ({exc.strerror or exc})")
     echo(summary(report))
     return report
 
 
 def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, threads: int,
              echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
-    """Today's path: the tasks one after another in this process."""
+    """Today's path: the tasks one after another in this process.
+
+    Raises
+    ------
+    Interrupted
+        On Ctrl-C, with the outcomes so far (the running task: failed, "interrupted").
+    """
     n = len(plan.order)
     outcomes: dict[str, TaskOutcome] = {}
     for i, name in enumerate(plan.order, 1):
@@ -114,15 +143,12 @@ def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *,
             outcomes[name] = blocked(name, out, up, outcomes)
         else:
             echo(f"[{i}/{n}] {name} ...")
-            log = logs_dir(spec, plan.profile) / f"{name}.log"
             try:
-                seconds, error = execute(spec, plan, name, progress_bar, threads)
-            except BaseException:
-                outcomes[name] = TaskOutcome(name, Status.FAILED, 0.0, out, log, "interrupted")
-                echo(f"[{i}/{n}] {name} ... FAILED (interrupted; see log {log})")
-                echo(summary(RunReport(plan.profile, tuple(outcomes.values()))))
-                raise
-            outcomes[name] = (TaskOutcome(name, Status.FAILED, seconds, out, log, error) if error
-                              else TaskOutcome(name, Status.OK, seconds, out, log))
+                outcomes[name] = execute(spec, plan, name, progress_bar, threads)
+            except KeyboardInterrupt:
+                with ignoring_interrupts():
+                    outcomes[name] = interrupted(name, out, logs_dir(spec, plan.profile) / f"{name}.log")
+                    echo(progress_line(i, n, outcomes[name]))
+                raise Interrupted(outcomes) from None
         echo(progress_line(i, n, outcomes[name]))
     return outcomes

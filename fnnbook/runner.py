@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,6 +54,8 @@ class Plan:
     missing_data : mapping of str to str
         Task -> why it cannot run here (its data files are missing); such a
         task and its dependants are "not run", the rest runs.
+    run : str
+        This run's name: its staging folder ``.staging/<run>/`` is its own.
     """
 
     profile: str
@@ -61,7 +64,13 @@ class Plan:
     parameters: Mapping[str, dict[str, Any]]
     fingerprints: Mapping[str, str]
     missing_data: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    run: str = dataclasses.field(default_factory=lambda: run_name())
 
+
+
+def run_name() -> str:
+    """A name no other run has: this process's id and a random part."""
+    return f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
 
 
 def _known_claims(claims_file: Path) -> set[str] | None:
@@ -127,6 +136,7 @@ def check(
     src = [Path(s) for s in sources] if sources is not None else [Path(fnnlib.__file__).resolve().parent]
     digest = sources_digest(src)
     data = data_digest(spec.data_dir) if spec.data_dir is not None and spec.data_dir.is_dir() else None
+    run = run_name()
     parameters: dict[str, dict[str, Any]] = {}
     fingerprints: dict[str, str] = {}
     missing_data: dict[str, str] = {}
@@ -140,7 +150,7 @@ def check(
                     raise PipelineError(f"task {name!r} declares claim {cid!r}, which is not in "
                                         f"{spec.claims_file.name}")
         params = resolve_parameters(spec, task, profile, declared,
-                                    out_dir=staging_dir(spec, profile, name))
+                                    out_dir=staging_dir(spec, profile, name, run))
         reason = _validate(task, profile, params)
         if reason:
             missing_data[name] = reason
@@ -148,7 +158,7 @@ def check(
         fingerprints[name] = fingerprint(task, params, {u: fingerprints[u] for u in task.upstream}, digest,
                                           data if "data_dir" in params else None)
     return Plan(profile=profile, order=tuple(order), selected=tuple(selected),
-                parameters=parameters, fingerprints=fingerprints, missing_data=missing_data)
+                parameters=parameters, fingerprints=fingerprints, missing_data=missing_data, run=run)
 
 
 
