@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterator, Mapping
 import dask
 import psutil
 from distributed import Client, Future, LocalCluster, wait
+from distributed.security import Security
 from tqdm import tqdm
 
 from fnnbook.execution import execute_task, ignoring_interrupts
@@ -52,10 +53,16 @@ def default_workers() -> int:
 
 @contextlib.contextmanager
 def local_cluster(workers: int) -> Iterator[Client]:
-    """A LocalCluster of ``workers`` single-threaded worker processes, and a client to it."""
+    """A LocalCluster of ``workers`` single-threaded worker processes, and a client to it.
+
+    Closed to other local clients: scheduler, workers and this client speak TLS with a temporary self-signed
+    certificate that only this run holds (``Security.temporary()``), so a ``Client`` from another process
+    cannot submit code to the workers.
+    """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               protocol="tls://", security=Security.temporary(),
                                dashboard_address="127.0.0.1:0",  # any free port
                                worker_dashboard_address=None, memory_limit=0)
         client = Client(cluster)

@@ -223,3 +223,30 @@ def test_a_read_only_output_root_is_one_line_and_exit_2(make_pipeline: MakePipel
     assert main(["run", "--pipeline", str(path), "--profile", "smoke", "--workers", "1", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Read-only file system" in err and "Traceback" not in err
+
+
+_INTRUDER = """
+import sys
+from distributed import Client
+try:
+    with Client(sys.argv[1], timeout="2s") as c:
+        print("ran:", c.submit(sum, [1, 2]).result(timeout=3))
+except Exception as exc:
+    print("refused:", type(exc).__name__)
+"""
+
+
+def test_the_local_cluster_refuses_other_local_clients() -> None:
+    import sys
+
+    from fnnbook.executor import local_cluster
+
+    with local_cluster(1) as client:
+        address = client.scheduler.address
+        assert address.startswith("tls://")
+        port = address.rsplit(":", 1)[1]
+        for tried in (f"tcp://127.0.0.1:{port}", address):
+            done = subprocess.run([sys.executable, "-c", _INTRUDER, tried], capture_output=True, text=True,
+                                  timeout=60, check=False)
+            assert "refused:" in done.stdout and "ran:" not in done.stdout, (tried, done.stdout, done.stderr)
+        assert client.submit(sum, [1, 2]).result() == 3  # the run's own client still works
