@@ -58,12 +58,12 @@ import fnnlib as F
 F.check_notebook_settings("quadrotor_mpc", globals())  # the checks `fnn-pipeline check` runs first
 
 # %% [tags: hide-input]
-import json
 from pathlib import Path
 
 import numpy as np
 
 import fnnlib as F
+from fnnbook.params import upstream_parameters
 from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc.compiled import warm_up
 from fnnlib.mpc.experiment import (CARRYING, FlightTest, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
@@ -80,12 +80,9 @@ up = Path(upstream_dirs["quadrotor_learning"])
 residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
 mlp, _ = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()
-member_files = json.loads((up / "results.json").read_text()).get("metrics", {}).get("member_checkpoints")
-if not member_files:
-    raise FileNotFoundError(f"{up / 'results.json'} lists no member_checkpoints: rerun quadrotor_learning")
-members = [(str(meta["seed"]), net.double()) for net, meta in
-           (F.load_checkpoint(up / fname, expected_kind="AeroResidual") for fname in member_files)]
-kept = [sd for sd, _ in members].index(str(meta_res.get("seed")))  # the network with the lowest validation loss
+members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
+           F.load_seed_checkpoints(up, "residual", expected_kind="AeroResidual", run=upstream_parameters(up))]
+kept = [sd for sd, _ in members].index(meta_res.get("seed"))  # the network with the lowest validation loss
 if u_max_judged not in u_max:
     raise ValueError(f"u_max_judged = {u_max_judged} must be one of u_max = {u_max}")
 

@@ -235,6 +235,7 @@ def _upstream(root: Path) -> Path:
             F.save_checkpoint(up / "residual.pt", net, {"seed": seed})
     F.save_checkpoint(up / "mlp.pt", AeroResidual((4,), "tanh").double(), {"seed": 0})
     (up / "results.json").write_text(json.dumps({"metrics": {"member_checkpoints": names}}))
+    (up / ".fingerprint.json").write_text(json.dumps({"parameters": {"seeds": [0, 1]}}))  # the run record
     return up
 
 
