@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import struct
 import zlib
@@ -13,7 +14,7 @@ import pytest
 import yaml
 
 from fnnbook import PipelineError, PipelineSpec, load_spec
-from fnnbook.book import assemble_book, build_book
+from fnnbook.book import GENERATED, assemble_book, build_book
 from fnnlib.results import claim_result, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
@@ -175,3 +176,46 @@ def test_a_long_text_output_scrolls_and_a_short_one_does_not() -> None:
     _fold(short)
     assert "scroll-output" in long.metadata["tags"]
     assert "scroll-output" not in short.metadata.get("tags", [])
+
+
+@pytest.mark.parametrize(("damage", "said"), [
+    ("delete", "not in this output root"), ("notebook", "executed notebook alpha.ipynb is missing"),
+    ("truncate", "results.json cannot be read"), ("hashed", "results.json is truncated or changed")])
+def test_a_damaged_task_gets_a_page_and_the_good_book_stays(fake_outputs: PipelineSpec, tmp_path: Path,
+                                                            damage: str, said: str) -> None:
+    book = _copy_book(tmp_path)
+    assemble_book(fake_outputs, "paper", book)
+    good = sorted(p.relative_to(book) for p in (book / GENERATED).rglob("*"))
+    out = fake_outputs.output_dir("paper", "alpha")
+    if damage == "delete":
+        shutil.rmtree(out)
+    elif damage == "notebook":
+        (out / "alpha.ipynb").unlink()
+    elif damage == "hashed":  # the run record's hash no longer matches
+        (out / ".fingerprint.json").write_text(json.dumps({"products": {"results.json": "0" * 64}}))
+    else:
+        (out / "results.json").write_text((out / "results.json").read_text()[:40])
+    assemble_book(fake_outputs, "paper", book)
+    page = (book / GENERATED / "alpha" / "alpha.md").read_text()
+    assert "Not run: " in page and "fnn-pipeline run --profile paper alpha" in page
+    assert said.split()[-1] in page
+    assert "not run: " in (book / GENERATED / "scoreboard.md").read_text()
+    assert good and not (book / f"{GENERATED}.new").exists()
+
+
+def test_a_failing_assembly_leaves_the_good_book(fake_outputs: PipelineSpec, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    book = _copy_book(tmp_path)
+    assemble_book(fake_outputs, "paper", book)
+    before = (book / GENERATED / "scoreboard.md").read_text()
+    import fnnbook.book as book_module
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(book_module, "plot_verdicts", broken)
+    with pytest.raises(OSError):
+        assemble_book(fake_outputs, "paper", book)
+    assert (book / GENERATED / "scoreboard.md").read_text() == before
+    assert (book / GENERATED / "alpha" / "alpha.ipynb").is_file()
+    assert not (book / f"{GENERATED}.new").exists()
