@@ -167,7 +167,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         outputs are missing, truncated or unreadable gets a page saying so
         (and how to rerun it); its claims read "not run: <reason>". The new
         ``_generated/`` is built aside and swapped in only when complete, under
-        the output root's locks (no run writes the outputs meanwhile).
+        a reader's share of the outputs' locks (no run writes them meanwhile).
     """
     book = Path(book_dir).resolve()
     for page in _STATIC_PAGES:
@@ -177,7 +177,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         raise PipelineError(f"claims file {spec.claims_file} does not exist")
     claims = read_claims(spec.claims_file)
     writable = os.access(spec.output_root, os.W_OK)  # a read-only root has no writer to keep out
-    with holding(spec, profile, spec.tasks) if writable else contextlib.nullcontext():
+    with holding(spec, profile, (), read=spec.tasks) if writable else contextlib.nullcontext():
         try:
             return _assemble(spec, profile, book, claims)
         finally:

@@ -9,15 +9,17 @@
     _logs/<task>.ipynb      the executed notebook of a failed attempt
     _status.json            how each task of the last run fared (read by the book)
 
-One writer per output: a run holds the lock of every task it runs or reads (its tasks and their upstream
-tasks, taken in name order, so two runs never wait on each other in a circle) from its decisions to its
-summary; the book holds every task's lock while it reads. A second run on the same tasks waits, and says
-which process it waits for; runs of disjoint tasks go side by side.
+One writer per output: a run holds the writer lock of every task it runs and a reader's share of every task
+it only reads (taken in name order, so two runs never wait on each other in a circle) from its decisions to
+its summary; the book holds a reader's share of every task. A second run that would write what another
+writes or reads waits, and says which process it waits for; readers and runs of disjoint tasks go side by
+side. A run marks its staging folder alive with ``.staging/<run>.lock``; an ended run's folder is removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import shutil
@@ -28,13 +30,13 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from filelock import FileLock, Timeout
+from filelock import FileLock
 
 from fnnbook.outcome import RunReport
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write
 
-__all__ = ["STATUS_FILE", "clear_stale", "holding", "logs_dir", "mark_killed", "point_to_final", "read_status",
+__all__ = ["STATUS_FILE", "clear_stale", "holding", "staging_of", "logs_dir", "mark_killed", "point_to_final", "read_status",
            "recover", "staging_dir", "swap", "write_status"]
 
 LOCKS = ".locks"
@@ -64,16 +66,59 @@ def recover(spec: PipelineSpec, profile: str, task: str) -> None:
 
 
 def clear_stale(spec: PipelineSpec, profile: str, tasks: Iterable[str], run: str) -> None:
-    """Remove what killed runs left in staging for ``tasks`` (the caller holds their locks), swaps put back."""
+    """Remove what ended runs (killed ones too) left in staging; put back swaps cut short for ``tasks``.
+
+    A run holds ``.staging/<run>.lock`` while it lives, so a folder whose lock can be taken is an ended run's.
+    Its partial outputs go; an output folder it had set aside mid-swap (``<task>.old``) is put back only for
+    ``tasks``, whose writer locks the caller holds, and kept for the next run that writes it otherwise.
+    """
     staging = spec.output_root / profile / ".staging"
+    tasks = set(tasks)
     for task in tasks:
         recover(spec, profile, task)
-        for left in staging.glob(f"*/{task}"):
-            if left.parent.name != run:
-                shutil.rmtree(left, ignore_errors=True)
-    for folder in staging.glob("*"):
-        with contextlib.suppress(OSError):
-            folder.rmdir()  # only when empty: another run's folder may still hold its tasks
+    for folder in sorted(p for p in staging.glob("*") if p.is_dir() and p.name != run):
+        with _flock(folder.with_name(f"{folder.name}.lock"), fcntl.LOCK_EX | fcntl.LOCK_NB) as ended:
+            if not ended:
+                continue  # a live run's
+            for left in folder.iterdir():
+                if not left.name.endswith(".old"):
+                    shutil.rmtree(left, ignore_errors=True)
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only when empty (a set-aside output waits for its task's writer)
+                folder.with_name(f"{folder.name}.lock").unlink()
+
+
+@contextlib.contextmanager
+def _flock(path: Path, mode: int) -> Iterator[bool]:
+    """flock ``path`` (created if missing) in ``mode``; yields whether it was taken (False: LOCK_NB and busy)."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, mode)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)  # releases the lock
+
+
+@contextlib.contextmanager
+def staging_of(spec: PipelineSpec, profile: str, run: str) -> Iterator[None]:
+    """Mark run ``run`` alive for its lifetime (``.staging/<run>.lock`` held); remove its folder at the end."""
+    staging = spec.output_root / profile / ".staging"
+    try:
+        staging.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PipelineError(f"cannot write to the output root {spec.output_root}: {_why(exc)}") from exc
+    with _flock(staging / f"{run}.lock", fcntl.LOCK_EX):
+        try:
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                (staging / run).rmdir()
+            with contextlib.suppress(OSError):
+                (staging / f"{run}.lock").unlink()
 
 
 def _holder(path: Path) -> str:
@@ -85,9 +130,12 @@ def _holder(path: Path) -> str:
 
 
 @contextlib.contextmanager
-def holding(spec: PipelineSpec, profile: str, tasks: Iterable[str], *,
+def holding(spec: PipelineSpec, profile: str, tasks: Iterable[str], *, read: Iterable[str] = (),
             echo: Callable[[str], None] = print) -> Iterator[None]:
-    """Hold the writer lock of each of ``tasks``' outputs, waiting (and saying for whom) while another has it.
+    """Hold the writer lock of each of ``tasks``' outputs and a reader's share of each of ``read``'s.
+
+    One writer or any number of readers per task output (``flock``: exclusive or shared); the locks are
+    taken in name order. While another run holds one, wait, and say who (``.locks/<task>.holder``).
 
     Raises
     ------
@@ -95,22 +143,21 @@ def holding(spec: PipelineSpec, profile: str, tasks: Iterable[str], *,
         If the output root cannot hold the lock files (read-only, full, no permission).
     """
     folder = spec.output_root / profile / LOCKS
+    modes = {t: fcntl.LOCK_SH for t in read}
+    modes.update({t: fcntl.LOCK_EX for t in tasks})
     with contextlib.ExitStack() as held:
-        for task in sorted(set(tasks)):
-            lock = FileLock(folder / f"{task}.lock")
+        for task in sorted(modes):
             try:
                 folder.mkdir(parents=True, exist_ok=True)
-                try:
-                    lock.acquire(timeout=0)
-                except Timeout:
-                    echo(f"waiting: the outputs of {task} are being written by "
-                         f"{_holder(folder / f'{task}.holder')}")
-                    lock.acquire()
-                held.callback(lock.release)
-                who = {"pid": os.getpid(), "host": socket.gethostname(), "command": " ".join(sys.argv),
-                       "since": time.strftime("%Y-%m-%d %H:%M:%S")}
-                with atomic_write(folder / f"{task}.holder", "w") as fh:
-                    fh.write(json.dumps(who) + "\n")
+                lock = folder / f"{task}.lock"
+                if not held.enter_context(_flock(lock, modes[task] | fcntl.LOCK_NB)):
+                    echo(f"waiting: the outputs of {task} are in use by {_holder(folder / f'{task}.holder')}")
+                    held.enter_context(_flock(lock, modes[task]))
+                if modes[task] == fcntl.LOCK_EX:
+                    who = {"pid": os.getpid(), "host": socket.gethostname(), "command": " ".join(sys.argv),
+                           "since": time.strftime("%Y-%m-%d %H:%M:%S")}
+                    with atomic_write(folder / f"{task}.holder", "w") as fh:
+                        fh.write(json.dumps(who) + "\n")
             except OSError as exc:
                 raise PipelineError(f"cannot write to the output root {spec.output_root}: {_why(exc)}") from exc
         yield

@@ -9,14 +9,13 @@ summary and ``_status.json``.
 
 from __future__ import annotations
 
-import contextlib
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from fnnbook.executor import run_on_dask
 from fnnbook.execution import execute, ignoring_interrupts
 from fnnbook.kernel import task_threads
-from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, write_status
+from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_of, write_status
 from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line, summary)
 from fnnbook.runner import Plan, check, decide
@@ -91,31 +90,42 @@ def run(
     plan = check(spec, profile, tasks, sources=sources)
     if threads is None:  # on a cluster given by address, the local core count says nothing: 1
         threads = 1 if scheduler is not None else task_threads(workers)
-    with holding(spec, profile, plan.order, echo=echo):
-        try:
-            clear_stale(spec, profile, plan.order, plan.run)
-        except OSError as exc:
-            raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
-        verdict = decide(spec, plan, force=force)
-        try:
-            if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
-                outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
-                                       echo=echo, progress_bar=progress_bar)
-            else:
-                outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-        except Interrupted as stop:
-            with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
-                _finish(spec, plan, stop.outcomes, echo)
-            raise KeyboardInterrupt from None
-        return _finish(spec, plan, outcomes, echo)
+    with staging_of(spec, profile, plan.run):
+        verdict = decide(spec, plan, force=force)  # a first look, to know which outputs to lock for writing
+        while True:
+            writes = {n for n, d in verdict.items() if d.action is Action.RUN}
+            with holding(spec, profile, writes, read=plan.order, echo=echo):
+                try:
+                    clear_stale(spec, profile, writes, plan.run)
+                except OSError as exc:
+                    raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
+                verdict = decide(spec, plan, force=force)  # again, now that no other run writes these
+                if {n for n, d in verdict.items() if d.action is Action.RUN} <= writes:
+                    return _execute(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
+                                    echo=echo, progress_bar=progress_bar)
+            # another run changed an output meanwhile: lock what must run now, and look again
+
+
+def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
+             scheduler: str | None, threads: int, echo: Callable[[str], None], progress_bar: bool) -> RunReport:
+    """Run the tasks decided to run (here or on Dask), record and summarise the outcomes."""
+    try:
+        if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
+            outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
+                                   echo=echo, progress_bar=progress_bar)
+        else:
+            outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
+    except Interrupted as stop:
+        with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
+            _finish(spec, plan, stop.outcomes, echo)
+        raise KeyboardInterrupt from None
+    return _finish(spec, plan, outcomes, echo)
 
 
 def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome],
             echo: Callable[[str], None]) -> RunReport:
     """Record the outcomes in ``_status.json`` (one clear line if that fails), echo the summary."""
     report = RunReport(plan.profile, tuple(outcomes[n] for n in plan.order if n in outcomes))
-    with contextlib.suppress(OSError):
-        (spec.output_root / plan.profile / ".staging" / plan.run).rmdir()  # empty by now
     try:
         write_status(spec, report)
     except OSError as exc:

@@ -21,8 +21,7 @@ import fnnlib
 from fnnbook.execution import execute, execute_task
 from fnnbook.fingerprint import data_digest, fingerprint, is_up_to_date, product_files, sources_digest
 from fnnbook.kernel import KERNEL, TASK_THREADS, cpu_count, kill_kernels, task_threads
-from fnnbook.layout import (STATUS_FILE, logs_dir, mark_killed, read_status, recover, staging_dir,
-                            write_status)
+from fnnbook.layout import STATUS_FILE, logs_dir, mark_killed, read_status, staging_dir, write_status
 from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, summary
 from fnnbook.params import FINGERPRINT_FILE, check_task_parameters, read_parameters, resolve_parameters
 from fnnbook.scoreboard import read_claims
@@ -166,8 +165,9 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
     """For each task of the plan, what the run does with it (before any runs): a :class:`Decision`.
 
     A task runs when forced (selected tasks only), when an upstream task
-    runs, or when it is not up to date; a task whose data are missing, or
-    whose upstream task cannot run, does not run.
+    runs, or when it is not up to date (an output folder a cut-short swap
+    set aside counts as missing until its writer puts it back); a task whose
+    data are missing, or whose upstream task cannot run, does not run.
     """
     verdict: dict[str, Decision] = {}
     for name in plan.order:
@@ -178,7 +178,6 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
             o = blocked(name, spec.output_dir(plan.profile, name), up, verdict)
             verdict[name] = Decision(Action.NOT_RUN, o.message, data_missing=o.data_missing)
         else:
-            recover(spec, plan.profile, name)
             stale = ((force and name in plan.selected) or any(verdict[u].action is Action.RUN for u in task.upstream)
                      or not is_up_to_date(spec, plan, name))
             verdict[name] = Decision(Action.RUN if stale else Action.SKIP)

@@ -284,3 +284,15 @@ def test_a_damaged_member_reruns_its_task_and_the_downstream(fault: str, make_pi
 def test_every_member_checkpoint_a_task_reads_is_a_product() -> None:
     spec = load_spec(Path(__file__).resolve().parents[2] / "pipeline.yaml")
     assert "residual_seed*.pt" in spec.tasks["quadrotor_learning"].products
+
+
+def test_readers_of_an_upstream_go_side_by_side(make_pipeline: MakePipeline, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run that only reads `leaf` (up to date) does not wait for another reader of `leaf`."""
+    monkeypatch.setattr("fnnbook.execution.papermill.execute_notebook", _with_members)
+    spec = load_spec(make_pipeline({"leaf": _members_task(), "child": {**child_task(), "products": []}}))
+    assert _quiet(spec, ["leaf"]).ok
+    lines: list[str] = []
+    with holding(spec, "smoke", (), read=["leaf"]):  # e.g. the book, or a run of another dependant
+        report = _quiet(spec, ["child"], echo=lines.append)
+    assert report.ok and [o.status for o in report.outcomes] == ["skipped", "ok"]
+    assert not any("waiting" in line for line in lines)
