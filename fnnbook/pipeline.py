@@ -43,10 +43,13 @@ def run(
     runs (:func:`check`).  A task is skipped when it is up to date
     (:func:`is_up_to_date`: same fingerprint, same upstream outputs, products
     unchanged) unless ``force``, which applies to the selected tasks only.
-    Each task executes in ``<output_root>/<profile>/.staging/<task>/`` and
+    Each task executes in this run's own ``<output_root>/<profile>/.staging/<run>/<task>/`` and
     replaces ``<output_root>/<profile>/<task>/`` only on success; a failed
-    task leaves the previous outputs untouched and its log in ``_logs/``,
-    and its dependants do not run; the other tasks go on.
+    task (a file-system fault included: ``io_error``) leaves the previous
+    outputs untouched and its log in ``_logs/``, and its dependants do not
+    run; the other tasks go on. The run holds the writer lock of each task
+    it runs and a reader's share of the others (:func:`fnnbook.layout.holding`):
+    a second run on the same outputs waits, and says for whom.
 
     Parameters
     ----------
@@ -83,7 +86,8 @@ def run(
     PipelineError
         If the check fails (nothing has run).
     KeyboardInterrupt
-        Re-raised after the running tasks are cancelled and recorded.
+        Re-raised after the running tasks are cancelled and the run is
+        recorded in ``_status.json`` (a second Ctrl-C meanwhile is ignored).
     """
     if workers < 1 or (threads is not None and threads < 1):
         raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
