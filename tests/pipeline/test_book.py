@@ -111,9 +111,11 @@ def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, 
     book = _copy_book(tmp_path)
     toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book).read_text())
     assert toc["root"] == "intro"
-    assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Results"]  # beta: no output
+    assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Neural feedback (Sec. 4)", "Results"]
     assert toc["parts"][0]["chapters"] == [{"file": "_generated/alpha/alpha"}]
-    assert toc["parts"][1]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
+    assert toc["parts"][1]["chapters"] == [{"file": "_generated/beta/beta"}]  # no output: a page that says so
+    assert "fnn-pipeline run --profile paper beta" in (book / "_generated" / "beta" / "beta.md").read_text()
+    assert toc["parts"][2]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
     assert (book / "_generated" / "alpha" / "figures" / "fig4c.png").is_file()
     scoreboard = (book / "_generated" / "scoreboard.md").read_text()
     assert "3 claims, 1 reproduced, 0 partly, 0 not reproduced, 2 not run." in scoreboard
