@@ -14,7 +14,7 @@ from typing import Any
 _HOME = {
     "check_task_parameters": "params", "read_parameters": "params", "resolve_parameters": "params",
     "run": "pipeline",
-    "Plan": "runner", "RunReport": "runner", "TaskOutcome": "runner", "check": "runner", "is_up_to_date": "runner",
+    "Plan": "runner", "RunReport": "outcome", "TaskOutcome": "outcome", "Status": "outcome", "Decision": "outcome", "check": "runner", "is_up_to_date": "runner",
     "Part": "spec", "PipelineError": "spec", "PipelineSpec": "spec", "Task": "spec", "load_spec": "spec",
 }
 
@@ -37,6 +37,8 @@ __all__ = [
     "PipelineSpec",
     "Plan",
     "RunReport",
+    "Decision",
+    "Status",
     "Task",
     "TaskOutcome",
     "check",

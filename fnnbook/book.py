@@ -8,6 +8,7 @@ API reference) and ``<book>/_toc.yml``.  The hand-written pages (``intro.md``,
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -19,9 +20,11 @@ from typing import Any
 import yaml
 
 from fnnbook.apiref import API_PAGE, write_api_page
-from fnnbook.runner import read_status
+from fnnbook.fingerprint import stored
+from fnnbook.layout import holding, read_status
 from fnnbook.scoreboard import plot_verdicts, read_claims, render_scoreboard, score_rows, with_scoreboard_claims
 from fnnbook.spec import PipelineError, PipelineSpec
+from fnnlib.io import atomic_write, file_sha256
 from fnnlib.results import RESULTS_FILENAME, Results, read_results
 
 __all__ = ["GENERATED", "assemble_book", "build_book"]
@@ -102,10 +105,42 @@ def _copy_for_book(src: Path, dst: Path, root: Path) -> None:
     dst.write_text(_relative_paths(nbformat.writes(nb), paths, root), encoding="utf-8")
 
 
-def _not_run_page(title: str, why: str) -> str:
+def _not_run_page(title: str, why: str, rerun: str) -> str:
     return (f"# {title}\n\n:::{{warning}}\nNot run: {why}\n:::\n\n"
             "Its claims are listed as *not run* on the scoreboard. Once the cause is fixed, "
-            "`fnn-pipeline run` runs this task and `fnn-pipeline book` shows its results here.\n")
+            f"`{rerun}` runs this task and `fnn-pipeline book` shows its results here.\n")
+
+
+def _damage(spec: PipelineSpec, profile: str, name: str, status: dict[str, Any]) -> str:
+    """Why a task's outputs cannot be shown ("" when they can): missing, truncated or changed since its run."""
+    out = spec.output_dir(profile, name)
+    if not out.is_dir():
+        said = status.get(name, {})
+        return said.get("message") or "its outputs are missing (it has not run in this output root)"
+    products = stored(spec, profile, name).get("products")  # outputs made by hand carry no run record
+    for product, digest in sorted(products.items() if isinstance(products, dict) else ()):
+        if not (out / product).is_file():
+            return f"its output {product} is missing"
+        if file_sha256(out / product) != digest:
+            return f"its output {product} is truncated or changed since its run"
+    if not (out / f"{name}.ipynb").is_file():
+        return f"its executed notebook {name}.ipynb is missing"
+    if (out / RESULTS_FILENAME).is_file():
+        try:
+            read_results(out / RESULTS_FILENAME)
+        except (OSError, ValueError) as exc:
+            return f"its {RESULTS_FILENAME} cannot be read ({exc})"
+    return ""
+
+
+def _swap_in(new: Path, final: Path) -> None:
+    """Replace ``final`` by ``new`` with renames (the good book stays until the new one is complete)."""
+    old = final.with_name(f"{final.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    if final.exists():
+        os.rename(final, old)
+    os.rename(new, final)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[str], *, api: bool = True) -> Path:
@@ -130,8 +165,11 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     Raises
     ------
     PipelineError
-        If a hand-written page or the claims file is missing, or a task's
-        output lacks its executed notebook.
+        If a hand-written page or the claims file is missing. A task whose
+        outputs are missing, truncated or unreadable gets a page saying so
+        (and how to rerun it); its claims read "not run: <reason>". The new
+        ``_generated/`` is built aside and swapped in only when complete, under
+        a reader's share of the outputs' locks (no run writes them meanwhile).
     """
     book = Path(book_dir).resolve()
     for page in _STATIC_PAGES:
@@ -140,11 +178,19 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     if not spec.claims_file.is_file():
         raise PipelineError(f"claims file {spec.claims_file} does not exist")
     claims = read_claims(spec.claims_file)
+    writable = os.access(spec.output_root, os.W_OK)  # a read-only root has no writer to keep out
+    with holding(spec, profile, (), read=spec.tasks) if writable else contextlib.nullcontext():
+        try:
+            return _assemble(spec, profile, book, claims)
+        finally:
+            shutil.rmtree(book / f"{GENERATED}.new", ignore_errors=True)  # gone once swapped in, or failed
 
+
+def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any]) -> Path:
     generated = book / GENERATED
-    if generated.exists():
-        shutil.rmtree(generated)
-    generated.mkdir(parents=True)
+    aside = book / f"{GENERATED}.new"  # assembled aside, swapped in only when complete
+    shutil.rmtree(aside, ignore_errors=True)
+    aside.mkdir(parents=True)
 
     results: dict[str, Results] = {}
     pages: dict[str, str] = {}
@@ -158,50 +204,46 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
             if name in spec.grids:  # grid points are read by their aggregate step, not shown one by one
                 continue
             out = spec.output_dir(profile, name)
-            executed = out / f"{name}.ipynb"
-            if not out.is_dir():
-                why = status.get(name, {}).get("message")
-                if why and status[name].get("status") == "not run":  # e.g. its data are missing: say so
-                    (generated / name).mkdir()
-                    (generated / name / f"{name}.md").write_text(_not_run_page(spec.tasks[name].title, why),
-                                                                 encoding="utf-8")
-                    pages[name] = f"{name}/{name}.md"
-                    notes[name] = f"not run: {why}"
-                    chapters.append({"file": f"{GENERATED}/{name}/{name}"})
-                continue
-            if not executed.is_file():
-                raise PipelineError(f"task {name!r}: {out} has no executed notebook {executed.name}")
-            target = generated / name
+            target = aside / name
             target.mkdir()
-            _copy_for_book(executed, target / executed.name, spec.root)
+            chapters.append({"file": f"{GENERATED}/{name}/{name}"})
+            why = _damage(spec, profile, name, status)
+            if why:  # a page that says what is missing and how to rerun, never a hole in the book
+                rerun = f"fnn-pipeline run --profile {profile} {name}"
+                (target / f"{name}.md").write_text(_not_run_page(spec.tasks[name].title, why, rerun),
+                                                   encoding="utf-8")
+                pages[name] = f"{name}/{name}.md"
+                notes[name] = f"not run: {why}"
+                continue
+            _copy_for_book(out / f"{name}.ipynb", target / f"{name}.ipynb", spec.root)
             if (out / "figures").is_dir():
                 shutil.copytree(out / "figures", target / "figures")
             if (out / RESULTS_FILENAME).is_file():
                 results[name] = read_results(out / RESULTS_FILENAME)
                 shutil.copy2(out / RESULTS_FILENAME, target / RESULTS_FILENAME)
-            pages[name] = f"{name}/{executed.name}"
+            pages[name] = f"{name}/{name}.ipynb"
             figures[name] = name
-            chapters.append({"file": f"{GENERATED}/{name}/{name}"})
         if chapters:
             parts.append({"caption": part.title, "numbered": True, "chapters": chapters})
 
     declared = {n: t.claims for n, t in spec.tasks.items()}
     results = with_scoreboard_claims(claims, results, profile, declared)  # B2 from the headlines, then B3
     rows = score_rows(claims, results, declared)
-    plot_verdicts(rows, generated / "verdicts.png")
-    (generated / "scoreboard.md").write_text(
+    plot_verdicts(rows, aside / "verdicts.png")
+    (aside / "scoreboard.md").write_text(
         render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes,
                           summary_figure="verdicts.png"),
         encoding="utf-8")
     parts.append({"caption": "Results", "chapters": [{"file": f"{GENERATED}/scoreboard"},
                                                      {"file": "paper_vs_release"}]})
     if api:
-        write_api_page(generated)
+        write_api_page(aside)
         parts.append({"caption": "Reference", "chapters": [{"file": f"{GENERATED}/{API_PAGE}"}]})
     toc = {"format": "jb-book", "root": "intro", "parts": parts}
+    _swap_in(aside, generated)
     path = book / "_toc.yml"
-    path.write_text("# Generated by fnnbook.book.assemble_book; do not edit.\n"
-                    + yaml.safe_dump(toc, sort_keys=False), encoding="utf-8")
+    with atomic_write(path, "w") as fh:
+        fh.write("# Generated by fnnbook.book.assemble_book; do not edit.\n" + yaml.safe_dump(toc, sort_keys=False))
     return path
 
 

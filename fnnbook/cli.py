@@ -27,6 +27,7 @@ from fnnbook.book import assemble_book, build_book
 from fnnbook.data import BOTTLE_SOURCES, fetch_bottle
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
+from fnnbook.outcome import Status
 from fnnbook.runner import check, is_up_to_date, read_status
 from fnnbook.spec import PipelineError, PipelineSpec, load_spec
 from fnnlib.data.bottle import DataError
@@ -148,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             report = run(spec, args.profile, args.tasks or None, force=args.force,
                          progress_bar=not args.no_progress, workers=workers, scheduler=args.scheduler,
                          threads=args.threads, echo=lambda line: print(line, flush=True))
-            return 0 if report.ok else 1
+            return 2 if report.io_error else (0 if report.ok else 1)
         if args.command == "data":
             if spec.data_dir is None:
                 raise PipelineError("the pipeline has no data_dir; pass --data-dir DIR")
@@ -165,7 +166,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
             assemble_book(spec, args.profile, book_dir)
             not_run = {t: s["message"] for t, s in read_status(spec, args.profile).items()
-                       if s.get("status") in ("failed", "not run")}
+                       if s.get("status") in (Status.FAILED, Status.NOT_RUN)}
             for task, why in not_run.items():
                 print(f"note: {task} is shown as not run or from an older run ({why})")
             start = time.perf_counter()
@@ -174,6 +175,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
     except (PipelineError, DataError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the file system's (read-only, full, no permission): one line, not a traceback
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

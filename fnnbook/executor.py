@@ -26,10 +26,15 @@ from collections.abc import Callable, Iterator, Mapping
 import dask
 import psutil
 from distributed import Client, Future, LocalCluster, wait
+from distributed.security import Security
 from tqdm import tqdm
 
-from fnnbook.runner import (Plan, TaskOutcome, logs_dir, staging_dir, cpu_count, execute_task, kill_kernels,
-                            mark_killed)
+from fnnbook.execution import execute_task, ignoring_interrupts
+from fnnbook.kernel import cpu_count, kill_kernels
+from fnnbook.layout import logs_dir, mark_killed, staging_dir
+from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
+                             progress_line)
+from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["TASK_MEMORY", "default_workers", "local_cluster", "run_on_dask"]
@@ -48,10 +53,16 @@ def default_workers() -> int:
 
 @contextlib.contextmanager
 def local_cluster(workers: int) -> Iterator[Client]:
-    """A LocalCluster of ``workers`` single-threaded worker processes, and a client to it."""
+    """A LocalCluster of ``workers`` single-threaded worker processes, and a client to it.
+
+    Closed to other local clients: scheduler, workers and this client speak TLS with a temporary self-signed
+    certificate that only this run holds (``Security.temporary()``), so a ``Client`` from another process
+    cannot submit code to the workers.
+    """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               protocol="tls://", security=Security.temporary(),
                                dashboard_address="127.0.0.1:0",  # any free port
                                worker_dashboard_address=None, memory_limit=0)
         client = Client(cluster)
@@ -62,10 +73,10 @@ def local_cluster(workers: int) -> Iterator[Client]:
             cluster.close()
 
 
-def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, workers: int,
+def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
                 scheduler: str | None, threads: int, echo: Callable[[str], None],
                 progress_bar: bool) -> dict[str, TaskOutcome]:
-    """Run the plan's tasks marked "run" on Dask; return every task's outcome.
+    """Run the plan's tasks decided to run on Dask; return every task's outcome.
 
     Raises
     ------
@@ -90,7 +101,7 @@ def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, w
         return _submit_and_wait(spec, plan, verdict, client, threads, echo, progress_bar)
 
 
-def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], client: Client,
+def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], client: Client,
                      threads: int, echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
     n = len(plan.order)
     index = {name: i for i, name in enumerate(plan.order, 1)}
@@ -99,17 +110,14 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str],
     stamp = f"{os.getpid()}-{time.time_ns()}"
     for name in plan.order:
         out = spec.output_dir(plan.profile, name)
-        if verdict[name] == "skipped":
-            outcomes[name] = TaskOutcome(name, "skipped", 0.0, out)
-        elif verdict[name].startswith("not run"):
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=verdict[name][len("not run: "):])
+        if verdict[name].action is not Action.RUN:
+            outcomes[name] = verdict[name].outcome(name, out)
         else:
             deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
             futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
                                           key=f"{name}-{stamp}", pure=False)
     for name, o in outcomes.items():
-        echo(f"[{index[name]}/{n}] {name} ... " + ("skipped (up to date)" if o.status == "skipped"
-                                                  else f"not run: {o.message}"))
+        echo(progress_line(index[name], n, o))
     bar = tqdm(total=n, initial=len(outcomes), desc="tasks", unit="task", disable=not progress_bar,
                dynamic_ncols=True)
     pending = {f.key: name for name, f in futures.items()}
@@ -124,20 +132,25 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str],
             for fut in done:
                 name = pending.pop(fut.key)
                 outcomes[name] = _outcome(spec, plan, name, fut, outcomes)
-                o = outcomes[name]
-                line = {"ok": f"ok ({o.seconds:.1f} s)", "failed": f"FAILED (see log {o.log})\n    {o.message}",
-                        "not run": f"not run ({o.message})"}[o.status]
                 with tqdm.external_write_mode():
-                    echo(f"[{index[name]}/{n}] {name} ... {line}")
+                    echo(progress_line(index[name], n, outcomes[name]))
                 bar.update(1)
             # a worker's processing set also holds tasks queued behind the one it runs: at most one runs per thread
             queued = {k for keys in client.processing().values() for k in keys} & set(pending)
-            counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "failed", "skipped")}
-            postfix = dict(done=counts["ok"], running=min(len(queued), slots), failed=counts["failed"],
-                           skipped=counts["skipped"])
+            counts = {s: sum(o.status == s for o in outcomes.values()) for s in Status}
+            postfix = dict(done=counts[Status.OK], running=min(len(queued), slots), failed=counts[Status.FAILED],
+                           skipped=counts[Status.SKIPPED])
             if postfix != shown:  # redraw on change only: a log file gets one line per change, not one a second
                 bar.set_postfix(postfix, refresh=True)
                 shown = postfix
+    except KeyboardInterrupt:
+        with ignoring_interrupts():  # a second Ctrl-C: the cancel still runs to its end
+            bar.close()
+            _cancel(client, futures, spec, plan, pending)
+            logs = logs_dir(spec, plan.profile)
+            stopped = {n: interrupted(n, spec.output_dir(plan.profile, n), logs / f"{n}.log")
+                       for n in pending.values()}
+        raise Interrupted({**outcomes, **stopped}) from None
     except BaseException:
         bar.close()
         _cancel(client, futures, spec, plan, pending)
@@ -152,16 +165,15 @@ def _outcome(spec: PipelineSpec, plan: Plan, name: str, fut: Future,
     log = logs_dir(spec, plan.profile) / f"{name}.log"
     if fut.status == "finished":
         return fut.result()
-    blocked = [u for u in spec.tasks[name].upstream if known.get(u) and known[u].status in ("failed", "not run")]
-    if blocked:
-        return TaskOutcome(name, "not run", 0.0, out, message=f"upstream {blocked[0]} failed")
+    if (up := blocked_by(spec.tasks[name], known)) is not None:
+        return blocked(name, out, up, known)
     exc = fut.exception()
     why = f"{type(exc).__name__}: {exc}".splitlines()[0]
     if type(exc).__name__ == "KilledWorker":
         why = "the worker process running it died (twice, with the retry); outputs untouched"
     mark_killed(log, why)
-    shutil.rmtree(staging_dir(spec, plan.profile, name), ignore_errors=True)
-    return TaskOutcome(name, "failed", 0.0, out, log, why)
+    shutil.rmtree(staging_dir(spec, plan.profile, name, plan.run), ignore_errors=True)
+    return TaskOutcome(name, Status.FAILED, 0.0, out, log, why)
 
 
 def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, plan: Plan,

@@ -13,8 +13,12 @@ import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from fnnbook.executor import run_on_dask
-from fnnbook.runner import (Plan, RunReport, TaskOutcome, execute, logs_dir, check, decide, summary, task_threads,
-                            write_status)
+from fnnbook.execution import execute, ignoring_interrupts
+from fnnbook.kernel import task_threads
+from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_of, write_status
+from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
+                             progress_line, summary)
+from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["run", "run_here"]
@@ -39,10 +43,13 @@ def run(
     runs (:func:`check`).  A task is skipped when it is up to date
     (:func:`is_up_to_date`: same fingerprint, same upstream outputs, products
     unchanged) unless ``force``, which applies to the selected tasks only.
-    Each task executes in ``<output_root>/<profile>/.staging/<task>/`` and
+    Each task executes in this run's own ``<output_root>/<profile>/.staging/<run>/<task>/`` and
     replaces ``<output_root>/<profile>/<task>/`` only on success; a failed
-    task leaves the previous outputs untouched and its log in ``_logs/``,
-    and its dependants do not run; the other tasks go on.
+    task (a file-system fault included: ``io_error``) leaves the previous
+    outputs untouched and its log in ``_logs/``, and its dependants do not
+    run; the other tasks go on. The run holds the writer lock of each task
+    it runs and a reader's share of the others (:func:`fnnbook.layout.holding`):
+    a second run on the same outputs waits, and says for whom.
 
     Parameters
     ----------
@@ -79,64 +86,83 @@ def run(
     PipelineError
         If the check fails (nothing has run).
     KeyboardInterrupt
-        Re-raised after the running tasks are cancelled and recorded.
+        Re-raised after the running tasks are cancelled and the run is
+        recorded in ``_status.json`` (a second Ctrl-C meanwhile is ignored).
     """
     if workers < 1 or (threads is not None and threads < 1):
         raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
     plan = check(spec, profile, tasks, sources=sources)
-    verdict = decide(spec, plan, force=force)
     if threads is None:  # on a cluster given by address, the local core count says nothing: 1
         threads = 1 if scheduler is not None else task_threads(workers)
-    if (scheduler is not None or workers > 1) and any(v == "run" for v in verdict.values()):
-        outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
-                               echo=echo, progress_bar=progress_bar)
-    else:
-        outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-    report = RunReport(profile, tuple(outcomes[n] for n in plan.order))
-    write_status(spec, report)
+    with staging_of(spec, profile, plan.run):
+        verdict = decide(spec, plan, force=force)  # a first look, to know which outputs to lock for writing
+        while True:
+            writes = {n for n, d in verdict.items() if d.action is Action.RUN}
+            with holding(spec, profile, writes, read=plan.order, echo=echo):
+                try:
+                    clear_stale(spec, profile, writes, plan.run)
+                except OSError as exc:
+                    raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
+                verdict = decide(spec, plan, force=force)  # again, now that no other run writes these
+                if {n for n, d in verdict.items() if d.action is Action.RUN} <= writes:
+                    return _execute(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
+                                    echo=echo, progress_bar=progress_bar)
+            # another run changed an output meanwhile: lock what must run now, and look again
+
+
+def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
+             scheduler: str | None, threads: int, echo: Callable[[str], None], progress_bar: bool) -> RunReport:
+    """Run the tasks decided to run (here or on Dask), record and summarise the outcomes."""
+    try:
+        if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
+            outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
+                                   echo=echo, progress_bar=progress_bar)
+        else:
+            outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
+    except Interrupted as stop:
+        with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
+            _finish(spec, plan, stop.outcomes, echo)
+        raise KeyboardInterrupt from None
+    return _finish(spec, plan, outcomes, echo)
+
+
+def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome],
+            echo: Callable[[str], None]) -> RunReport:
+    """Record the outcomes in ``_status.json`` (one clear line if that fails), echo the summary."""
+    report = RunReport(plan.profile, tuple(outcomes[n] for n in plan.order if n in outcomes))
+    try:
+        write_status(spec, report)
+    except OSError as exc:
+        echo(f"note: could not record the outcomes in {STATUS_FILE} ({exc.strerror or exc})")
     echo(summary(report))
     return report
 
 
-def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, str], *, threads: int,
-              echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
-    """Today's path: the tasks one after another in this process."""
+def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, threads: int,
+             echo: Callable[[str], None], progress_bar: bool) -> dict[str, TaskOutcome]:
+    """Today's path: the tasks one after another in this process.
+
+    Raises
+    ------
+    Interrupted
+        On Ctrl-C, with the outcomes so far (the running task: failed, "interrupted").
+    """
     n = len(plan.order)
     outcomes: dict[str, TaskOutcome] = {}
-    bad: set[str] = set()
     for i, name in enumerate(plan.order, 1):
-        task = spec.tasks[name]
         out = spec.output_dir(plan.profile, name)
-        prefix = f"[{i}/{n}] {name} ..."
-        blocked = [u for u in task.upstream if u in bad]
-        if verdict[name].startswith("not run"):
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=verdict[name][len("not run: "):])
-            echo(f"{prefix} {verdict[name]}")
-            continue
-        if blocked:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "not run", 0.0, out, message=f"upstream {blocked[0]} failed")
-            echo(f"{prefix} not run (upstream {blocked[0]} failed)")
-            continue
-        if verdict[name] == "skipped":
-            outcomes[name] = TaskOutcome(name, "skipped", 0.0, out)
-            echo(f"{prefix} skipped (up to date)")
-            continue
-        echo(prefix)
-        log = logs_dir(spec, plan.profile) / f"{name}.log"
-        try:
-            seconds, error = execute(spec, plan, name, progress_bar, threads)
-        except BaseException:
-            outcomes[name] = TaskOutcome(name, "failed", 0.0, out, log, "interrupted")
-            echo(f"{prefix} FAILED (interrupted; see log {log})")
-            echo(summary(RunReport(plan.profile, tuple(outcomes.values()))))
-            raise
-        if error:
-            bad.add(name)
-            outcomes[name] = TaskOutcome(name, "failed", seconds, out, log, error)
-            echo(f"{prefix} FAILED (see log {log})\n    {error}")
+        if verdict[name].action is not Action.RUN:
+            outcomes[name] = verdict[name].outcome(name, out)
+        elif (up := blocked_by(spec.tasks[name], outcomes)) is not None:
+            outcomes[name] = blocked(name, out, up, outcomes)
         else:
-            outcomes[name] = TaskOutcome(name, "ok", seconds, out, log)
-            echo(f"{prefix} ok ({seconds:.1f} s)")
+            echo(f"[{i}/{n}] {name} ...")
+            try:
+                outcomes[name] = execute(spec, plan, name, progress_bar, threads)
+            except KeyboardInterrupt:
+                with ignoring_interrupts():
+                    outcomes[name] = interrupted(name, out, logs_dir(spec, plan.profile) / f"{name}.log")
+                    echo(progress_line(i, n, outcomes[name]))
+                raise Interrupted(outcomes) from None
+        echo(progress_line(i, n, outcomes[name]))
     return outcomes

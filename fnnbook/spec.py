@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import itertools
+import hashlib
 import json
 import os
 import re
@@ -271,10 +272,20 @@ def _load_task(root: Path, name: str, data: Any) -> Task:
     )
 
 
+def _point_value(value: Any) -> str:
+    """A grid value as part of a folder name, one-to-one: a non-negative integer as its digits, anything else
+    as a readable prefix and a short hash of its canonical JSON (``-1.0`` and ``1.0``, ``[9, -1]`` and
+    ``[9, 1]``, ``"a b"`` and ``"a_b"`` all differ)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+        return str(value)
+    canonical = json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
+    readable = re.sub(r"[^A-Za-z0-9.]+", "_", canonical).strip("_.")[:24].strip("_.") or "x"
+    return f"{readable}_{hashlib.sha256(canonical.encode()).hexdigest()[:8]}"
+
+
 def _point_name(task: str, point: Mapping[str, Any]) -> str:
-    """``spiral__seed_3``: the task and each grid value, made safe for a folder name."""
-    parts = [f"{k}_{re.sub(r'[^A-Za-z0-9.]+', '_', str(v)).strip('_') or 'x'}" for k, v in point.items()]
-    return "__".join([task, *parts])
+    """``spiral__seed_3``, ``spiral__x0_9.0_1.0_<hash>``: the task and each grid value (:func:`_point_value`)."""
+    return "__".join([task, *(f"{k}_{_point_value(v)}" for k, v in point.items())])
 
 
 def _expand_grid(task: Task, grid: Any) -> list[Task]:
@@ -289,9 +300,13 @@ def _expand_grid(task: Task, grid: Any) -> list[Task]:
         if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
             raise PipelineError(f"{where}.{name} lists a value twice: {values!r}")
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    return [dataclasses.replace(task, name=_point_name(task.name, point),
+    names = [_point_name(task.name, point) for point in points]
+    if len(set(names)) != len(names):  # cannot happen short of a hash collision: refused, not dropped
+        raise PipelineError(f"{where}: two points get the same name: "
+                            f"{sorted(n for n in names if names.count(n) > 1)[0]}")
+    return [dataclasses.replace(task, name=name,
                                 parameters={prof: {**values, **point} for prof, values in task.parameters.items()})
-            for point in points]
+            for name, point in zip(names, points)]
 
 
 def _topological(tasks: Mapping[str, Task]) -> list[str]:

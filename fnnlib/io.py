@@ -19,6 +19,7 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "wb", *, encoding: st
 
     The temporary file lives in the same folder (so the rename is atomic)
     and is named ``.<name>-<random>.tmp``; it is removed if the body raises.
+    The file gets the mode ``open()`` would give it (0666 less the umask).
 
     Parameters
     ----------
@@ -40,12 +41,20 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "wb", *, encoding: st
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's 0600 -> what open() would give: readable like any file
         with os.fdopen(fd, mode, encoding=(encoding or "utf-8") if mode == "w" else None) as fh:
             yield fh
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:

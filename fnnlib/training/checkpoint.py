@@ -121,12 +121,19 @@ def seed_checkpoint_name(seed: int, stem: str = "neural_ode") -> str:
 
 
 def load_seed_checkpoints(directory: str | os.PathLike[str], stem: str = "neural_ode",
-                          expected_kind: str | None = "NeuralODE") -> list[tuple[int, nn.Module, dict[str, Any]]]:
+                          expected_kind: str | None = "NeuralODE", *,
+                          run: Mapping[str, Any] | None = None) -> list[tuple[int, nn.Module, dict[str, Any]]]:
     """Load every seed's checkpoint ``{stem}_seed{s}.pt`` in ``directory``; return ``[(seed, model, meta), ...]``.
 
-    The list is in ascending seed order. Each file is read by :func:`load_checkpoint` (checksum, kind), its
-    ``meta["seed"]`` must name the seed of its file name, and when the files record the run's ``meta["seeds"]``
-    they must agree and name exactly the files present (so a missing or stale seed file is refused).
+    The one loader of an ensemble's members; a seed is an ``int``. The list is in ascending seed order (in the
+    order of ``run["seeds"]`` when given). Each file is read by :func:`load_checkpoint` (checksum, kind), its
+    ``meta["seed"]`` must name the seed of its file name (so the members hold distinct seeds), and when the
+    files record the run's ``meta["seeds"]`` they must agree and name exactly the files present (so a missing
+    or stale seed file is refused).
+
+    ``run``: the parameters the training task ran with (its run record, e.g. ``upstream_parameters``). Its
+    ``seeds`` must be exactly the files present, and each value a member's meta records too (``epochs``,
+    ``lr``, ...: its recipe) must be the run's, so a file swapped in from another run is refused by name.
 
     Raises
     ------
@@ -161,4 +168,22 @@ def load_seed_checkpoints(directory: str | os.PathLike[str], stem: str = "neural
     if run_seeds is not None and sorted(run_seeds) != sorted(found):
         raise CheckpointError(f"{directory} holds the seeds {sorted(found)} but the run trained {run_seeds}: "
                               f"a seed's checkpoint is missing or stale")
+    return loaded if run is None else _as_run(loaded, run, found)
+
+
+def _as_run(loaded: list[tuple[int, nn.Module, dict[str, Any]]], run: Mapping[str, Any],
+            found: Mapping[int, Path]) -> list[tuple[int, nn.Module, dict[str, Any]]]:
+    """The members checked against the run's record (seeds, recipe), in the run's seed order."""
+    seeds = run.get("seeds")
+    if seeds is not None:
+        if len(set(seeds)) != len(seeds) or sorted(seeds) != sorted(found):
+            raise CheckpointError(f"the run trained the seeds {list(seeds)}, {next(iter(found.values())).parent} "
+                                  f"holds {sorted(found)}: a member's checkpoint is missing or stale")
+        order = {s: i for i, s in enumerate(seeds)}
+        loaded = sorted(loaded, key=lambda m: order[m[0]])
+    for seed, _, meta in loaded:
+        for key, value in meta.items():
+            if key not in ("seed", "seeds") and run.get(key) is not None and run[key] != value:
+                raise CheckpointError(f"checkpoint {found[seed]} was trained with {key} = {value!r}, "
+                                      f"the run record says {run[key]!r}: it comes from another run")
     return loaded

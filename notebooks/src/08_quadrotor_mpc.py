@@ -65,6 +65,7 @@ import numpy as np
 
 import fnnlib as F
 import fnnlib.mpc as M
+from fnnbook.params import upstream_parameters
 from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc import randomized_vehicles, validation_references
 from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
@@ -75,12 +76,9 @@ up = Path(upstream_dirs["quadrotor_learning"])
 residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
 mlp, _ = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()
-member_files = F.read_results(up / F.RESULTS_FILENAME).metrics.get("member_checkpoints")
-if not member_files:
-    raise FileNotFoundError(f"{up / F.RESULTS_FILENAME} lists no member_checkpoints: rerun quadrotor_learning")
-members = [(str(meta["seed"]), net.double()) for net, meta in
-           (F.load_checkpoint(up / fname, expected_kind="AeroResidual") for fname in member_files)]
-kept = [sd for sd, _ in members].index(str(meta_res.get("seed")))  # the network with the lowest validation loss
+members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
+           F.load_seed_checkpoints(up, "residual", expected_kind="AeroResidual", run=upstream_parameters(up))]
+kept = [sd for sd, _ in members].index(meta_res.get("seed"))  # the network with the lowest validation loss
 if u_max_judged not in u_max:
     raise ValueError(f"u_max_judged = {u_max_judged} must be one of u_max = {u_max}")
 

@@ -150,9 +150,9 @@ q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the fli
 quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
 q_rmse = q_mpc["paired_mean_axis_rmse_m"]
 costs = list(q_rmse)
-member_files = F.read_results(up["quadrotor_learning"] / F.RESULTS_FILENAME).metrics["member_checkpoints"]
-members = [(int(meta["seed"]), net.double()) for net, meta in
-           (F.load_checkpoint(up["quadrotor_learning"] / f, expected_kind="AeroResidual") for f in member_files)]
+members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
+           F.load_seed_checkpoints(up["quadrotor_learning"], "residual", expected_kind="AeroResidual",
+                                   run=upstream_parameters(up["quadrotor_learning"]))]
 flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
 
 

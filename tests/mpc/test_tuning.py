@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import json
 import math
 from pathlib import Path
 
@@ -235,6 +236,7 @@ def _upstream(root: Path) -> Path:
             F.save_checkpoint(up / "residual.pt", net, {"seed": seed})
     F.save_checkpoint(up / "mlp.pt", AeroResidual((4,), "tanh").double(), {"seed": 0})
     F.write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names})
+    (up / ".fingerprint.json").write_text(json.dumps({"parameters": {"seeds": [0, 1]}}))  # the run record
     return up
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import struct
 import zlib
@@ -13,7 +14,7 @@ import pytest
 import yaml
 
 from fnnbook import PipelineError, PipelineSpec, load_spec
-from fnnbook.book import assemble_book, build_book
+from fnnbook.book import GENERATED, assemble_book, build_book
 from fnnlib.results import ClaimResult, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
@@ -110,9 +111,11 @@ def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, 
     book = _copy_book(tmp_path)
     toc = yaml.safe_load(assemble_book(fake_outputs, "paper", book, api=False).read_text())  # API: tests/reader
     assert toc["root"] == "intro"
-    assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Results"]  # beta: no output
+    assert [p["caption"] for p in toc["parts"]] == ["Linear feedback (Sec. 3)", "Neural feedback (Sec. 4)", "Results"]
     assert toc["parts"][0]["chapters"] == [{"file": "_generated/alpha/alpha"}]
-    assert toc["parts"][1]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
+    assert toc["parts"][1]["chapters"] == [{"file": "_generated/beta/beta"}]  # no output: a page that says so
+    assert "fnn-pipeline run --profile paper beta" in (book / "_generated" / "beta" / "beta.md").read_text()
+    assert toc["parts"][2]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
     assert (book / "_generated" / "alpha" / "figures" / "fig4c.png").is_file()
     scoreboard = (book / "_generated" / "scoreboard.md").read_text()
     assert "3 claims, 1 reproduced, 0 partly, 0 not reproduced, 2 not run." in scoreboard
@@ -175,3 +178,46 @@ def test_a_long_text_output_scrolls_and_a_short_one_does_not() -> None:
     _fold(short)
     assert "scroll-output" in long.metadata["tags"]
     assert "scroll-output" not in short.metadata.get("tags", [])
+
+
+@pytest.mark.parametrize(("damage", "said"), [
+    ("delete", "not in this output root"), ("notebook", "executed notebook alpha.ipynb is missing"),
+    ("truncate", "results.json cannot be read"), ("hashed", "results.json is truncated or changed")])
+def test_a_damaged_task_gets_a_page_and_the_good_book_stays(fake_outputs: PipelineSpec, tmp_path: Path,
+                                                            damage: str, said: str) -> None:
+    book = _copy_book(tmp_path)
+    assemble_book(fake_outputs, "paper", book)
+    good = sorted(p.relative_to(book) for p in (book / GENERATED).rglob("*"))
+    out = fake_outputs.output_dir("paper", "alpha")
+    if damage == "delete":
+        shutil.rmtree(out)
+    elif damage == "notebook":
+        (out / "alpha.ipynb").unlink()
+    elif damage == "hashed":  # the run record's hash no longer matches
+        (out / ".fingerprint.json").write_text(json.dumps({"products": {"results.json": "0" * 64}}))
+    else:
+        (out / "results.json").write_text((out / "results.json").read_text()[:40])
+    assemble_book(fake_outputs, "paper", book)
+    page = (book / GENERATED / "alpha" / "alpha.md").read_text()
+    assert "Not run: " in page and "fnn-pipeline run --profile paper alpha" in page
+    assert said.split()[-1] in page
+    assert "not run: " in (book / GENERATED / "scoreboard.md").read_text()
+    assert good and not (book / f"{GENERATED}.new").exists()
+
+
+def test_a_failing_assembly_leaves_the_good_book(fake_outputs: PipelineSpec, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    book = _copy_book(tmp_path)
+    assemble_book(fake_outputs, "paper", book)
+    before = (book / GENERATED / "scoreboard.md").read_text()
+    import fnnbook.book as book_module
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(book_module, "plot_verdicts", broken)
+    with pytest.raises(OSError):
+        assemble_book(fake_outputs, "paper", book)
+    assert (book / GENERATED / "scoreboard.md").read_text() == before
+    assert (book / GENERATED / "alpha" / "alpha.ipynb").is_file()
+    assert not (book / f"{GENERATED}.new").exists()

@@ -179,7 +179,7 @@ def test_resolved_parameters_inject_paths(make_pipeline: MakePipeline, tmp_path:
     assert plan.order == ("leaf", "child")
     params = plan.parameters["child"]
     assert params["profile"] == "smoke"
-    assert params["out_dir"] == str(tmp_path / "outputs" / "smoke" / ".staging" / "child")
+    assert params["out_dir"] == str(tmp_path / "outputs" / "smoke" / ".staging" / plan.run / "child")
     assert params["upstream_dirs"] == {"leaf": str(tmp_path / "outputs" / "smoke" / "leaf")}
     assert params["data_dir"] == str(tmp_path / "data")
     assert "data_dir" not in plan.parameters["leaf"]  # leaf does not declare it

@@ -152,7 +152,8 @@ def test_interrupted_swap_is_recovered(make_pipeline: MakePipeline) -> None:
     spec = load_spec(make_pipeline())
     assert _run(spec)[0].ok
     out = spec.output_dir("smoke", "leaf")
-    aside = spec.output_root / "smoke" / ".staging" / "leaf.old"
+    aside = spec.output_root / "smoke" / ".staging" / "1234-deadbeef" / "leaf.old"  # a killed run's
+    aside.parent.mkdir(parents=True)
     out.rename(aside)  # as if the process died between the two renames
     report, _ = _run(spec)
     assert report.outcome("leaf").status == "skipped"
