@@ -25,7 +25,7 @@ from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.gains import GainError, spectral_radius
 from fnnlib.feedback.gaps import measure_fn, start_state, step_layer
 from fnnlib.feedback.layer import eval_field, shift_inputs
-from fnnlib.feedback.measurement import check_measurements, check_output_matrix
+from fnnlib.feedback.measurement import DetectabilityError, check_detectable, check_measurements, check_output_matrix
 from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
@@ -72,13 +72,10 @@ def check_output_gain(L: Tensor, C: Tensor, Ts: float, *, A: Tensor | None = Non
     if A.shape != (n, n):
         raise ValueError(f"Jacobian A must have shape ({n}, {n}), got {tuple(A.shape)}")
     Ad = eye + Ts * A
-    for lam in torch.linalg.eigvals(Ad):
-        if abs(complex(lam)) >= 1:  # PBH: [lam I - Ad; C] must have full column rank
-            pbh = torch.cat([lam * eye.to(torch.complex128) - Ad.to(torch.complex128), C.to(torch.complex128)])
-            if int(torch.linalg.matrix_rank(pbh)) < n:
-                raise GainError(f"(I + Ts A, C) is not detectable: the mode with eigenvalue {complex(lam):.4g} "
-                                "(|z| >= 1) is not seen by the measurements, so no gain L can make its error decay; "
-                                "measure more states")
+    try:
+        check_detectable(Ad, C, labels=[f"x{i}" for i in range(n)], what="(I + Ts A, C)")
+    except DetectabilityError as err:
+        raise GainError(str(err)) from None
     rho = spectral_radius(Ad - Ts * L @ C)
     if rho >= 1 and not allow_unstable:
         raise GainError(f"rho(I + Ts (A - L C)) = {rho:.4g} >= 1 with Ts = {Ts}: the observer error does not decay; "

@@ -174,3 +174,33 @@ def output_matrix_at(meas: Measurements, x: Tensor) -> Tensor:
     if meas.h is None:
         return meas.C if meas.C is not None else torch.eye(x.shape[-1], dtype=torch.float64)
     return output_jacobian(meas.h, x.reshape(1, -1))[0].double()
+
+
+class DetectabilityError(ValueError):
+    """A measurement layout that leaves a mode with :math:`|\\lambda| \\ge 1` unseen: no gain makes its error decay."""
+
+
+def check_detectable(Ad: Tensor, C: Tensor, *, labels: list[str] | None = None, what: str = "(Ad, C)",
+                     tol: float = 1e-9) -> None:
+    r"""PBH test of a discrete pair: every eigenvalue :math:`\lambda` of ``Ad`` (m, m) with :math:`|\lambda| \ge 1`
+    must have :math:`[\lambda I - A_d;\; C]` of full column rank. Raises :class:`DetectabilityError` naming
+    the eigenvalue and the unseen mode (its eigenvector, by the ``labels`` of the state components)."""
+    Ad = torch.as_tensor(Ad, dtype=torch.float64)
+    C = torch.as_tensor(C, dtype=torch.float64)
+    m = Ad.shape[0]
+    eye = torch.eye(m, dtype=torch.complex128)
+    labels = labels or [f"z{i}" for i in range(m)]
+    for lam in torch.linalg.eigvals(Ad):
+        if abs(complex(lam)) < 1 - tol:
+            continue
+        pbh = torch.cat([lam * eye - Ad.to(torch.complex128), C.to(torch.complex128)])
+        _, S, Vh = torch.linalg.svd(pbh)
+        if float(S[-1]) > 1e-9 * max(1.0, float(S[0])):
+            continue
+        v = Vh[-1].conj()
+        v = v / v[int(v.abs().argmax())]
+        mode = " + ".join(f"{complex(c).real:.3g}*{labels[i]}" for i, c in enumerate(v.tolist()) if abs(c) > 1e-6)
+        raise DetectabilityError(
+            f"{what} is not detectable: the mode with eigenvalue {complex(lam):.4g} (|z| >= 1), direction "
+            f"{mode}, is not seen by the measurements (PBH: [lambda I - A; C] v = 0), so no gain can make its "
+            "error decay; measure more outputs or model fewer disturbances")
