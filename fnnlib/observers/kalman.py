@@ -98,7 +98,7 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
 
 
 class _KalmanBase(AugmentedObserver):
-    """Shared set-up of the Kalman filters: the measurement ``C``, the disturbance layout ``E``, Q, R, P0,
+    r"""Shared set-up of the Kalman filters: the measurement ``C``, the disturbance layout ``E``, Q, R, P0,
     the detectability check and the filterpy filter.
 
     ``disturbance`` ``E`` (n, q) (or a list of the q states it acts on): :math:`\dot x = f(x, u) + E d`,
@@ -310,7 +310,7 @@ class ExtendedKalmanObserver(_KalmanBase):
     takes_gaps = True
 
     def _step(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None = None):
-        """The prediction :math:`\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,)."""
+        r"""The prediction :math:`\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,)."""
         n, Ts = self.n, self.Ts
         x, d = z[:n, 0], z[n:, 0]
         with torch.enable_grad():  # J by one batched backward pass: row i of f(X), X = n copies of x
