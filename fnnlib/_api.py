@@ -94,6 +94,18 @@ from fnnlib.training import (
     train_neural_ode,
 )
 
+# A real plant: measurements y = C x (or h(x)), inputs, gaps, the UKF, tuning recipes.
+from fnnlib.feedback import (
+    DEFAULT_TUNE_RECIPE,
+    DetectabilityError,
+    TuneRecipe,
+    check_detectable,
+    check_measurements,
+    model_jacobian,
+    output_jacobian,
+)
+from fnnlib.observers import UnscentedKalmanObserver
+
 __version__ = "0.1.0"
 
 __all__ = [
@@ -116,4 +128,8 @@ __all__ = [
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
+]
+__all__ += [  # a real plant
+    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
+    "check_measurements", "model_jacobian", "output_jacobian",
 ]

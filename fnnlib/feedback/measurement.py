@@ -138,35 +138,48 @@ def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None
     return Measurements(y, m, u, Cm, h, y.shape[-1])
 
 
-def _batched_jacobian(fn: Callable[[Tensor], Tensor], x: Tensor) -> Tensor:
-    """Jacobians of ``fn`` (batch, n) -> (batch, q) at every row of ``x`` (..., n): (..., q, n), one vmap'd jacrev."""
+def _batched_jacobian(fn: Callable[[Tensor], Tensor], x: Tensor, q: int) -> Tensor:
+    """Jacobians of ``fn`` (batch, n) -> (batch, q) at every row of ``x`` (..., n): (..., q, n).
+
+    One forward and one backward pass: each row is repeated q times, copy i's output i is summed, and the
+    gradient of that sum is row i of the Jacobian (the rows of a (batch, n) field are independent).
+    """
     lead, n = x.shape[:-1], x.shape[-1]
-    flat = x.reshape(-1, n)
-    J = torch.func.vmap(torch.func.jacrev(lambda xi: fn(xi[None])[0]))(flat)
-    return J.reshape(*lead, J.shape[-2], n)
+    flat = x.detach().reshape(-1, n)
+    with torch.enable_grad():
+        X = flat[:, None, :].expand(flat.shape[0], q, n).reshape(-1, n).clone().requires_grad_(True)
+        out = fn(X)
+        if out.shape != (X.shape[0], q):
+            raise ValueError(f"the function returned shape {tuple(out.shape)} for input {tuple(X.shape)}; "
+                             f"expected ({X.shape[0]}, {q})")
+        (J,) = torch.autograd.grad(out.reshape(-1, q, q).diagonal(dim1=1, dim2=2).sum(), X)
+    return J.reshape(*lead, q, n)
 
 
 def model_jacobian(f, x: Tensor, u: Tensor | None = None, *, t: float = 0.0) -> Tensor:
     r"""The model's Jacobian :math:`A = \partial f/\partial x` at the states ``x`` (..., n): shape (..., n, n).
 
     ``f(t, x)`` or, with inputs ``u`` (..., m), ``f(t, x, u)``; one batched autograd call
-    (``torch.func.jacrev`` under ``vmap``). E.g. ``A = model_jacobian(f, x_op)`` at an operating point, for
+    (:func:`_batched_jacobian`). E.g. ``A = model_jacobian(f, x_op)`` at an operating point, for
     the detectability and stability checks of :class:`~fnnlib.feedback.measured.MeasuredFeedback`.
     """
     if not isinstance(x, Tensor) or not x.is_floating_point() or x.ndim < 1:
         raise TypeError(f"x must be a floating-point tensor of shape (..., n), got {type(x).__name__}")
     check_model_dtype(f, x[None])
+    n = x.shape[-1]
     if u is None:
-        return _batched_jacobian(lambda xs: f(t, xs), x)
+        return _batched_jacobian(lambda xs: f(t, xs), x, n)
     u = torch.as_tensor(u, dtype=x.dtype).expand(*x.shape[:-1], -1)
-    lead, n, m = x.shape[:-1], x.shape[-1], u.shape[-1]
-    J = torch.func.vmap(torch.func.jacrev(lambda xi, ui: f(t, xi[None], ui[None])[0]))(x.reshape(-1, n), u.reshape(-1, m))
-    return J.reshape(*lead, n, n)
+    m = u.shape[-1]
+    U = u.reshape(-1, 1, m).expand(-1, n, m).reshape(-1, m)
+    return _batched_jacobian(lambda xs: f(t, xs, U), x, n)
 
 
 def output_jacobian(h: OutputMap, x: Tensor) -> Tensor:
     """The Jacobian of a measurement function ``h`` at the states ``x`` (..., n): shape (..., p, n)."""
-    return _batched_jacobian(h, x)
+    with torch.no_grad():
+        p = h(x.reshape(-1, x.shape[-1])[:1]).shape[-1]
+    return _batched_jacobian(h, x, p)
 
 
 def output_matrix_at(meas: Measurements, x: Tensor) -> Tensor:
