@@ -31,6 +31,7 @@ from torch.nn import functional as TF
 from fnnlib._validation import check_positive
 from fnnlib.feedback.cascade import _checked, _measured, run_cascade
 from fnnlib.feedback.gaps import gap_cascade
+from fnnlib.feedback.measured import check_output_gain
 from fnnlib.feedback.layer import check_inputs, check_model_dtype
 from fnnlib.feedback.types import VectorField
 
@@ -125,6 +126,38 @@ def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: Cascade
                        rows=rows)
 
 
+class OutputGains(nn.Module):
+    r"""An output-feedback gain :math:`L` (n, p) and the decay rate :math:`\beta` for measurements ``y = C x``,
+    trainable: ``L`` free (start from a stabilising one, e.g. :func:`~fnnlib.place_observer_gain`),
+    :math:`\beta = \mathrm{softplus}(b)`. :func:`tune_gains` checks the result with
+    :func:`~fnnlib.feedback.measured.check_output_gain`."""
+
+    full = True
+
+    def __init__(self, L0: Tensor, beta0: float):
+        super().__init__()
+        L0 = torch.as_tensor(L0, dtype=torch.float64)
+        if L0.ndim != 2 or not bool(torch.isfinite(L0).all()):
+            raise ValueError(f"with C the initial gain L0 must be a finite (n, p) matrix, got shape {tuple(L0.shape)}")
+        beta0 = float(beta0)
+        if not (beta0 > 0 and math.isfinite(beta0)):
+            raise ValueError(f"initial decay rate beta0 must be finite and > 0 (softplus), got {beta0!r}")
+        self.n = L0.shape[0]
+        self.raw_L = nn.Parameter(L0.clone())
+        self.raw_beta = nn.Parameter(torch.tensor(_inverse_softplus(beta0), dtype=torch.float64))
+
+    def L(self) -> Tensor:
+        """The output gain (n, p), float64."""
+        return self.raw_L
+
+    beta = CascadeGains.beta
+    values = CascadeGains.values
+
+    def L_stack(self, N: int, dtype: torch.dtype) -> list[Tensor]:
+        r"""Eq. (11): :math:`L_i = L e^{-\beta i}`, ``i = 0 .. N-1``, in ``dtype``."""
+        return [(self.L() * torch.exp(-self.beta() * i)).to(dtype) for i in range(int(N))]
+
+
 @dataclass(frozen=True)
 class TuneRecipe:
     """The settings of :func:`tune_gains` in one checked, immutable object.
@@ -145,9 +178,9 @@ class TuneRecipe:
     train_model: bool = False
 
     def __post_init__(self):
-        L0 = self.L0 if isinstance(self.L0, (int, float)) else tuple(float(v) for v in self.L0)
+        L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
         object.__setattr__(self, "L0", L0)
-        vals = [L0] if isinstance(L0, (int, float)) else list(L0)
+        vals = [L0] if isinstance(L0, (int, float)) else list(torch.tensor(L0, dtype=torch.float64).abs().reshape(-1).tolist())
         if not vals or not all(math.isfinite(v) and v > 0 for v in vals):
             raise ValueError(f"TuneRecipe.L0 must be > 0 and finite (a scalar or one per state), got {self.L0!r}")
         if not (math.isfinite(float(self.beta0)) and float(self.beta0) > 0):
@@ -190,7 +223,8 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
                beta0: float | None = None, iterations: int | None = None, lr: float | None = None,
                u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
                train_model: bool | None = None, recipe: TuneRecipe | None = None,
-               objective: Objective | None = None, mask: Tensor | None = None) -> TunedGains:
+               objective: Objective | None = None, mask: Tensor | None = None, C: Tensor | None = None,
+               A: Tensor | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
 
     Gradient descent (Adam, full batch) on the N-step prediction error of the cascade,
@@ -226,19 +260,32 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
     mask : Tensor of bool, shape (..., T) or (..., T, n), optional
         Missing samples (a NaN in ``y`` means the same): the cascade runs open loop through them
         (:mod:`fnnlib.feedback.gaps`) and the error is scored on present targets only.
+    C : Tensor (p, n), optional
+        Partial measurements ``y = C x`` (``y`` (..., T, p)): ``L0`` is then an output gain (n, p) (a
+        stabilising start, e.g. placed), tuned freely (:class:`OutputGains`) on the N-step error of the
+        predicted outputs, and checked at the end with the model Jacobian ``A`` (raises if unstable).
+    A : Tensor (n, n), optional
+        The model's Jacobian for that check (:func:`~fnnlib.feedback.measurement.model_jacobian`).
     """
     recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
                      train_model=train_model)
     if objective is not None and not callable(objective):
         raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
-    meas, Ts, N = _measured(f, y, Ts, N, None, u=u, mask=mask)
-    x = meas.y
-    if x.shape[-2] <= N:
-        raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
     L0, beta0, iterations, lr = recipe.L0, recipe.beta0, recipe.iterations, recipe.lr
     full, L_max, train_model = recipe.full, recipe.L_max, recipe.train_model
     L0 = L0 if isinstance(L0, (int, float)) else torch.tensor(L0, dtype=torch.float64)
-    gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
+    n = None if C is None else (L0.shape[0] if isinstance(L0, Tensor) and L0.ndim == 2 else None)
+    if C is not None and n is None:
+        raise ValueError("with C give L0 as an (n, p) output gain (e.g. fnnlib.place_observer_gain)")
+    meas, Ts, N = _measured(f, y, Ts, N, n, C=C, u=u, mask=mask)
+    x = meas.y
+    if x.shape[-2] <= N:
+        raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
+    if C is None:
+        gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
+    else:
+        check_output_gain(L0, meas.C, Ts, A=A)  # a stabilising start
+        gains = OutputGains(L0, beta0)
     params = list(gains.parameters())
     if train_model:
         if not isinstance(f, nn.Module):
@@ -261,6 +308,9 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
         for p in frozen:
             p.requires_grad_(True)
     result.seconds = time.perf_counter() - start
+    if C is not None:
+        with torch.no_grad():
+            check_output_gain(gains.L(), meas.C, Ts, A=A)  # still stabilising after the descent
     vals = gains.values()
     result.L, result.beta = vals["L"], vals["beta"]
     return result
@@ -279,7 +329,7 @@ def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
     if missing:
         raise TypeError(f"tune_gains needs {missing} (or recipe=TuneRecipe(...), e.g. DEFAULT_TUNE_RECIPE)")
     L0 = given.pop("L0")
-    L0 = float(L0) if torch.as_tensor(L0).ndim == 0 else tuple(torch.as_tensor(L0, dtype=torch.float64).tolist())
+    L0 = float(L0) if torch.as_tensor(L0).ndim == 0 else _as_tuple(L0)
     return TuneRecipe(L0=L0, **given)
 
 
@@ -291,10 +341,19 @@ def _loss(f: VectorField, meas, Ts: float, N: int, gains: CascadeGains, objectiv
         if not isinstance(loss, Tensor) or loss.numel() != 1 or not loss.requires_grad:
             raise ValueError("the objective must return a scalar tensor differentiable in the gains")
         return loss.reshape(())
-    if meas.mask is None:
+    n = gains.n
+    if meas.mask is None and meas.C is None:
         # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
         return prediction_loss(cascade_forward(f, x, Ts, N, gains, u=meas.u, rows=x.shape[-2] - N), x, N)
-    z = gap_cascade(f, meas, gains.L_stack(N, x.dtype), Ts, x.shape[-1], diagonal=not gains.full)
-    present = meas.mask[..., N:, :].to(x.dtype)  # a target N samples later that was measured
-    err = (z[..., : x.shape[-2] - N, :] - x[..., N:, :]).pow(2) * present
+    z = gap_cascade(f, meas, gains.L_stack(N, x.dtype), Ts, n, diagonal=not gains.full)
+    if meas.C is not None:
+        z = z @ meas.C.to(x.dtype).T  # the predicted outputs
+    present = (torch.ones_like(x) if meas.mask is None else meas.mask.to(x.dtype))[..., N:, :]
+    err = (z[..., : x.shape[-2] - N, :] - x[..., N:, :]).pow(2) * present  # targets N samples later, measured
     return err.sum() / present.sum().clamp_min(1.0) * x.shape[-1]
+
+
+def _as_tuple(v) -> tuple:
+    """A vector or matrix setting as nested tuples of floats (hashable, for the frozen recipe)."""
+    t = torch.as_tensor(v, dtype=torch.float64)
+    return tuple(t.tolist()) if t.ndim == 1 else tuple(tuple(r) for r in t.tolist())
