@@ -124,3 +124,16 @@ def test_tune_gains_through_gaps_and_with_a_recipe_and_an_objective():
         F.TuneRecipe(L0=-1.0)
     with pytest.raises(TypeError, match="needs \\['iterations', 'lr'\\]"):
         F.tune_gains(PLANT, y, TS, 5, u=u, L0=2.0, beta0=0.1)
+
+
+def test_tune_gains_with_C_tunes_an_output_gain_and_checks_it():
+    x, u = _data()
+    y = x @ C.T + 0.01 * torch.randn(T, 1, generator=torch.Generator().manual_seed(2), dtype=F64)
+    y[10:20] = float("nan")
+    tuned = F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=A, L0=_gain(), beta0=0.05, iterations=3, lr=0.1)
+    assert torch.tensor(tuned.L).shape == (2, 1) and tuned.loss[-1] < tuned.loss[0]
+    with pytest.raises(ValueError, match=r"with C give L0 as an \(n, p\) output gain"):
+        F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=A, L0=1.0, beta0=0.05, iterations=1, lr=0.1)
+    with pytest.raises(F.GainError, match="not detectable"):  # a Jacobian whose mode the position does not see
+        F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64),
+                     L0=_gain(), beta0=0.05, iterations=1, lr=0.1)
