@@ -93,6 +93,18 @@ from fnnlib.training import (
     train_neural_ode,
 )
 
+# A real plant: measurements y = C x (or h(x)), inputs, gaps, the UKF, tuning recipes.
+from fnnlib.feedback import (
+    DEFAULT_TUNE_RECIPE,
+    DetectabilityError,
+    TuneRecipe,
+    check_detectable,
+    check_measurements,
+    model_jacobian,
+    output_jacobian,
+)
+from fnnlib.observers import UnscentedKalmanObserver
+
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
     "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
@@ -133,4 +145,9 @@ __all__ += [
     "ReleaseError", "UnsafePickleError", "load_release_bottle_ode", "load_release_losses", "load_release_mlp",
     "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module",
     "release_spiral",
+]
+
+__all__ += [  # a real plant
+    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
+    "check_measurements", "model_jacobian", "output_jacobian",
 ]

@@ -92,6 +92,11 @@ def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
     if not 1 <= N < T or pred.shape[-2] != T:
         raise ValueError(f"need 1 <= N < T and predictions of length T; got N={N}, T={T}, "
                          f"prediction length {pred.shape[-2]}")
+    for name, v in (("truth", truth[..., N:, :]), ("pred", pred[..., : T - N, :])):
+        if not bool(torch.isfinite(v).all()):
+            idx = tuple(int(i) for i in (~torch.isfinite(v)).nonzero()[0])
+            raise ValueError(f"{name} holds a NaN or infinite value among the scored samples (first at index {idx} "
+                             "of the scored part); score only samples that were measured")
     return torch.linalg.vector_norm(pred[..., : T - N, :] - truth[..., N:, :], dim=-1)
 
 

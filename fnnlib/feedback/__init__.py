@@ -6,6 +6,9 @@
 * :mod:`~fnnlib.feedback.layer`: Eqs. (7)-(8) along a sequence, one gain or a batch of gains.
 * :mod:`~fnnlib.feedback.cascade`: the N-layer cascade (Sec. 3.3), one gain or a sweep.
 * :mod:`~fnnlib.feedback.measured`: partial measurements ``y = C x``, the gain L (n x p) and its checks.
+* :mod:`~fnnlib.feedback.measurement`: the one measurement model (``C`` or ``h(x)``, inputs, gaps) and its check,
+  the model Jacobian, the PBH detectability test.
+* :mod:`~fnnlib.feedback.gaps`: Eqs. (7)-(8) and the cascade through missing samples and with ``C``.
 * :mod:`~fnnlib.feedback.tuning`: the differentiable cascade and ``tune_gains`` (L and beta learned, B1).
 * :mod:`~fnnlib.feedback.rollout`: the open-loop neural ODE (Eq. (2)) it is compared to.
 """
@@ -25,11 +28,28 @@ from fnnlib.feedback.gains import (
 )
 from fnnlib.feedback.layer import eval_field, feedback_layer, observe_gains
 from fnnlib.feedback.measured import MeasuredFeedback, check_output_gain
+from fnnlib.feedback.measurement import (
+    DetectabilityError,
+    Measurements,
+    check_detectable,
+    check_measurements,
+    model_jacobian,
+    output_jacobian,
+)
 from fnnlib.feedback.rollout import rollout_predict
-from fnnlib.feedback.tuning import CascadeGains, TunedGains, cascade_forward, prediction_loss, tune_gains
+from fnnlib.feedback.tuning import (
+    DEFAULT_TUNE_RECIPE,
+    CascadeGains,
+    TunedGains,
+    TuneRecipe,
+    cascade_forward,
+    prediction_loss,
+    tune_gains,
+)
 from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
-__all__ = ["MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
+__all__ = ["DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
+           "check_measurements", "model_jacobian", "output_jacobian", "MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
            "noise_amplification", "prediction_loss", "tune_gains", "Estimate", "Feedback", "GainError", "VectorField", "cascade_predict", "cascade_predict_loop",
            "cascade_sweep", "check_N", "check_beta", "check_betas", "check_gain", "decay_factors", "decayed_gains", "eval_field",
            "feedback_layer", "gain_batch", "gain_compact", "gain_matrix", "observe_gains", "rollout_predict",

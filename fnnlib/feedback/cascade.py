@@ -19,7 +19,10 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N, decay_factors, decayed_gains
 from fnnlib.feedback.gains import check_gain, gain_batch, gain_compact
+from fnnlib.feedback.gaps import gap_cascade, start_state
 from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains, shift_inputs
+from fnnlib.feedback.measured import check_output_gain
+from fnnlib.feedback.measurement import Measurements, check_measurements, output_matrix_at
 from fnnlib.feedback.types import VectorField
 
 
@@ -66,9 +69,36 @@ def _checked(x: Tensor, Ts: float, N: int) -> tuple[Tensor, float, int]:
     return x, Ts, N
 
 
+def _measured(f: VectorField, x: Tensor, Ts: float, N: int, n: int | None, *, C=None, u: Tensor | None = None,
+              mask: Tensor | None = None) -> tuple[Measurements, float, int]:
+    """The checks of a cascade on measurements that may have gaps (NaN or ``mask``), inputs and a ``C``: before any work."""
+    N = check_N(N)
+    Ts = check_positive(Ts, name="Ts")
+    if isinstance(x, Tensor) and x.ndim >= 2 and (x.shape[-2] == 0 or x.shape[-1] == 0):
+        raise ValueError(f"x is an empty trajectory (shape {tuple(x.shape)}); give at least one sample of a "
+                         "state with at least one component")
+    n = n if n is not None else (x.shape[-1] if isinstance(x, Tensor) else 0)
+    return check_measurements(x, n, C=C, u=u, mask=mask, f=f, name="x" if C is None else "y"), Ts, N
+
+
+def _state_dim(x: Tensor, C, L, f: VectorField, x0: Tensor | None) -> int | None:
+    """The state dimension n: the measurements' own without ``C``, else from ``L`` (n, p), ``f.n``, ``C`` or ``x0``."""
+    if C is None:
+        return x.shape[-1] if isinstance(x, Tensor) else None
+    L = torch.as_tensor(L)
+    if L.ndim == 2:
+        return int(L.shape[0])
+    if getattr(f, "n", None) is not None:
+        return int(f.n)
+    if isinstance(C, Tensor) or not callable(C):
+        return int(torch.as_tensor(C).shape[-1])
+    return int(torch.as_tensor(x0).shape[-1])
+
+
 @torch.no_grad()
 def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
-                    *, return_all: bool = False, allow_unstable: bool = False, u: Tensor | None = None) -> Tensor:
+                    *, return_all: bool = False, allow_unstable: bool = False, u: Tensor | None = None,
+                    C=None, mask: Tensor | None = None, x0: Tensor | None = None, A: Tensor | None = None) -> Tensor:
     r"""N-step prediction by the cascaded feedback network (Sec. 3.3, Eq. (11)), from every start time.
 
     With ``L = 0`` this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
@@ -92,6 +122,17 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Ten
     u : Tensor, shape (..., T, m), optional
         Inputs of a controlled model ``f(t, x, u)``, one row per sample
         (the input held over the step from that sample).
+    C : Tensor (p, n) or callable ``h(x)``, optional
+        Partial measurements ``y = C x``: ``x`` is then ``y`` (..., T, p), ``L`` an output gain (n, p)
+        (checked by :func:`~fnnlib.feedback.measured.check_output_gain`, with the Jacobian ``A`` when given),
+        and every layer evaluates the field at its estimate (:mod:`fnnlib.feedback.gaps`).
+    mask : Tensor of bool, shape (..., T) or (..., T, p), optional
+        ``False`` where no sample was taken (a NaN in ``x`` means the same): the layers move open loop
+        through the gap (:mod:`fnnlib.feedback.gaps`).
+    x0 : Tensor (n,), optional
+        First estimate with ``C`` (default: the least-squares state of the first sample).
+    A : Tensor (n, n), optional
+        The model's Jacobian (:func:`~fnnlib.feedback.measurement.model_jacobian`) for the checks with ``C``.
 
     Returns
     -------
@@ -99,16 +140,24 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Ten
         Shape (..., T, n): row k predicts the state at ``t_{k+N}``; with
         ``return_all`` shape (N+1, ..., T, n), depth 0 being ``x`` itself.
     """
-    x, Ts, N = _checked(x, Ts, N)
-    n = x.shape[-1]
-    L = check_gain(L, n, Ts, allow_unstable=allow_unstable, N=N, beta=beta)  # warns on strong noise amplification
-    L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
-    return run_cascade(f, x, L_stack, Ts, return_all=return_all, u=u)
+    n = _state_dim(x, C, L, f, x0)
+    meas, Ts, N = _measured(f, x, Ts, N, n, C=C, u=u, mask=mask)
+    if C is None:
+        L = check_gain(L, n, Ts, allow_unstable=allow_unstable, N=N, beta=beta)  # warns on strong noise amplification
+        L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
+        if meas.mask is None:  # no gap: the paper's cascade, one scan per layer
+            return run_cascade(f, x, L_stack, Ts, return_all=return_all, u=u)
+    else:
+        C_lin = output_matrix_at(meas, start_state(meas, n, x0)[(0,) * (meas.y.ndim - 2)])
+        L, _ = check_output_gain(L, C_lin, Ts, A=A, allow_unstable=allow_unstable)
+        L_stack = [L_i.to(x.dtype) for L_i in decayed_gains(L, N, beta)]
+    return gap_cascade(f, meas, L_stack, Ts, n, x0=x0, return_all=return_all)
 
 
 @torch.no_grad()
 def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Sequence[float] | Tensor,
-                  beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False) -> Tensor:
+                  beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False,
+                  u: Tensor | None = None, mask: Tensor | None = None) -> Tensor:
     r"""The N-step cascade for a batch of (base gain, decay rate) pairs in one pass.
 
     Batch element ``g`` runs :func:`cascade_predict` with gain ``L_g`` and
@@ -130,13 +179,17 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Seque
         Scalar or diagonal base gains.
     beta : float or Tensor (G,)
         Decay rates of Eq. (11).
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model, as :func:`cascade_predict` takes them.
+    mask : Tensor of bool, shape (..., T) or (..., T, n), optional
+        Missing samples (or NaN in ``x``), as :func:`cascade_predict` takes them.
 
     Returns
     -------
     Tensor, shape (G, ..., T, n)
         Row ``k`` predicts the state at ``t_{k+N}``.
     """
-    x, Ts, N = _checked(x, Ts, N)
+    meas, Ts, N = _measured(f, x, Ts, N, None, u=u, mask=mask)
     n = x.shape[-1]
     L = gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)  # (G, n) base gains
     decay = decay_factors(beta, N)  # (B, N)
@@ -146,7 +199,10 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Seque
     G = max(G, B)
     L = L.expand(G, n)
     L_stack = [lead_gains(L * decay[:, i].to(x.dtype)[:, None], x.ndim + 1) for i in range(N)]  # Eq. (11)
-    return run_cascade(f, x.expand(G, *x.shape), L_stack, Ts, diagonal=True)
+    if meas.mask is None:
+        return run_cascade(f, x.expand(G, *x.shape), L_stack, Ts, diagonal=True, u=u)
+    meas = meas._replace(y=meas.y.expand(G, *x.shape), mask=meas.mask.expand(G, *x.shape))
+    return gap_cascade(f, meas, L_stack, Ts, n, diagonal=True)
 
 
 @torch.no_grad()

@@ -20,10 +20,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from fnnlib._validation import as_trajectory, check_positive
+from fnnlib._validation import check_positive
 from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.gains import GainError, spectral_radius
+from fnnlib.feedback.gaps import measure_fn, start_state, step_layer
 from fnnlib.feedback.layer import eval_field, shift_inputs
+from fnnlib.feedback.measurement import DetectabilityError, check_detectable, check_measurements, check_output_matrix
 from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
@@ -43,7 +45,8 @@ def check_output_gain(L: Tensor, C: Tensor, Ts: float, *, A: Tensor | None = Non
     (shapes are always checked).
     """
     Ts = check_positive(Ts, name="Ts")
-    C = torch.as_tensor(C, dtype=F64)
+    L_shape = tuple(torch.as_tensor(L).shape)
+    C = check_output_matrix(C, L_shape[0]) if len(L_shape) == 2 else torch.as_tensor(C, dtype=F64)
     if C.ndim != 2:
         raise ValueError(f"C must be a (p, n) matrix, got shape {tuple(C.shape)}")
     p, n = C.shape
@@ -69,13 +72,10 @@ def check_output_gain(L: Tensor, C: Tensor, Ts: float, *, A: Tensor | None = Non
     if A.shape != (n, n):
         raise ValueError(f"Jacobian A must have shape ({n}, {n}), got {tuple(A.shape)}")
     Ad = eye + Ts * A
-    for lam in torch.linalg.eigvals(Ad):
-        if abs(complex(lam)) >= 1:  # PBH: [lam I - Ad; C] must have full column rank
-            pbh = torch.cat([lam * eye.to(torch.complex128) - Ad.to(torch.complex128), C.to(torch.complex128)])
-            if int(torch.linalg.matrix_rank(pbh)) < n:
-                raise GainError(f"(I + Ts A, C) is not detectable: the mode with eigenvalue {complex(lam):.4g} "
-                                "(|z| >= 1) is not seen by the measurements, so no gain L can make its error decay; "
-                                "measure more states")
+    try:
+        check_detectable(Ad, C, labels=[f"x{i}" for i in range(n)], what="(I + Ts A, C)")
+    except DetectabilityError as err:
+        raise GainError(str(err)) from None
     rho = spectral_radius(Ad - Ts * L @ C)
     if rho >= 1 and not allow_unstable:
         raise GainError(f"rho(I + Ts (A - L C)) = {rho:.4g} >= 1 with Ts = {Ts}: the observer error does not decay; "
@@ -109,27 +109,35 @@ class MeasuredFeedback:
         self.L, self.C = check_output_gain(L, C, self.Ts, A=A, allow_unstable=allow_unstable)
         self.p, self.n = self.C.shape
 
-    def observe(self, y: Tensor, u: Tensor | None = None, *, x0: Tensor | None = None) -> Estimate:
+    def _measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None):
+        """The one check of ``y``, ``u`` and ``mask`` (:func:`~fnnlib.feedback.measurement.check_measurements`)."""
+        return check_measurements(y, self.n, C=self.C, u=u, mask=mask, f=self.f)
+
+    def observe(self, y: Tensor, u: Tensor | None = None, *, x0: Tensor | None = None,
+                mask: Tensor | None = None) -> Estimate:
         r"""``x_hat``, ``f_hat`` (..., T, n) along measurements ``y`` (..., T, p); a loop over time.
 
-        :math:`\hat x_0` = ``x0`` or, by default, the least-squares state :math:`C^+ y_0`.
+        :math:`\hat x_0` = ``x0`` or, by default, the least-squares state :math:`C^+ y_0`. A NaN in ``y``
+        or a ``False`` in ``mask`` ((..., T) or (..., T, p)) is a missing sample: no correction there
+        (:mod:`fnnlib.feedback.gaps`).
         """
-        y = as_trajectory(y, self.p, name="y")
-        L, C = self.L.to(y.dtype), self.C.to(y.dtype)
-        x_hat = torch.linalg.pinv(C) @ y[..., 0, :, None] if x0 is None else torch.as_tensor(x0, dtype=y.dtype)[..., None]
-        x_hat = x_hat[..., 0].expand(*y.shape[:-2], self.n)
-        x_hats, f_hats = [], []
-        for k in range(y.shape[-2]):
-            uk = None if u is None else u[..., k:k + 1, :]
-            f_hat = eval_field(self.f, x_hat[..., None, :], uk)[..., 0, :] + (y[..., k, :] - x_hat @ C.T) @ L.T  # Eq. (7)
-            x_hats.append(x_hat)
-            f_hats.append(f_hat)
-            x_hat = x_hat + self.Ts * f_hat  # x_hat += Ts * f_hat   (Eq. 8)
-        return Estimate(torch.stack(x_hats, -2), torch.stack(f_hats, -2))
+        meas = self._measurements(y, u, mask)
+        return self._observe(meas, x0)
 
-    def predict(self, y: Tensor, N: int, u: Tensor | None = None, *, x0: Tensor | None = None) -> Tensor:
+    def _observe(self, meas, x0: Tensor | None) -> Estimate:
+        L = self.L.to(meas.y.dtype)
+        start = start_state(meas, self.n, x0)
+        est, _ = step_layer(self.f, meas.y, L, self.Ts, start, mask=meas.mask, u=meas.u,
+                            measure=measure_fn(meas, meas.y.dtype))
+        return est
+
+    @torch.no_grad()
+    def predict(self, y: Tensor, N: int, u: Tensor | None = None, *, x0: Tensor | None = None,
+                mask: Tensor | None = None) -> Tensor:
         """N-step predictions of the state (..., T, n) from every sample: Euler rollouts of the model from ``x_hat``."""
-        z = self.observe(y, u, x0=x0).x_hat
-        for j in range(check_N(N)):
-            z = z + self.Ts * eval_field(self.f, z, shift_inputs(u, j))  # x_{j+1} = x_j + Ts f(x_j, u_j)
+        N = check_N(N)
+        meas = self._measurements(y, u, mask)
+        z = self._observe(meas, x0).x_hat
+        for j in range(N):
+            z = z + self.Ts * eval_field(self.f, z, shift_inputs(meas.u, j))  # x_{j+1} = x_j + Ts f(x_j, u_j)
         return z

@@ -8,12 +8,15 @@ from torchdiffeq import odeint
 
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N
+from fnnlib.feedback.layer import shift_inputs
+from fnnlib.feedback.measurement import check_measurements
 from fnnlib.feedback.types import VectorField
 
 
 @torch.no_grad()
 def rollout_predict(f: VectorField, x: Tensor, Ts: float, N: int, *, method: str = "euler",
-                    return_all: bool = False, rtol: float = 1e-7, atol: float = 1e-9) -> Tensor:
+                    return_all: bool = False, rtol: float = 1e-7, atol: float = 1e-9,
+                    u: Tensor | None = None) -> Tensor:
     """N-step open-loop neural-ODE prediction (Eq. (2)) from every sample of ``x``.
 
     Parameters
@@ -23,6 +26,9 @@ def rollout_predict(f: VectorField, x: Tensor, Ts: float, N: int, *, method: str
     method : str
         torchdiffeq solver; ``"euler"`` steps at ``Ts`` (the discretisation
         the cascade uses), adaptive solvers integrate accurately.
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model ``f(t, x, u)``: step ``j`` from start ``k`` holds ``u_{k+j}``
+        (the last one held), integrated one sample interval at a time.
 
     Returns
     -------
@@ -32,10 +38,31 @@ def rollout_predict(f: VectorField, x: Tensor, Ts: float, N: int, *, method: str
     N = check_N(N)
     Ts = check_positive(Ts, name="Ts")
     x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
+    meas = check_measurements(x, x.shape[-1], u=u, f=f, missing=False, name="x")
     n = x.shape[-1]
+    if u is not None:
+        return _rollout_inputs(f, x, meas.u, Ts, N, method, return_all, rtol, atol)
     grid = torch.arange(N + 1, dtype=x.dtype) * Ts
     fixed = method in {"euler", "midpoint", "rk4"}
     kwargs = {"options": {"step_size": Ts}} if fixed else {"rtol": rtol, "atol": atol}
     sol = odeint(f, x.reshape(-1, n), grid, method=method, **kwargs)  # (N+1, M, n)
     sol = sol.reshape(N + 1, *x.shape)
     return sol if return_all else sol[-1]
+
+
+def _rollout_inputs(f: VectorField, x: Tensor, u: Tensor, Ts: float, N: int, method: str, return_all: bool,
+                    rtol: float, atol: float) -> Tensor:
+    """:func:`rollout_predict` of a controlled model: one ``odeint`` per sample interval, the input held (zero-order hold)."""
+    fixed = method in {"euler", "midpoint", "rk4"}
+    kwargs = {"options": {"step_size": Ts}} if fixed else {"rtol": rtol, "atol": atol}
+    n, m = x.shape[-1], u.shape[-1]
+    lead = torch.broadcast_shapes(x.shape[:-1], u.shape[:-1])
+    z = x.expand(*lead, n).reshape(-1, n)
+    grid = torch.tensor([0.0, Ts], dtype=x.dtype)
+    sol = [z]
+    for j in range(N):
+        uj = shift_inputs(u, j).expand(*lead, m).reshape(-1, m)
+        z = odeint(lambda t, s, uj=uj: f(t, s, uj), z, grid, method=method, **kwargs)[-1]
+        sol.append(z)
+    out = torch.stack(sol).reshape(N + 1, *lead, n)
+    return out if return_all else out[-1]

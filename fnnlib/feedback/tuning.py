@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import torch
@@ -28,7 +29,9 @@ from torch import Tensor, nn
 from torch.nn import functional as TF
 
 from fnnlib._validation import check_positive
-from fnnlib.feedback.cascade import _checked, run_cascade
+from fnnlib.feedback.cascade import _checked, _measured, run_cascade
+from fnnlib.feedback.gaps import gap_cascade
+from fnnlib.feedback.measured import check_output_gain
 from fnnlib.feedback.layer import check_inputs, check_model_dtype
 from fnnlib.feedback.types import VectorField
 
@@ -123,6 +126,83 @@ def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: Cascade
                        rows=rows)
 
 
+class OutputGains(nn.Module):
+    r"""An output-feedback gain :math:`L` (n, p) and the decay rate :math:`\beta` for measurements ``y = C x``,
+    trainable: ``L`` free (start from a stabilising one, e.g. :func:`~fnnlib.place_observer_gain`),
+    :math:`\beta = \mathrm{softplus}(b)`. :func:`tune_gains` checks the result with
+    :func:`~fnnlib.feedback.measured.check_output_gain`."""
+
+    full = True
+
+    def __init__(self, L0: Tensor, beta0: float):
+        super().__init__()
+        L0 = torch.as_tensor(L0, dtype=torch.float64)
+        if L0.ndim != 2 or not bool(torch.isfinite(L0).all()):
+            raise ValueError(f"with C the initial gain L0 must be a finite (n, p) matrix, got shape {tuple(L0.shape)}")
+        beta0 = float(beta0)
+        if not (beta0 > 0 and math.isfinite(beta0)):
+            raise ValueError(f"initial decay rate beta0 must be finite and > 0 (softplus), got {beta0!r}")
+        self.n = L0.shape[0]
+        self.raw_L = nn.Parameter(L0.clone())
+        self.raw_beta = nn.Parameter(torch.tensor(_inverse_softplus(beta0), dtype=torch.float64))
+
+    def L(self) -> Tensor:
+        """The output gain (n, p), float64."""
+        return self.raw_L
+
+    beta = CascadeGains.beta
+    values = CascadeGains.values
+
+    def L_stack(self, N: int, dtype: torch.dtype) -> list[Tensor]:
+        r"""Eq. (11): :math:`L_i = L e^{-\beta i}`, ``i = 0 .. N-1``, in ``dtype``."""
+        return [(self.L() * torch.exp(-self.beta() * i)).to(dtype) for i in range(int(N))]
+
+
+@dataclass(frozen=True)
+class TuneRecipe:
+    """The settings of :func:`tune_gains` in one checked, immutable object.
+
+    ``L0`` (scalar or a list of n) and ``beta0``: the initial gain and decay rate (:class:`CascadeGains`);
+    ``iterations`` and ``lr``: Adam steps and learning rate; ``full``, ``L_max``: the gain's form and bound;
+    ``train_model``: also descend on the model. Checked in ``__post_init__``; replace a field with
+    ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
+    own-system chapter.
+    """
+
+    L0: float | tuple = 5.0
+    beta0: float = 0.05
+    iterations: int = 60
+    lr: float = 0.1
+    full: bool = False
+    L_max: float | None = None
+    train_model: bool = False
+
+    def __post_init__(self):
+        L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
+        object.__setattr__(self, "L0", L0)
+        vals = [L0] if isinstance(L0, (int, float)) else list(torch.tensor(L0, dtype=torch.float64).abs().reshape(-1).tolist())
+        if not vals or not all(math.isfinite(v) and v > 0 for v in vals):
+            raise ValueError(f"TuneRecipe.L0 must be > 0 and finite (a scalar or one per state), got {self.L0!r}")
+        if not (math.isfinite(float(self.beta0)) and float(self.beta0) > 0):
+            raise ValueError(f"TuneRecipe.beta0 must be finite and > 0, got {self.beta0!r}")
+        if isinstance(self.iterations, bool) or int(self.iterations) != self.iterations or int(self.iterations) < 1:
+            raise ValueError(f"TuneRecipe.iterations must be an integer >= 1, got {self.iterations!r}")
+        check_positive(self.lr, name="TuneRecipe.lr")
+        if self.L_max is not None:
+            check_positive(self.L_max, name="TuneRecipe.L_max")
+        for name in ("full", "train_model"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"TuneRecipe.{name} must be a bool, got {getattr(self, name)!r}")
+
+
+#: :func:`tune_gains`'s settings of the own-system chapter (L0 = 5, beta0 = 0.05, 60 Adam steps at lr 0.1).
+DEFAULT_TUNE_RECIPE = TuneRecipe()
+
+#: A closed-loop cost: ``objective(gains, x, u, mask)`` -> a scalar tensor, differentiable in ``gains``
+#: (a :class:`CascadeGains`); ``x`` (..., T, n) the tuning data, ``u`` its inputs or ``None``, ``mask`` its gaps or ``None``.
+Objective = Callable[["CascadeGains", Tensor, "Tensor | None", "Tensor | None"], Tensor]
+
+
 @dataclass
 class TunedGains:
     """What :func:`tune_gains` found: the gains module, plain values and the loss per iteration."""
@@ -139,9 +219,12 @@ def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
     return (z[..., : y.shape[-2] - N, :] - y[..., N:, :]).pow(2).sum(-1).mean()
 
 
-def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tensor, beta0: float,
-               iterations: int, lr: float, u: Tensor | None = None, full: bool = False, L_max: float | None = None,
-               train_model: bool = False) -> TunedGains:
+def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tensor | None = None,
+               beta0: float | None = None, iterations: int | None = None, lr: float | None = None,
+               u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
+               train_model: bool | None = None, recipe: TuneRecipe | None = None,
+               objective: Objective | None = None, mask: Tensor | None = None, C: Tensor | None = None,
+               A: Tensor | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
 
     Gradient descent (Adam, full batch) on the N-step prediction error of the cascade,
@@ -169,14 +252,40 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
         See :class:`CascadeGains`.
     train_model : bool
         Also descend on ``f``'s parameters (an ``nn.Module``).
+    recipe : TuneRecipe, optional
+        All of ``L0 .. train_model`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
+    objective : callable, optional
+        A closed-loop cost ``objective(gains, x, u, mask)`` (:data:`Objective`) to descend instead of the
+        N-step prediction error, e.g. the error of the loop the gains will serve, on training data.
+    mask : Tensor of bool, shape (..., T) or (..., T, n), optional
+        Missing samples (a NaN in ``y`` means the same): the cascade runs open loop through them
+        (:mod:`fnnlib.feedback.gaps`) and the error is scored on present targets only.
+    C : Tensor (p, n), optional
+        Partial measurements ``y = C x`` (``y`` (..., T, p)): ``L0`` is then an output gain (n, p) (a
+        stabilising start, e.g. placed), tuned freely (:class:`OutputGains`) on the N-step error of the
+        predicted outputs, and checked at the end with the model Jacobian ``A`` (raises if unstable).
+    A : Tensor (n, n), optional
+        The model's Jacobian for that check (:func:`~fnnlib.feedback.measurement.model_jacobian`).
     """
-    x, Ts, N = _checked(y, Ts, N)
+    recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
+                     train_model=train_model)
+    if objective is not None and not callable(objective):
+        raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
+    L0, beta0, iterations, lr = recipe.L0, recipe.beta0, recipe.iterations, recipe.lr
+    full, L_max, train_model = recipe.full, recipe.L_max, recipe.train_model
+    L0 = L0 if isinstance(L0, (int, float)) else torch.tensor(L0, dtype=torch.float64)
+    n = None if C is None else (L0.shape[0] if isinstance(L0, Tensor) and L0.ndim == 2 else None)
+    if C is not None and n is None:
+        raise ValueError("with C give L0 as an (n, p) output gain (e.g. fnnlib.place_observer_gain)")
+    meas, Ts, N = _measured(f, y, Ts, N, n, C=C, u=u, mask=mask)
+    x = meas.y
     if x.shape[-2] <= N:
         raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
-    if int(iterations) < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations!r}")
-    check_positive(lr, name="lr")
-    gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
+    if C is None:
+        gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
+    else:
+        check_output_gain(L0, meas.C, Ts, A=A)  # a stabilising start
+        gains = OutputGains(L0, beta0)
     params = list(gains.parameters())
     if train_model:
         if not isinstance(f, nn.Module):
@@ -191,8 +300,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
             p.requires_grad_(False)
         for _ in range(int(iterations)):
             opt.zero_grad()
-            # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
-            loss = prediction_loss(cascade_forward(f, x, Ts, N, gains, u=u, rows=x.shape[-2] - N), x, N)
+            loss = _loss(f, meas, Ts, N, gains, objective)
             loss.backward()
             opt.step()
             result.loss.append(loss.item())
@@ -200,6 +308,52 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
         for p in frozen:
             p.requires_grad_(True)
     result.seconds = time.perf_counter() - start
+    if C is not None:
+        with torch.no_grad():
+            check_output_gain(gains.L(), meas.C, Ts, A=A)  # still stabilising after the descent
     vals = gains.values()
     result.L, result.beta = vals["L"], vals["beta"]
     return result
+
+
+def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
+    """The recipe of :func:`tune_gains`: ``recipe``, or one built from the loose arguments (not both)."""
+    given = {k: v for k, v in loose.items() if v is not None}
+    if recipe is not None:
+        if not isinstance(recipe, TuneRecipe):
+            raise TypeError(f"recipe must be a TuneRecipe, got {type(recipe).__name__}")
+        if given:
+            raise ValueError(f"give either recipe or the loose settings, not both (got recipe and {sorted(given)})")
+        return recipe
+    missing = [k for k in ("L0", "beta0", "iterations", "lr") if k not in given]
+    if missing:
+        raise TypeError(f"tune_gains needs {missing} (or recipe=TuneRecipe(...), e.g. DEFAULT_TUNE_RECIPE)")
+    L0 = given.pop("L0")
+    L0 = float(L0) if torch.as_tensor(L0).ndim == 0 else _as_tuple(L0)
+    return TuneRecipe(L0=L0, **given)
+
+
+def _loss(f: VectorField, meas, Ts: float, N: int, gains: CascadeGains, objective: Objective | None) -> Tensor:
+    """One iteration's cost: ``objective``, or the N-step prediction error (through the gaps, on present targets)."""
+    x = meas.y
+    if objective is not None:
+        loss = objective(gains, x, meas.u, meas.mask)
+        if not isinstance(loss, Tensor) or loss.numel() != 1 or not loss.requires_grad:
+            raise ValueError("the objective must return a scalar tensor differentiable in the gains")
+        return loss.reshape(())
+    n = gains.n
+    if meas.mask is None and meas.C is None:
+        # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
+        return prediction_loss(cascade_forward(f, x, Ts, N, gains, u=meas.u, rows=x.shape[-2] - N), x, N)
+    z = gap_cascade(f, meas, gains.L_stack(N, x.dtype), Ts, n, diagonal=not gains.full)
+    if meas.C is not None:
+        z = z @ meas.C.to(x.dtype).T  # the predicted outputs
+    present = (torch.ones_like(x) if meas.mask is None else meas.mask.to(x.dtype))[..., N:, :]
+    err = (z[..., : x.shape[-2] - N, :] - x[..., N:, :]).pow(2) * present  # targets N samples later, measured
+    return err.sum() / present.sum().clamp_min(1.0) * x.shape[-1]
+
+
+def _as_tuple(v) -> tuple:
+    """A vector or matrix setting as nested tuples of floats (hashable, for the frozen recipe)."""
+    t = torch.as_tensor(v, dtype=torch.float64)
+    return tuple(t.tolist()) if t.ndim == 1 else tuple(tuple(r) for r in t.tolist())

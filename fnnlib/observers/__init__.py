@@ -1,5 +1,5 @@
 """Observers behind one interface: the linear feedback of Eqs. (7)-(8) (its kernel in :mod:`fnnlib.feedback`), the neural
-feedback of Sec. 4, and the Luenberger and Kalman baselines on the learned model with a constant-disturbance state (S11)."""
+feedback of Sec. 4, and the Luenberger and Kalman baselines (KF, EKF, UKF) on the learned model with a constant-disturbance state (S11)."""
 
 from fnnlib.observers.augmented import (
     AugmentedObserver,
@@ -14,8 +14,9 @@ from fnnlib.observers.linear import LinearFeedback
 from fnnlib.observers.luenberger import LuenbergerObserver, linear_feedback_gain, place_observer_gain
 from fnnlib.observers.neural import NeuralFeedbackObserver, feedback_rollout
 from fnnlib.observers.tuning import disturbance_drift_variance
+from fnnlib.observers.unscented import UnscentedKalmanObserver
 
 __all__ = ["AugmentedObserver", "DisturbanceEstimate", "ExtendedKalmanObserver", "KalmanObserver", "LinearFeedback",
-           "LuenbergerObserver", "NeuralFeedbackObserver", "Observer", "ObserverReport", "SteadyState",
+           "LuenbergerObserver", "NeuralFeedbackObserver", "Observer", "ObserverReport", "SteadyState", "UnscentedKalmanObserver",
            "augmented_matrices", "constant_gain_filter", "disturbance_drift_variance", "evaluate_observer", "feedback_rollout", "linear_feedback_gain",
            "metrics_table", "place_observer_gain", "rollout_corrected", "steady_state_gain"]

@@ -166,8 +166,18 @@ class AugmentedObserver:
         self.n = int(n)
         self.A, self.B, self.C = augmented_matrices(self.n, self.Ts)
 
-    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:  # pragma: no cover - abstract
+    def estimate(self, x: Tensor, u: Tensor | None = None, **kw) -> DisturbanceEstimate:  # pragma: no cover
         raise NotImplementedError
+
+    def _estimate(self, x: Tensor, u: Tensor | None, mask: Tensor | None) -> DisturbanceEstimate:
+        """:meth:`estimate`, with ``mask`` only for the filters that take gaps."""
+        if mask is None:
+            return self.estimate(x, u)
+        if not getattr(self, "takes_gaps", False):
+            raise NotImplementedError(f"{type(self).__name__} evaluates the learned field at the measurement "
+                                      "(Eq. (7)), so it needs every sample; for gaps use ExtendedKalmanObserver, "
+                                      "UnscentedKalmanObserver or MeasuredFeedback")
+        return self.estimate(x, u, mask=mask)
 
     def inputs(self, x: Tensor, u_ext: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """The checked measurements ``y`` (..., T, n) and the known input :math:`u_k = f_{neural}(y_k)`, as in Eq. (7).
@@ -184,14 +194,15 @@ class AugmentedObserver:
         """:func:`constant_gain_filter` with the predictor-form gain ``L`` (2n, n), split into the estimate."""
         return split_estimate(self.f, constant_gain_filter(self.A, self.B, self.C, L, u, x), x, u_ext)
 
-    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+    def observe(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> Estimate:
         """``x_hat`` (filtered, :math:`\\hat x_{k|k}`), ``f_hat`` (model rate + :math:`\\hat d_{k|k}`), (..., T, n).
 
-        ``u`` (..., T, m): inputs of a controlled model.
+        ``u`` (..., T, m): inputs of a controlled model; ``mask``: missing samples (the filters that take gaps).
         """
-        return self.estimate(x, u).as_estimate()
+        return self._estimate(x, u, mask).as_estimate()
 
-    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None, *, mask: Tensor | None = None) -> Tensor:
         """N-step predictions from every sample: :func:`rollout_corrected` from :math:`\\hat x_{k|k}, \\hat d_{k|k}`."""
-        est = self.estimate(x, u)
+        N = check_N(N)
+        est = self._estimate(x, u, mask)
         return rollout_corrected(self.f, est.x_hat, est.d_hat, self.Ts, N, u)

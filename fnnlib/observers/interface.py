@@ -13,6 +13,7 @@ import time
 from collections.abc import Mapping
 from typing import NamedTuple, Protocol, runtime_checkable
 
+import torch
 from torch import Tensor
 
 from fnnlib.metrics import error_norm, rmse
@@ -60,16 +61,22 @@ def _best_seconds(fn, repeats: int):
 
 
 def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Tensor, N: int, *,
-                      settle: int = 0, repeats: int = 3) -> ObserverReport:
+                      settle: int = 0, repeats: int = 3, u: Tensor | None = None,
+                      mask: Tensor | None = None) -> ObserverReport:
     """Run ``observer`` on measurements ``y`` and score it against the truth.
 
     Parameters
     ----------
     observer : Observer
-    y : Tensor, shape (T, n)
-        Measurements (noisy states).
+    y : Tensor, shape (T, p)
+        Measurements (noisy states, or p outputs ``y = C x`` of an observer built with that ``C``;
+        NaN where a sample is missing, for the observers that take gaps).
     x_true, f_true : Tensor, shape (T, n)
         Clean states and true change rates at the same samples.
+    u : Tensor, shape (T, m), optional
+        Inputs of a controlled model, passed to ``observe`` and ``predict``.
+    mask : Tensor of bool, shape (T,) or (T, p), optional
+        Missing samples, passed to ``observe`` and ``predict``.
     N : int
         Prediction horizon.
     settle : int
@@ -92,17 +99,22 @@ def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Ten
     if not isinstance(observer, Observer):
         raise TypeError(f"{type(observer).__name__} does not implement the Observer interface "
                         "(n, Ts, observe, predict)")
-    if not (y.shape == x_true.shape == f_true.shape) or y.ndim != 2:
-        raise ValueError(f"y, x_true, f_true must share one shape (T, n); got {tuple(y.shape)}, "
-                         f"{tuple(x_true.shape)}, {tuple(f_true.shape)}")
+    if not isinstance(y, Tensor) or y.ndim != 2 or not (x_true.shape == f_true.shape == (y.shape[0], observer.n)):
+        raise ValueError(f"need y (T, p) and x_true, f_true (T, n) with n = {observer.n}; got "
+                         f"{tuple(getattr(y, 'shape', ()))}, {tuple(x_true.shape)}, {tuple(f_true.shape)}")
+    for name, v in (("x_true", x_true), ("f_true", f_true)):
+        if not bool(torch.isfinite(v).all()):
+            raise ValueError(f"{name} holds a NaN or infinite value: the truth must be complete")
     T = y.shape[0]
     if not 1 <= int(N) < T:
         raise ValueError(f"need 1 <= N < T = {T}, got N = {N}")
     settle = int(settle)
     if not 0 <= settle < T:
         raise ValueError(f"need 0 <= settle < T = {T}, got settle = {settle}")
-    est, t_obs = _best_seconds(lambda: observer.observe(y), repeats)
-    z_N, t_pred = _best_seconds(lambda: observer.predict(y, int(N)), repeats)
+    args = () if u is None else (u,)
+    kw = {} if mask is None else {"mask": mask}
+    est, t_obs = _best_seconds(lambda: observer.observe(y, *args, **kw), repeats)
+    z_N, t_pred = _best_seconds(lambda: observer.predict(y, int(N), *args, **kw), repeats)
     metrics = {
         "state_rmse": rmse(est.x_hat, x_true),
         "rate_rmse": rmse(est.f_hat, f_true),

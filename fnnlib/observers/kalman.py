@@ -28,9 +28,9 @@ import torch
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from torch import Tensor
 
-from fnnlib._validation import as_trajectory
 from fnnlib.feedback.gains import gain_matrix
 from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.measurement import check_detectable, check_measurements, check_output_matrix, model_jacobian
 from fnnlib.feedback.types import VectorField
 from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate, split_estimate
 
@@ -98,30 +98,114 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
 
 
 class _KalmanBase(AugmentedObserver):
-    """Shared set-up of the two Kalman filters: Q, R, P0 and the filterpy filter."""
+    r"""Shared set-up of the Kalman filters: the measurement ``C``, the disturbance layout ``E``, Q, R, P0,
+    the detectability check and the filterpy filter.
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None):
+    ``disturbance`` ``E`` (n, q) (or a list of the q states it acts on): :math:`\dot x = f(x, u) + E d`,
+    default every state (E = I). With a ``C`` or an ``E``, the augmented pair is checked for detectability
+    at the model's Jacobian ``A`` (default: at the origin) and refused with the PBH reason.
+    """
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
         super().__init__(f, Ts, n)
-        m = 2 * self.n
-        if C is not None:  # partial measurements y = C x: the augmented output matrix is [C 0]
-            C = torch.as_tensor(C, dtype=torch.float64)
-            if C.ndim != 2 or C.shape[1] != self.n or not bool(torch.isfinite(C).all()):
-                raise ValueError(f"C must be a finite (p, {self.n}) matrix, got shape {tuple(C.shape)}")
-            self.C = torch.cat([C, torch.zeros(C.shape[0], self.n, dtype=torch.float64)], 1)
-        self.p = self.C.shape[0]
+        self.C_x = None if C is None else check_output_matrix(C, self.n)  # partial measurements y = C x
+        self.E = None if disturbance is None else disturbance_matrix(disturbance, self.n)
+        q = self.n if self.E is None else self.E.shape[1]
+        if self.E is not None:
+            eye = torch.eye(self.n, dtype=torch.float64)
+            self.A = torch.block_diag(eye, torch.eye(q, dtype=torch.float64))
+            self.A[: self.n, self.n:] = self.Ts * self.E  # x += Ts E d; d = d
+            self.B = torch.cat([self.Ts * eye, torch.zeros(q, self.n, dtype=torch.float64)], 0)
+        if self.C_x is not None or self.E is not None:
+            Cx = torch.eye(self.n, dtype=torch.float64) if self.C_x is None else self.C_x
+            self.C = torch.cat([Cx, torch.zeros(Cx.shape[0], q, dtype=torch.float64)], 1)
+            check_detectable(self._linearised(A), self.C, labels=[f"x{i}" for i in range(self.n)] +
+                             [f"d{j}" for j in range(q)], what="the augmented [x; d] model")
+        self.q, self.p = q, self.C.shape[0]
+        m = self.n + q
         self.Q = as_covariance(Q, m, name="Q")
         self.R = as_covariance(R, self.p, name="R", definite=True)
         if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
             x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
-            P0 = torch.block_diag(x_part, 100.0 * torch.eye(self.n, dtype=torch.float64))
+            P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
         self.P0 = as_covariance(P0, m, name="P0")
 
-    def _new(self, cls, *args):
+    def _linearised(self, A) -> Tensor:
+        """The augmented transition at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
+        if A is None:
+            dtype = next((p.dtype for p in getattr(self.f, "parameters", lambda: iter(()))() if p.is_floating_point()),
+                         torch.float64)
+            m = getattr(self.f, "m", 0) or 0
+            u0 = torch.zeros(m, dtype=dtype) if m else None
+            A = model_jacobian(self.f, torch.zeros(self.n, dtype=dtype), u0)
+        A = torch.as_tensor(A, dtype=torch.float64)
+        if A.shape != (self.n, self.n):
+            raise ValueError(f"the model Jacobian A must have shape ({self.n}, {self.n}), got {tuple(A.shape)}")
+        Phi = self.A.clone()
+        Phi[: self.n, : self.n] += self.Ts * A
+        return Phi
+
+    def _new(self, cls, *args, **kwargs):
         """A filterpy filter with this plant's matrices (numpy), started at P0."""
-        kf = cls(*args, dim_x=2 * self.n, dim_z=self.p)
+        kf = cls(*args, dim_x=self.n + self.q, dim_z=self.p, **kwargs)
         kf.F, kf.H = self.A.numpy().copy(), self.C.numpy().copy()
         kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
         return kf
+
+    def measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None):
+        """The one check of ``y`` (..., T, p), ``u``, ``mask``; numpy arrays per trajectory (B, T, .)."""
+        meas = check_measurements(y, self.n, C=self.C_x, u=u, mask=mask, f=self.f)
+        ys = meas.y.reshape(-1, *meas.y.shape[-2:]).double().numpy()
+        lead = meas.y.shape[:-2]
+        us = None if meas.u is None else meas.u.expand(*lead, *meas.u.shape[-2:]).reshape(-1, *meas.u.shape[-2:])
+        ms = None if meas.mask is None else meas.mask.reshape(-1, *meas.mask.shape[-2:]).numpy()
+        return meas, ys, us, ms
+
+    def start(self, y0: np.ndarray, m0: np.ndarray | None) -> np.ndarray:
+        """The prior :math:`z_{0|-1} = [C^+ y_0; 0]` (column, n + q), over the present outputs only."""
+        Cx = self.C.numpy()[:, : self.n] if m0 is None else self.C.numpy()[:, : self.n] * m0[:, None]
+        return np.concatenate([np.linalg.pinv(Cx) @ y0, np.zeros(self.q)])[:, None]
+
+    def update(self, kf, y: np.ndarray, m: np.ndarray | None, *, extended: bool) -> None:
+        """filterpy's measurement update on the present outputs (none: no update, the estimate runs open loop).
+
+        ``extended``: the EKF's ``update(z, HJacobian, Hx)`` (column ``z``); else the UKF's ``update(z, R, hx)``.
+        """
+        C = self.C.numpy()
+        if m is not None and not m.any():
+            return None
+        R = None if m is None else self.R.numpy()[np.ix_(m, m)]
+        if m is not None:
+            C, y = C[m], y[m]
+        if extended:
+            return kf.update(y[:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s, R=R)
+        return kf.update(y, R=R, hx=lambda s: C @ s)
+
+    def split(self, z: np.ndarray, meas) -> DisturbanceEstimate:
+        """Augmented estimates (B, T, n + q) -> ``x_hat``, ``d_hat`` (the disturbance on the rate, ``E d``), ``f_hat``."""
+        y = meas.y
+        z = torch.as_tensor(z).reshape(*y.shape[:-1], self.n + self.q)
+        n = self.n
+        x_hat, d = z[..., :n].to(y.dtype), z[..., n:]
+        d_hat = (d if self.E is None else d @ self.E.T).to(y.dtype)
+        with torch.no_grad():
+            f_hat = eval_field(self.f, x_hat, meas.u) + d_hat  # the filter's own model: f(x_hat, u) + E d_hat
+        return DisturbanceEstimate(x_hat, d_hat, f_hat)
+
+
+def disturbance_matrix(E, n: int) -> Tensor:
+    """The disturbance layout ``E`` (n, q) float64 from a matrix or a list of state indices."""
+    E = torch.as_tensor(E)
+    if E.ndim == 1 and not E.is_floating_point():
+        idx = [int(i) for i in E.tolist()]
+        if not idx or any(not 0 <= i < n for i in idx) or len(set(idx)) != len(idx):
+            raise ValueError(f"disturbance states must be distinct indices in 0..{n - 1}, got {idx}")
+        return torch.eye(n, dtype=torch.float64)[:, idx]
+    E = E.to(torch.float64)
+    if E.ndim != 2 or E.shape[0] != n or E.shape[1] < 1 or not bool(torch.isfinite(E).all()):
+        raise ValueError(f"disturbance must be a finite (n, q) = ({n}, q) matrix or a list of state indices, "
+                         f"got shape {tuple(E.shape)}")
+    return E
 
 
 class KalmanObserver(_KalmanBase):
@@ -195,8 +279,10 @@ class _LearnedModelEKF(ExtendedKalmanFilter):
         super().__init__(dim_x=dim_x, dim_z=dim_z)
         self.step = step
 
+    k: int | None = None  # the sample the next prediction steps from (its input)
+
     def predict_x(self, u=0):
-        self.x, self.F = self.step(self.x)
+        self.x, self.F = self.step(self.x, self.k)
 
 
 class ExtendedKalmanObserver(_KalmanBase):
@@ -216,44 +302,47 @@ class ExtendedKalmanObserver(_KalmanBase):
     constant-gain counterpart).
     filterpy advances one sample per call, so :meth:`estimate` loops over
     time and over the leading batch axes in Python.
+
+    ``disturbance`` (the states the constant disturbance acts on, or a matrix E (n, q)) and the model
+    Jacobian ``A`` for the detectability check: see :class:`_KalmanBase`. Inputs ``u`` and gaps are taken.
     """
 
-    def _step(self, z: np.ndarray, dtype: torch.dtype):
-        """The prediction :math:`\\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (2n, 1)."""
+    takes_gaps = True
+
+    def _step(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None = None):
+        r"""The prediction :math:`\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,)."""
         n, Ts = self.n, self.Ts
         x, d = z[:n, 0], z[n:, 0]
         with torch.enable_grad():  # J by one batched backward pass: row i of f(X), X = n copies of x
             X = torch.as_tensor(x, dtype=dtype).expand(n, n).clone().requires_grad_(True)
-            out = self.f(0.0, X)
+            out = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(n, -1))
             (J,) = torch.autograd.grad(out.diagonal().sum(), X)  # J[i, j] = d f_i / d x_j
         F = self.A.numpy().copy()
-        F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts I], [0, I]]
-        x_next = x + Ts * (out[0].detach().double().numpy() + d)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}) + d_{k|k})
+        F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts E], [0, I]]
+        Ed = d if self.E is None else self.E.numpy() @ d
+        x_next = x + Ts * (out[0].detach().double().numpy() + Ed)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}, u_k) + E d)
         return np.concatenate([x_next, d])[:, None], F
 
-    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n); autonomous models only."""
-        if u is not None:
-            raise NotImplementedError("the EKF takes autonomous models only; use KalmanObserver for inputs")
-        x = as_trajectory(x, self.p, name="y")
-        ys = x.reshape(-1, *x.shape[-2:]).double().numpy()
-        C = self.C.numpy()
-        C_pinv = np.linalg.pinv(C[:, : self.n])  # the least-squares state of a measurement
-        z = np.empty((*ys.shape[:2], 2 * self.n))
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p), inputs ``u`` (..., T, m).
+
+        A NaN in ``x`` or a ``False`` in ``mask`` ((..., T) or (..., T, p)) is a missing output: the update
+        uses the present ones only, and none at all moves the estimate open loop.
+        """
+        meas, ys, us, ms = self.measurements(x, u, mask)
+        dtype = meas.y.dtype
+        z = np.empty((*ys.shape[:2], self.n + self.q))
         for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
-            ekf = self._new(_LearnedModelEKF, lambda s: self._step(s, x.dtype))
-            ekf.x = np.concatenate([C_pinv @ y[0], np.zeros(self.n)])[:, None]  # prior z_{0|-1} = [C^+ y_0; 0]
+            ui = None if us is None else us[i]
+            ekf = self._new(_LearnedModelEKF, lambda s, k=None: self._step(s, dtype, None if ui is None else ui[k]))
+            ekf.x = self.start(y[0], None if ms is None else ms[i, 0])  # prior z_{0|-1} = [C^+ y_0; 0]
             for k in range(y.shape[0]):
                 if k:
-                    ekf.predict()  # z = Phi(z); P = F P F' + Q
-                ekf.update(y[k][:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s)  # K, z += K (y - C z)
+                    ekf.k = k - 1
+                    ekf.predict()  # z = Phi(z, u_{k-1}); P = F P F' + Q
+                self.update(ekf, y[k], None if ms is None else ms[i, k], extended=True)  # K, z += K (y - C z)
                 z[i, k] = ekf.x[:, 0]
-        z = torch.as_tensor(z).reshape(*x.shape[:-2], x.shape[-2], 2 * self.n)
-        n = self.n
-        x_hat, d_hat = z[..., :n].to(x.dtype), z[..., n:].to(x.dtype)
-        with torch.no_grad():
-            f_hat = eval_field(self.f, x_hat) + d_hat  # the EKF's own model: f(x_hat) + d_hat
-        return DisturbanceEstimate(x_hat, d_hat, f_hat)
+        return self.split(z, meas)
 
     def __repr__(self) -> str:
         return f"ExtendedKalmanObserver(n={self.n}, Ts={self.Ts})"

@@ -15,11 +15,12 @@ from torch import Tensor
 
 from fnnlib._validation import check_positive
 from fnnlib.feedback import VectorField, eval_field
+from fnnlib.feedback.measurement import check_measurements
 
 __all__ = ["disturbance_drift_variance"]
 
 
-def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField) -> float:
+def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField, u: Tensor | None = None) -> float:
     r""":math:`q_d`: the variance of the per-step change of :math:`\Delta f` on training trajectories.
 
     Parameters
@@ -29,7 +30,9 @@ def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField) -> floa
     Ts : float
         Sampling step.
     field : callable
-        The learned field ``f(t, x)`` (autonomous), e.g. the trained neural ODE.
+        The learned field ``f(t, x)``, e.g. the trained neural ODE, or ``f(t, x, u)`` with inputs.
+    u : Tensor, shape (T, m) or (B, T, m), optional
+        The inputs of the training trajectories, one row per sample.
 
     Returns
     -------
@@ -39,13 +42,13 @@ def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField) -> floa
         :math:`d_k = (x_{k+1} - x_k) / T_s - f_{neural}(x_k)` (the filter's Euler plant solved for
         :math:`d_k`); the observers notebook's ``kf_q_d``.
     """
-    x = torch.as_tensor(x)
     Ts = check_positive(Ts, name="Ts")
-    if x.ndim not in (2, 3) or x.shape[-2] < 3:
+    if isinstance(x, Tensor) and (x.ndim not in (2, 3) or x.shape[-2] < 3):
         raise ValueError(f"x must be (T, n) or (B, T, n) with T >= 3, got shape {tuple(x.shape)}")
-    if not bool(torch.isfinite(x).all()):
-        raise ValueError("x holds a NaN or infinite value")
+    meas = check_measurements(x, x.shape[-1] if isinstance(x, Tensor) else 0, u=u, f=field, missing=False,
+                              name="x", min_samples=3)
+    u_k = None if meas.u is None else meas.u[..., :-1, :]
     with torch.no_grad():
-        # d_k = (x_{k+1} - x_k) / Ts - f_neural(x_k)   (the augmented plant's Euler step)
-        d = x.diff(dim=-2) / Ts - eval_field(field, x[..., :-1, :])
+        # d_k = (x_{k+1} - x_k) / Ts - f_neural(x_k, u_k)   (the augmented plant's Euler step)
+        d = x.diff(dim=-2) / Ts - eval_field(field, x[..., :-1, :], u_k)
     return float(d.diff(dim=-2).std() ** 2)

@@ -113,9 +113,11 @@ def test_bad_inputs(f, x):
     with pytest.raises(TypeError, match="must be a torch.Tensor"):
         cascade_predict(f, x.tolist(), TS, 2, 1.0)
     bad = x.clone()
-    bad[4, 0] = float("nan")
-    with pytest.raises(ValueError, match="x holds a NaN value"):
+    bad[4, 0] = float("inf")  # a NaN is a missing sample (tests/feedback/test_gaps.py); inf is an error
+    with pytest.raises(ValueError, match="x holds an infinite value"):
         cascade_predict(f, bad, TS, 2, 1.0)
+    with pytest.raises(ValueError, match="x holds a NaN value"):
+        cascade_predict_loop(f, torch.where(torch.isinf(bad), float("nan"), bad), TS, 2, 1.0)
     with pytest.raises(ValueError, match="not positive definite"):
         cascade_predict(f, x, TS, 2, -1.0)
     with pytest.raises(ValueError, match="one trajectory of shape"):

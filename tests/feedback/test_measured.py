@@ -56,18 +56,20 @@ def test_checks_name_what_fails():
     torch.testing.assert_close(full, 3.0 * torch.eye(2, dtype=F64))
 
 
-def test_ekf_takes_the_same_C_and_predicts_the_measured_output():
-    from fnnlib import ExtendedKalmanObserver
+def test_ekf_takes_the_same_C_and_refuses_an_undetectable_disturbance_layout():
+    from fnnlib import DetectabilityError, ExtendedKalmanObserver
 
     f = LinearSystem(A, torch.zeros(2, 1, dtype=F64))
     x = _euler(torch.tensor([1.0, -2.0], dtype=F64), torch.zeros(T, 1, dtype=F64))
-    ekf = ExtendedKalmanObserver(lambda t, z: f(t, z, torch.zeros(z.shape[0], 1, dtype=z.dtype)), TS, 2,
-                                 [1e-10] * 2 + [1e-10] * 2, 1e-8, C=C)
+    field = lambda t, z: f(t, z, torch.zeros(z.shape[0], 1, dtype=z.dtype))  # noqa: E731
+    # a disturbance on both states with only the position measured: a velocity offset and a position
+    # disturbance are indistinguishable ([C 0] does not observe the augmented state), refused with the PBH mode
+    with pytest.raises(DetectabilityError, match=r"eigenvalue 1\+0j .*direction .*x1.*d0"):
+        ExtendedKalmanObserver(field, TS, 2, [1e-10] * 4, 1e-8, C=C)
+    ekf = ExtendedKalmanObserver(field, TS, 2, [1e-10] * 3, 1e-8, C=C, disturbance=[1])  # on the velocity only
     est = ekf.estimate(x @ C.T)
-    assert float((est.x_hat[50:, 0] - x[50:, 0]).abs().max()) < 1e-8  # the measured position
-    # with a constant-disturbance state and only the position measured, a velocity offset and a disturbance
-    # are indistinguishable ([C 0] does not observe the augmented state), but the predicted outputs are exact
+    assert float((est.x_hat[50:] - x[50:]).abs().max()) < 1e-6  # now the whole state
     z = ekf.predict(x @ C.T, 10)
-    torch.testing.assert_close(z[50:-10] @ C.T, x[60:] @ C.T, rtol=0, atol=1e-8)
-    with pytest.raises(ValueError, match=r"C must be a finite \(p, 2\) matrix"):
+    torch.testing.assert_close(z[50:-10], x[60:], rtol=0, atol=1e-6)
+    with pytest.raises(ValueError, match=r"C has shape \(1, 3\) but must be \(p, n\) with n = 2"):
         ExtendedKalmanObserver(f, TS, 2, 1e-4, 1e-4, C=torch.ones(1, 3))

@@ -60,3 +60,22 @@ def test_bad_arguments():
         noise_amplification(2.0, 0.01, 5)
     with pytest.raises(ValueError, match="N must be an integer >= 1"):
         noise_amplification(2.0, 0.01, 0, n=1)
+
+
+@pytest.mark.parametrize("L, A", [(torch.tensor([30.0, 3.0]), None),
+                                  (10.0, torch.tensor([[0.0, 1.0], [-25.0, -8.0]], dtype=F64))])
+def test_exact_factor_is_the_measured_rms_for_diagonal_gains_and_a_model_jacobian(L, A):
+    """The measured figure is the RMS over every component; a diagonal gain's worst direction overstates it,
+    and a damping model (its Jacobian A) changes it: the exact factor takes both into account."""
+    Ts, N, beta = 0.01, 20, 0.02
+    Am = torch.zeros(2, 2, dtype=F64) if A is None else A
+    v = torch.randn(8, 4000, 2, generator=torch.Generator().manual_seed(1), dtype=F64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GainWarning)
+        z = cascade_predict(lambda t, x: x @ Am.T, v, Ts, N, L, beta)
+    mc = float(z[:, 1000:].pow(2).mean().sqrt())
+    exact = noise_amplification(L, Ts, N, beta, n=2, exact=True, A=A)
+    assert mc == pytest.approx(exact, rel=0.03)
+    if A is None:
+        worst = noise_amplification(L, Ts, N, beta, n=2, exact=True, reduce="max")
+        assert worst > 1.2 * mc  # the worst direction is not what is measured

@@ -87,7 +87,7 @@ def test_bad_calls_are_refused(problem):
     x, y, f = problem
     with pytest.raises(TypeError, match="Observer interface"):
         evaluate_observer(object(), y, x, f, N)
-    with pytest.raises(ValueError, match="share one shape"):
+    with pytest.raises(ValueError, match=r"need y \(T, p\) and x_true, f_true \(T, n\)"):
         evaluate_observer(_observers()["luenberger"], y, x[:-1], f, N)
     with pytest.raises(ValueError, match="1 <= N < T"):
         evaluate_observer(_observers()["luenberger"], y, x, f, T)

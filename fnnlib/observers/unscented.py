@@ -1,0 +1,80 @@
+r"""The unscented Kalman filter (filterpy's ``UnscentedKalmanFilter``) on the learned model with a disturbance state.
+
+The same plant as :class:`~fnnlib.observers.ExtendedKalmanObserver`,
+:math:`\Phi(x, d) = (x + T_s(f_{neural}(x, u) + E d),\; d)` and :math:`y = C x + v`, but the mean and
+covariance are carried through :math:`\Phi` by sigma points (van der Merwe's scaled set) instead of a
+Jacobian; all sigma points of a step go through the model in one batched call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from torch import Tensor
+
+from fnnlib.feedback.types import VectorField
+from fnnlib.observers.augmented import DisturbanceEstimate
+from fnnlib.observers.kalman import _KalmanBase
+
+
+class _BatchedUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with every sigma point propagated in one call of ``fx_batch`` (S, n + q) -> (S, n + q)."""
+
+    def __init__(self, fx_batch, **kw):
+        super().__init__(fx=None, hx=None, **kw)
+        self.fx_batch = fx_batch
+
+    def compute_process_sigmas(self, dt, fx=None, **fx_args):
+        self.sigmas_f = self.fx_batch(self.points_fn.sigma_points(self.x, self.P), **fx_args)
+
+
+class UnscentedKalmanObserver(_KalmanBase):
+    r"""Unscented Kalman filter on the learned model with a constant-disturbance state (filterpy).
+
+    Parameters are those of :class:`~fnnlib.observers.ExtendedKalmanObserver` (``Q``, ``R``, ``P0``, ``C``,
+    ``disturbance``, ``A``), and ``alpha``, ``beta``, ``kappa`` of the scaled sigma points.
+    :meth:`estimate` takes inputs ``u`` (..., T, m) and gaps (NaN or ``mask``) like the EKF.
+    """
+
+    takes_gaps = True
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None,
+                 alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
+        super().__init__(f, Ts, n, Q, R, P0=P0, C=C, disturbance=disturbance, A=A)
+        if not float(alpha) > 0:
+            raise ValueError(f"alpha must be > 0, got {alpha!r}")
+        self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
+
+    def _fx(self, sigmas: np.ndarray, dtype: torch.dtype, u: Tensor | None) -> np.ndarray:
+        """:math:`\\Phi` of every sigma point (S, n + q) in one model call."""
+        n = self.n
+        X = torch.as_tensor(sigmas[:, :n], dtype=dtype)
+        with torch.no_grad():
+            fx = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(X.shape[0], -1))
+        d = sigmas[:, n:]
+        Ed = d if self.E is None else d @ self.E.numpy().T
+        return np.concatenate([sigmas[:, :n] + self.Ts * (fx.double().numpy() + Ed), d], 1)
+
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's."""
+        meas, ys, us, ms = self.measurements(x, u, mask)
+        dtype = meas.y.dtype
+        dim = self.n + self.q
+        z = np.empty((*ys.shape[:2], dim))
+        for i, y in enumerate(ys):
+            ui = None if us is None else us[i]
+            points = MerweScaledSigmaPoints(dim, alpha=self.alpha, beta=self.beta, kappa=self.kappa)
+            ukf = self._new(_BatchedUKF, lambda s, k: self._fx(s, dtype, None if ui is None else ui[k]),
+                            dt=self.Ts, points=points)
+            ukf.x = self.start(y[0], None if ms is None else ms[i, 0])[:, 0]
+            ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # the first update has no prediction before it
+            for k in range(y.shape[0]):
+                if k:
+                    ukf.predict(k=k - 1)  # sigma points through Phi(., u_{k-1})
+                self.update(ukf, y[k], None if ms is None else ms[i, k], extended=False)
+                z[i, k] = ukf.x
+        return self.split(z, meas)
+
+    def __repr__(self) -> str:
+        return f"UnscentedKalmanObserver(n={self.n}, Ts={self.Ts})"
