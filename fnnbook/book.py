@@ -181,12 +181,12 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     writable = os.access(spec.output_root, os.W_OK)  # a read-only root has no writer to keep out
     with holding(spec, profile, (), read=spec.tasks) if writable else contextlib.nullcontext():
         try:
-            return _assemble(spec, profile, book, claims)
+            return _assemble(spec, profile, book, claims, api=api)
         finally:
             shutil.rmtree(book / f"{GENERATED}.new", ignore_errors=True)  # gone once swapped in, or failed
 
 
-def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any]) -> Path:
+def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *, api: bool) -> Path:
     generated = book / GENERATED
     aside = book / f"{GENERATED}.new"  # assembled aside, swapped in only when complete
     shutil.rmtree(aside, ignore_errors=True)

@@ -141,6 +141,14 @@ _GAINS = C.number_list  # scalar gains, each stable at the step Ts (RELATIONS)
 
 
 
+def _fraction(name: str, value: Any) -> float:
+    """A share in [0, 1), e.g. of the samples a sensor loses."""
+    share = C.nonnegative(name, value)
+    if share >= 1:
+        raise ValueError(f"{name} must lie in [0, 1), got {value!r}")
+    return share
+
+
 def _synthetic_sizes(name: str, value: Any) -> list[int]:
     """``[training throws, test throws, samples per throw]`` of the synthetic stand-in: >= 1, >= 1, >= 2."""
     if not (isinstance(value, list) and len(value) == 3):
@@ -204,6 +212,8 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                    "spiral_x0": _X0, "spiral_tune_x0": _X0, "spiral_tune_samples": _N2, "spiral_N": _N1,
                    "spiral_noise_std": _POS, "spiral_L": _GAIN, "spiral_beta": _NONNEG,
                    "spiral_tune_iterations": _N1},
+    "quick_start": {"T": _N2, "Ts": _POS, "N": _N1, "noise_std": _POS, "drop": _fraction,
+                    "tune_iterations": _N1},
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
                     "quad_tune_flights": _N1, "quad_tune_iterations": _N1, "quad_tune_lr": _POS},
 })
@@ -318,6 +328,10 @@ def _own_system(p: Mapping[str, Any]) -> None:
         _gain(p, 2, p["spiral_Ts"], p["spiral_N"], L="spiral_L", beta="spiral_beta")
 
 
+def _quick_start(p: Mapping[str, Any]) -> None:
+    C.horizon("N", p["N"], below=p["T"], below_name="T")
+
+
 def _tuned_gains(p: Mapping[str, Any]) -> None:
     """Only the tuning's own settings: the data, hand-tuned gains and flights come from the upstream runs."""
 
@@ -326,6 +340,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
     "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system, "tuned_gains": _tuned_gains,
+    "quick_start": _quick_start,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

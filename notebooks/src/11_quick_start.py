@@ -17,13 +17,14 @@ noise_std = 0.02
 drop = 0.2
 tune_iterations = 20
 
-# %%
-import fnnlib as F
-
-F.check_notebook_settings("quick_start", globals())
+# %% tags=["remove-input"]
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("quick_start", globals())
 
 # %%
 import torch
+
+import fnnlib as F
 
 
 class Cart(F.DynamicalSystem):  # your own f(t, x, u): x = (position, velocity), u = force
