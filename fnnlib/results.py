@@ -44,6 +44,7 @@ from typing import Any
 from fnnlib.io import atomic_write
 
 VERDICTS = ("reproduced", "partly", "not reproduced")
+#: the name of a task's results file in its output folder
 RESULTS_FILENAME = "results.json"
 
 #: the keys of a claim's JSON, in the order they are written; the last four only when given

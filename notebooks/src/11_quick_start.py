@@ -61,10 +61,12 @@ errors
 # `errors` is the mean $N$-step error of the state on the second record (after a quarter of it, the
 # start-up). Which one wins is printed below, with the tuned gain and decay rate; the results file follows.
 
-# %%
+# %% tags=["nbval-check-output"]
 best = min(errors, key=errors.get)
 print(f"lowest N-step error: {best} ({errors[best]:.4g}); the tuned feedback: {errors['feedback, tuned']:.4g}")
 print(f"tuned L = {[round(v[0], 3) for v in tuned.L]}, beta = {tuned.beta:.3f}, "
       f"N-step loss {tuned.loss[0]:.4g} -> {tuned.loss[-1]:.4g}")
-F.write_results(out_dir, task="quick_start", profile=profile, claims=[],
+
+# %%
+results_file = F.write_results(out_dir, task="quick_start", profile=profile, claims=[],
                 metrics={"errors": errors, "L": tuned.L, "beta": tuned.beta})

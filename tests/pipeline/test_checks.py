@@ -73,7 +73,7 @@ def test_a_default_that_names_the_grid_is_refused_and_an_aggregate_passes(make_p
 @functools.cache
 def _repository_pipeline() -> dict[str, Any]:
     doc = yaml.safe_load((REPO / "pipeline.yaml").read_text())
-    doc["claims_file"] = str(REPO / "pipeline.yaml")  # any file; no claim IDs are needed here
+    doc["claims_file"] = str(REPO / "claims.yaml")  # the registry; no claim IDs are needed here
     for task in doc["tasks"].values():
         task["notebook"] = str(REPO / task["notebook"])
         task["claims"] = []
