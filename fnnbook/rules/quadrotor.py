@@ -21,7 +21,8 @@ from fnnlib.results import ClaimResult, Reading
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "SIX", "count_trainable", "join_readings", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
+__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "SIX", "count_trainable", "join_readings", "q1_convergence",
+           "q2_prediction", "q3_tracking", "q4_prediction",
            "q5_adaptive", "q6_training_cost"]
 
 
@@ -136,7 +137,8 @@ def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[f
                                "not below FNN's",
                        readings={"as worded": Reading(
                            f"the same words read as 'comparable' alone (within {100 * rel_tol:g} % of FNN), the "
-                           "'slightly larger' a description of the authors' run rather than a requirement", comparable)},
+                           "'slightly larger' a description of the authors' run rather than a requirement",
+                           comparable)},
                        rule=f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN in >= S - 1 of S runs and its mean "
                             "RMSE >= FNN's; Theorem 2's ball is a guarantee")
 
