@@ -19,7 +19,7 @@ import jinja2
 import yaml
 
 from fnnbook.rules import beyond
-from fnnlib.results import VERDICTS, ClaimResult, Results
+from fnnlib.results import BY_CONSTRUCTION, STATUSES, ClaimResult, Results
 
 __all__ = ["NOT_RUN", "SCOREBOARD_TASK", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of",
            "plot_verdicts", "read_claims", "render_scoreboard", "score_rows", "seeds_check", "self_check",
@@ -33,7 +33,8 @@ SCOREBOARD_TASK = "scoreboard"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
-_BADGE = {"reproduced": "success", "partly": "warning", "not reproduced": "danger", NOT_RUN: "secondary"}
+_BADGE = {"reproduced": "success", "partly": "warning", "not reproduced": "danger", BY_CONSTRUCTION: "info",
+          NOT_RUN: "secondary"}
 
 
 @dataclass(frozen=True)
@@ -240,10 +241,15 @@ def headline_of(result: ClaimResult | None) -> tuple[str, str]:
             text += f" ± {_number(head.spread)}"
         if head.unit:
             text += f" {head.unit}"
-        if head.n:
+        if result.n is not None:
+            text += f" (n = {result.n})"
+        elif head.n:
             text += f" (n = {head.n} seeds)"
         return head.name, text
-    return "checks holding", f"{sum(result.checks.values())} of {len(result.checks)}"
+    if not result.checks:
+        return "guarantees holding", f"{len(result.guarantees or {})} (no check could fail)"
+    n = f" (n = {result.n})" if result.n is not None else ""
+    return "checks holding", f"{sum(result.checks.values())} of {len(result.checks)}{n}"
 
 
 def _figure_label(row: ScoreRow) -> str:
@@ -251,16 +257,20 @@ def _figure_label(row: ScoreRow) -> str:
 
 
 def verdict_counts(rows: Sequence[ScoreRow]) -> dict[str, dict[str, int]]:
-    """Group -> verdict -> number of claims, groups in order of first appearance."""
+    """Group -> status -> number of claims, groups in order of first appearance.
+
+    A claim counts once, under its primary reading's verdict; "verified by construction" is counted apart.
+    """
     counts: dict[str, dict[str, int]] = {}
     for row in rows:
-        group = counts.setdefault(row.claim.group, {v: 0 for v in (*VERDICTS, NOT_RUN)})
+        group = counts.setdefault(row.claim.group, {v: 0 for v in (*STATUSES, NOT_RUN)})
         group[row.verdict] += 1
     return counts
 
 
 #: badge colours of sphinx-design (Bootstrap), also used by the verdict figure
-_COLOURS = {"reproduced": "#198754", "partly": "#ffc107", "not reproduced": "#dc3545", NOT_RUN: "#6c757d"}
+_COLOURS = {"reproduced": "#198754", "partly": "#ffc107", "not reproduced": "#dc3545", BY_CONSTRUCTION: "#0dcaf0",
+            NOT_RUN: "#6c757d"}
 
 
 def plot_verdicts(rows: Sequence[ScoreRow], path: str | os.PathLike[str]) -> Path:
@@ -274,13 +284,13 @@ def plot_verdicts(rows: Sequence[ScoreRow], path: str | os.PathLike[str]) -> Pat
     groups = list(counts)[::-1]
     fig, ax = plt.subplots(figsize=(6.4, 0.35 * len(groups) + 0.9), dpi=110)
     left = [0] * len(groups)
-    for verdict in (*VERDICTS, NOT_RUN):
+    for verdict in (*STATUSES, NOT_RUN):
         widths = [counts[g][verdict] for g in groups]
         ax.barh(groups, widths, left=left, color=_COLOURS[verdict], label=verdict, height=0.6)
         left = [a + b for a, b in zip(left, widths)]
     ax.set_xlabel("claims")
     ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.legend(ncols=4, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False, fontsize="small")
+    ax.legend(ncols=3, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False, fontsize="small")
     ax.spines[["top", "right"]].set_visible(False)
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")
@@ -296,6 +306,8 @@ def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str]
     ours = f"{_inline(name)}: **{_inline(value)}**" if name else (_inline(value) or "—")
     if result is None and row.task in notes:
         ours = _inline(notes[row.task])
+    if result is not None and result.at_paper_setting:
+        ours += f" — *at the paper's setting:* {_inline(result.at_paper_setting)}"
     where = [f"[section]({pages[row.task]})"] if row.task is not None and row.task in pages else []
     figure = f"{figures[row.task]}/{result.figure}" if result and result.figure and row.task in figures else None
     if figure:  # opens the row and scrolls to the figure inside it
@@ -304,7 +316,23 @@ def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str]
             "title": (result and result.title) or short_title(row.claim.text), "ours": ours,
             "paper": (result and result.paper) or row.claim.text,
             "paper_label": f"paper, {row.claim.figure}" if row.claim.figure else "paper",
-            "where": where, "figure": figure, "figure_label": _figure_label(row)}
+            "where": where, "figure": figure, "figure_label": _figure_label(row), "readings": readings_of(result),
+            "n": units_of(result)}
+
+
+def readings_of(result: ClaimResult | None) -> str:
+    """The verdict of each reading, the counted one first: ``"strict: partly; as worded: reproduced"``
+    ("" for a claim with one reading)."""
+    if result is None:
+        return ""
+    return "; ".join(f"{name}: {verdict}" for name, verdict in result.reading_verdicts().items())
+
+
+def units_of(result: ClaimResult | None) -> int | None:
+    """The independent units a comparison rests on: the claim's ``n``, else its headline's (None if neither)."""
+    if result is None:
+        return None
+    return result.n if result.n is not None else (result.headline.n if result.headline is not None else None)
 
 
 @functools.cache
@@ -355,7 +383,7 @@ def render_scoreboard(
     -------
     str
     """
-    counts = [f"{sum(r.verdict == v for r in rows)} {v}" for v in (*VERDICTS, NOT_RUN)]
+    counts = [f"{sum(r.verdict == v for r in rows)} {v}" for v in (*STATUSES, NOT_RUN)]
     shown = [_summary(r, pages, figures or {}, notes or {}) for r in rows]
     return _template().render(rows=shown, profile=profile, counts=counts, summary_figure=summary_figure)
 

@@ -6,7 +6,9 @@ verdict is derived from the checks alone, never set by hand:
 
 * ``"reproduced"``      every check holds,
 * ``"partly"``          some but not all checks hold,
-* ``"not reproduced"``  no check holds.
+* ``"not reproduced"``  no check holds;
+* ``"verified by construction"``  the claim has no check, only guarantees: nothing measured could have
+  refuted it, so it is never counted as reproduced (the scoreboard counts it apart).
 
 Besides its ``checks``, a claim may carry:
 
@@ -18,9 +20,15 @@ Besides its ``checks``, a claim may carry:
   ``{"name", "value", "unit"}`` plus ``"spread"``, ``"n"`` and
   ``"per_seed"`` when it is measured over seeds (:func:`headline_number`);
 * ``paper``: the paper's number or statement it is compared with;
-* ``title``: the claim in a few words.
+* ``title``: the claim in a few words;
+* ``reading`` (and ``reading_name``): one sentence on how the rule reads the paper's words;
+* ``readings``: the other readings of an ambiguous claim, each a :class:`Reading` with its own checks and
+  verdict; the claim's own checks (the reading written first) are the ones counted;
+* ``n``: the number of independent units the comparison rests on;
+* ``at_paper_setting``: where a claim is judged at a setting other than the paper's stated one, the outcome
+  at the stated one (or why it cannot be judged there, with the number).
 
-All four are optional: a result without them reads as before, and the
+All are optional: a result without them reads as before, and the
 scoreboard falls back on the claims file and the numbers.
 
 One claim is a :class:`ClaimResult` (what every rule of ``fnnbook.rules``
@@ -44,12 +52,17 @@ from typing import Any
 from fnnlib.io import atomic_write
 
 VERDICTS = ("reproduced", "partly", "not reproduced")
+#: the status of a claim whose only support holds by construction (no check, some guarantees)
+BY_CONSTRUCTION = "verified by construction"
+#: every status a claim can have: the three verdicts, then :data:`BY_CONSTRUCTION`
+STATUSES = (*VERDICTS, BY_CONSTRUCTION)
 #: the name of a task's results file in its output folder
 RESULTS_FILENAME = "results.json"
 
 #: the keys of a claim's JSON, in the order they are written; the last four only when given
 _REQUIRED = ("id", "verdict", "rule", "checks", "numbers", "figure")
-_OPTIONAL = ("guarantees", "headline", "paper", "title")
+_OPTIONAL = ("guarantees", "headline", "paper", "title", "reading", "reading_name", "readings", "n",
+             "at_paper_setting")
 
 
 class GuaranteeFailed(AssertionError):
@@ -162,6 +175,53 @@ def headline_number(name: str, value: float | Sequence[float], *, unit: str = ""
 
 
 @dataclass(frozen=True)
+class Reading:
+    """One reading of an ambiguous claim's words: the sentence that states it and the checks it implies.
+
+    Attributes
+    ----------
+    sentence : str
+        How this reading takes the paper's words, in one sentence.
+    checks : mapping of str to bool
+        Its own checks, computed from the same measured numbers; they alone decide :attr:`verdict`.
+
+    Raises
+    ------
+    ValueError
+        If ``sentence`` or ``checks`` is empty.
+    """
+
+    sentence: str
+    checks: Mapping[str, bool]
+
+    def __post_init__(self) -> None:
+        if not self.sentence:
+            raise ValueError("a reading needs its sentence")
+        verdict_from_checks(self.checks)
+        object.__setattr__(self, "checks", {k: bool(v) for k, v in self.checks.items()})
+
+    @property
+    def verdict(self) -> str:
+        """The verdict its checks imply (:func:`verdict_from_checks`)."""
+        return verdict_from_checks(self.checks)
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"reading", "checks", "verdict"}``."""
+        return {"reading": self.sentence, "checks": dict(self.checks), "verdict": self.verdict}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Reading:
+        """Read what :meth:`to_json` wrote; a stored verdict other than the checks' is refused (ValueError)."""
+        if set(data) != {"reading", "checks", "verdict"}:
+            raise ValueError(f"a reading has the keys reading, checks, verdict, got {sorted(data)}")
+        reading = cls(data["reading"], data["checks"])
+        if reading.verdict != data["verdict"]:
+            raise ValueError(f"reading verdict {data['verdict']!r} is not the one its checks imply "
+                             f"({reading.verdict!r})")
+        return reading
+
+
+@dataclass(frozen=True)
 class ClaimResult:
     """One claim's checks, guarantees, measured numbers and the verdict they imply.
 
@@ -191,6 +251,19 @@ class ClaimResult:
         The paper's number or statement for this claim.
     title : str, optional
         The claim in a few words.
+    reading : str, optional
+        How this rule reads the paper's words, in one sentence.
+    reading_name : str, optional
+        A short name for that reading (e.g. ``"strict"``) when the claim has other :attr:`readings`.
+    readings : mapping of str to Reading, optional
+        The other readings of an ambiguous claim, by name; shown beside the verdict, never counted.
+    n : int, optional
+        The number of independent units (seeds, networks, disturbance draws) the comparison rests on.
+    at_paper_setting : str, optional
+        When judged at a setting other than the paper's stated one: the outcome at the stated one, or why it
+        cannot be judged there, with the number.
+
+    With no checks and non-empty ``guarantees`` the claim is :data:`BY_CONSTRUCTION`.
 
     Raises
     ------
@@ -198,9 +271,10 @@ class ClaimResult:
         If a guarantee is false: something that must hold does not, so the run itself is wrong and no
         verdict is written.
     ValueError
-        If ``checks`` is empty.
+        If ``checks`` and ``guarantees`` are both empty, ``readings`` is given without ``reading_name``, or
+        ``n`` is below 1.
     TypeError
-        If ``headline`` is not a :class:`Headline`.
+        If ``headline`` is not a :class:`Headline` or a reading not a :class:`Reading`.
     """
 
     id: str
@@ -212,9 +286,26 @@ class ClaimResult:
     headline: Headline | None = None
     paper: str | None = None
     title: str | None = None
+    reading: str | None = None
+    reading_name: str | None = None
+    readings: Mapping[str, Reading] | None = None
+    n: int | None = None
+    at_paper_setting: str | None = None
 
     def __post_init__(self) -> None:
-        verdict_from_checks(self.checks)  # refuses a claim without checks
+        if self.checks or not self.guarantees:
+            verdict_from_checks(self.checks)  # refuses a claim with neither checks nor guarantees
+        if self.readings is not None:
+            wrong = [k for k, r in self.readings.items() if not isinstance(r, Reading)]
+            if wrong or not self.readings or not self.reading_name:
+                raise (TypeError if wrong else ValueError)(
+                    f"claim {self.id}: readings must be a non-empty name -> Reading mapping beside a reading_name "
+                    f"(wrong: {wrong})")
+            object.__setattr__(self, "readings", dict(self.readings))
+        if self.n is not None:
+            if isinstance(self.n, bool) or int(self.n) != self.n or self.n < 1:
+                raise ValueError(f"claim {self.id}: n must be a positive count of independent units, got {self.n!r}")
+            object.__setattr__(self, "n", int(self.n))
         failed = [k for k, v in (self.guarantees or {}).items() if not bool(v)]
         if failed:
             raise GuaranteeFailed(f"claim {self.id}: guarantee(s) {', '.join(failed)} do not hold")
@@ -227,8 +318,15 @@ class ClaimResult:
 
     @property
     def verdict(self) -> str:
-        """``"reproduced"`` (every check holds), ``"partly"`` (some do) or ``"not reproduced"`` (none does)."""
-        return verdict_from_checks(self.checks)
+        """``"reproduced"`` (every check holds), ``"partly"`` (some do), ``"not reproduced"`` (none does), or
+        :data:`BY_CONSTRUCTION` (no check, only guarantees)."""
+        return verdict_from_checks(self.checks) if self.checks else BY_CONSTRUCTION
+
+    def reading_verdicts(self) -> dict[str, str]:
+        """Reading name -> verdict, the counted one (:attr:`reading_name`) first; empty with one reading."""
+        if not self.readings:
+            return {}
+        return {str(self.reading_name): self.verdict} | {k: r.verdict for k, r in self.readings.items()}
 
     def replace(self, **changes: Any) -> ClaimResult:
         """A copy with ``changes`` (e.g. the ``numbers``, ``figure`` and ``headline`` a notebook adds)."""
@@ -241,6 +339,8 @@ class ClaimResult:
         out |= {k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None}
         if self.headline is not None:
             out["headline"] = self.headline.to_json()
+        if self.readings is not None:
+            out["readings"] = {k: r.to_json() for k, r in self.readings.items()}
         return copy.deepcopy(out)  # the result stays frozen
 
     @classmethod
@@ -259,13 +359,15 @@ class ClaimResult:
         unknown = sorted(set(data) - {*_REQUIRED, *_OPTIONAL})
         if missing or unknown:
             raise ValueError(f"claim {cid!r}: keys missing {missing}, unknown {unknown}")
-        if data["verdict"] not in VERDICTS:
+        if data["verdict"] not in STATUSES:
             raise ValueError(f"claim {cid!r} has verdict {data['verdict']!r}")
         if not all((data.get("guarantees") or {}).values()):
             raise ValueError(f"claim {cid!r} has a failed guarantee")
         fields = {k: v for k, v in data.items() if k != "verdict"}
         if data.get("headline") is not None:
             fields["headline"] = Headline.from_json(data["headline"])
+        if data.get("readings") is not None:
+            fields["readings"] = {k: Reading.from_json(r) for k, r in data["readings"].items()}
         claim = cls(**fields)
         if claim.verdict != data["verdict"]:
             raise ValueError(f"claim {cid!r}: verdict {data['verdict']!r} is not the one its checks imply "

@@ -9,7 +9,7 @@ import pytest
 from fnnbook.scoreboard import (NOT_RUN, SCOREBOARD_TASK, Claim, headline_of, plot_verdicts, read_claims,
                                render_scoreboard, score_rows, self_check, short_title, verdict_counts,
                                with_scoreboard_claims)
-from fnnlib.results import ClaimResult, GuaranteeFailed, Results, headline_number
+from fnnlib.results import BY_CONSTRUCTION, ClaimResult, GuaranteeFailed, Reading, Results, headline_number
 
 
 def _results(task: str, *claims: ClaimResult) -> dict[str, Results]:
@@ -102,7 +102,7 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
     page = render_scoreboard(rows, profile="smoke", pages={"spiral": "spiral/spiral.ipynb"},
                              figures={"spiral": "spiral"}, summary_figure="verdicts.png")
     assert page.startswith("# Scoreboard\n")
-    assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 2 not run." in page
+    assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 0 verified by construction, 2 not run." in page
     assert "```{image} verdicts.png" in page  # the verdicts per section, under the counts
     assert ":::{warning}" in page  # not the paper profile
     lines = page.splitlines()
@@ -147,6 +147,23 @@ def test_scoreboard_row_shows_headline_paper_and_guarantees_apart(claims_file: P
     assert body.index("`frozen weights unchanged`") > guarantees_at > checks_at
 
 
+def test_row_shows_both_readings_n_and_the_paper_setting_the_count_uses_the_first(claims_file: Path) -> None:
+    s1 = ClaimResult("S1", checks={"strict a": True, "strict b": False}, rule="r", reading="both a and b",
+                     reading_name="strict", readings={"as worded": Reading("a only", {"a": True})}, n=3,
+                     at_paper_setting="at 4 N: cannot be judged (needs 5.2 N of thrust)")
+    s2 = ClaimResult("S2", checks={}, guarantees={"algebra of Eq. (25)": True}, rule="r")
+    rows = score_rows(read_claims(claims_file), _results("spiral", s1, s2))
+    page = render_scoreboard(rows, profile="paper", pages={})
+    assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 1 verified by construction, 1 not run." in page
+    row, body = _row_lines(page, "S1")
+    assert "{bdg-warning}`partly` strict: partly; as worded: reproduced]{.sb-verdict}" in row
+    assert "**1 of 2 (n = 3)**" in row and "at 4 N: cannot be judged (needs 5.2 N of thrust)" in row
+    assert "**Reading (strict, counted).** both a and b" in body and 'Reading "as worded"** (reproduced' in body
+    row2, body2 = _row_lines(page, "S2")
+    assert "{bdg-info}`verified by construction`" in row2 and "No check" in body2
+    assert verdict_counts(rows)["Spiral (Sec. 3-4)"][BY_CONSTRUCTION] == 1
+
+
 def test_headline_of_a_single_value_has_no_spread() -> None:
     name, text = headline_of(ClaimResult("S1", checks={"a": True}, rule="r",
                                          headline=headline_number("RMSE", 0.0421, unit="cm")))
@@ -164,8 +181,8 @@ def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) ->
     results = _results("t", ClaimResult("S1", checks={"a": True}, numbers={}, rule="r"))
     rows = score_rows(read_claims(claims_file), results)
     assert verdict_counts(rows) == {
-        "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, NOT_RUN: 1},
-        "Beyond the paper": {"reproduced": 0, "partly": 0, "not reproduced": 0, NOT_RUN: 1}}
+        "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, BY_CONSTRUCTION: 0, NOT_RUN: 1},
+        "Beyond the paper": {"reproduced": 0, "partly": 0, "not reproduced": 0, BY_CONSTRUCTION: 0, NOT_RUN: 1}}
     png = plot_verdicts(rows, tmp_path / "verdicts.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
