@@ -97,16 +97,15 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
                        "and Q positive definite on the unstable modes?")
 
 
-class _KalmanBase(AugmentedObserver):
-    r"""Shared set-up of the Kalman filters: the measurement ``C``, the disturbance layout ``E``, Q, R, P0,
-    the detectability check and the filterpy filter.
+class _OutputModel(AugmentedObserver):
+    r"""The augmented model with a measurement ``C`` and a disturbance layout ``E``, and its detectability check.
 
     ``disturbance`` ``E`` (n, q) (or a list of the q states it acts on): :math:`\dot x = f(x, u) + E d`,
     default every state (E = I). With a ``C`` or an ``E``, the augmented pair is checked for detectability
     at the model's Jacobian ``A`` (default: at the origin) and refused with the PBH reason.
     """
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
+    def __init__(self, f: VectorField, Ts: float, n: int, *, C=None, disturbance=None, A=None):
         super().__init__(f, Ts, n)
         self.C_x = None if C is None else check_output_matrix(C, self.n)  # partial measurements y = C x
         self.E = None if disturbance is None else disturbance_matrix(disturbance, self.n)
@@ -122,13 +121,6 @@ class _KalmanBase(AugmentedObserver):
             check_detectable(self._linearised(A), self.C, labels=[f"x{i}" for i in range(self.n)] +
                              [f"d{j}" for j in range(q)], what="the augmented [x; d] model")
         self.q, self.p = q, self.C.shape[0]
-        m = self.n + q
-        self.Q = as_covariance(Q, m, name="Q")
-        self.R = as_covariance(R, self.p, name="R", definite=True)
-        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
-            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
-            P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
-        self.P0 = as_covariance(P0, m, name="P0")
 
     def _linearised(self, A) -> Tensor:
         """The augmented transition at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
@@ -223,6 +215,20 @@ class _KalmanBase(AugmentedObserver):
         return DisturbanceEstimate(x_hat, d_hat, f_hat)
 
 
+class _KalmanBase(_OutputModel):
+    """Shared set-up of the Kalman filters: :class:`_OutputModel` (``C``, ``E``, detectability) and Q, R, P0."""
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
+        super().__init__(f, Ts, n, C=C, disturbance=disturbance, A=A)
+        q, m = self.q, self.n + self.q
+        self.Q = as_covariance(Q, m, name="Q")
+        self.R = as_covariance(R, self.p, name="R", definite=True)
+        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
+            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
+            P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
+        self.P0 = as_covariance(P0, m, name="P0")
+
+
 def disturbance_matrix(E, n: int) -> Tensor:
     """The disturbance layout ``E`` (n, q) float64 from a matrix or a list of state indices."""
     E = torch.as_tensor(E)
@@ -260,7 +266,7 @@ class KalmanObserver(_KalmanBase):
         Partial measurements ``y = C x`` (p, n), the disturbance layout and the model Jacobian, as
         :class:`_KalmanBase` takes them (detectability checked there). With any of them the filter is the
         stationary Kalman gain of the augmented model linearised at ``A`` (default: at the origin), run with
-        the model evaluated at the *estimate* (:meth:`_KalmanBase.constant_gain_loop`; ``steady_state`` must
+        the model evaluated at the *estimate* (:meth:`_OutputModel.constant_gain_loop`; ``steady_state`` must
         then be True), and it takes gaps (``mask`` or NaN). Without them the full-state filter above is unchanged.
     """
 

@@ -84,3 +84,21 @@ def test_the_full_state_filter_is_unchanged():
         kf.A, kf.C, kf.Q, kf.R).K)
     with pytest.raises(NotImplementedError, match="needs every sample"):
         kf.observe(x, u, mask=torch.ones(T, dtype=torch.bool))
+
+
+def test_output_luenberger_places_the_poles_of_the_linearised_model_and_tracks():
+    poles = [0.7, 0.75, 0.8]
+    obs = F.LuenbergerObserver(PLANT, TS, 2, poles, C=C, disturbance=[1], A=A)
+    np.testing.assert_allclose(np.sort(obs.error_poles().real), poles, atol=1e-9)
+    assert obs.L.shape == (3, 1)
+    x, u = _data()
+    y = x @ C.T
+    est = obs.estimate(y, u)
+    # the prior error e_{k+1|k} = (Phi - L C) e_{k|k-1} on the linear plant: gone after 120 steps (0.8^120 ~ 2e-12)
+    assert float((est.x_hat[-1] - x[-1]).abs().max()) < 1e-8 and abs(float(est.d_hat[-1, 1]) - 0.3) < 1e-8
+    y[50:70] = float("nan")
+    assert bool(torch.isfinite(obs.estimate(y, u).x_hat).all())
+    with pytest.raises(DetectabilityError):
+        F.LuenbergerObserver(PLANT, TS, 2, [0.7, 0.75, 0.8, 0.85], C=C, A=A)
+    with pytest.raises(ValueError, match=r"observer gain L must have shape \(3, 1\)"):
+        F.LuenbergerObserver(PLANT, TS, 2, L=torch.zeros(4, 2), C=C, disturbance=[1], A=A)
