@@ -107,7 +107,7 @@ print(f"{len(b_nets)} neural ODEs of bottle loaded (seeds {b_seeds}); hand-tuned
       f"beta = {bottle_beta:g}, N = {bN}")
 
 # %%
-def o1_loss(net, x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+def o1_loss(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
     """The O1 error of cascade predictions ``z`` of throws ``x``: mean position error N = 0.5 s ahead."""
     return F.error_norm(z[..., : x.shape[-2] - bN, :3], x[..., bN:, :3]).mean()
 
@@ -119,7 +119,7 @@ def bottle_hand(seed: int, net) -> F.GainSweep:
 
     def cost(L, beta):
         with torch.no_grad():
-            return float(o1_loss(net, x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, L, beta)))
+            return float(o1_loss(x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, L, beta)))
     return F.sweep_gains(cost, bottle_hand_L_grid, bottle_hand_beta_grid)
 
 
@@ -128,7 +128,7 @@ def bottle_tune(seed: int, net, hand: F.GainSweep) -> F.TunedGains:
     which = torch.randperm(x_b_train.shape[0], generator=F.make_generator(seed))[:bottle_tune_throws]
 
     def objective(gains, x, u, mask):  # the judged metric on the training throws, differentiable in the gains
-        return o1_loss(net, x, F.cascade_forward(net, x, b_Ts, bN, gains, rows=x.shape[-2] - bN))
+        return o1_loss(x, F.cascade_forward(net, x, b_Ts, bN, gains, rows=x.shape[-2] - bN))
     return F.tune_gains(net, x_b_train[which], b_Ts, bN, L0=hand.L, beta0=hand.beta, objective=objective,
                         iterations=bottle_tune_iterations, lr=bottle_tune_lr)
 
@@ -210,6 +210,9 @@ val_refs = M.validation_references(m["validation_flights"], m["validation_steps"
                                    max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
 val_tests = [M.FlightTest(Quadrotor(v), x_r, u_r, steps=m["validation_steps"], Ts=quad_Ts,
                           substeps=m["truth_substeps"], backend=tests[0].backend) for v in val_vehicles for x_r, u_r in val_refs]
+if float(quad_L) not in quad_L_grid or float(quad_beta) not in quad_beta_grid:
+    raise ValueError(f"the tuning grid must hold quadrotor_mpc's hand gains L = {quad_L}, beta = {quad_beta} "
+                     f"(got quad_L_grid {quad_L_grid}, quad_beta_grid {quad_beta_grid})")
 if not 1 <= quad_tune_cases <= len(val_tests):
     raise ValueError(f"quad_tune_cases must lie in 1..{len(val_tests)} (quadrotor_mpc's validation flights), "
                      f"got {quad_tune_cases}")
