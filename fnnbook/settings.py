@@ -211,11 +211,13 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                    "kf_p0_d": _NONNEG, "spiral_n_samples": _N2, "spiral_Ts": _POS, "spiral_test": _SPIRAL3,
                    "spiral_x0": _X0, "spiral_tune_x0": _X0, "spiral_tune_samples": _N2, "spiral_N": _N1,
                    "spiral_noise_std": _POS, "spiral_L": _GAIN, "spiral_beta": _NONNEG,
-                   "spiral_tune_iterations": _N1},
+                   "spiral_tune_iterations": _N1, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0)},
     "quick_start": {"T": _N2, "Ts": _POS, "N": _N1, "noise_std": _POS, "drop": _fraction,
                     "tune_iterations": _N1},
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
-                    "quad_tune_flights": _N1, "quad_tune_iterations": _N1, "quad_tune_lr": _POS},
+                    "bottle_hand_throws": _N1, "bottle_hand_L_grid": _vec(minimum=0.0),
+                    "bottle_hand_beta_grid": _vec(minimum=0.0), "quad_tune_cases": _N1,
+                    "quad_L_grid": _vec(minimum=0.0), "quad_beta_grid": _vec(minimum=0.0)},
 })
 """Per notebook: parameter -> its check, ``check(name, value)`` (:mod:`fnnlib.checks`); every parameter of
 every ``parameters`` cell but the injected ``profile``, ``out_dir``, ``data_dir`` and ``upstream_dirs``."""
@@ -326,6 +328,10 @@ def _own_system(p: Mapping[str, Any]) -> None:
         warnings.simplefilter("ignore", GainWarning)
         _gain(p, 2, p["Ts"], p["N"], L="L_hand", beta="beta_hand")
         _gain(p, 2, p["spiral_Ts"], p["spiral_N"], L="spiral_L", beta="spiral_beta")
+        for L in p["hand_L_grid"]:  # every pair of the hand sweep, on both settings
+            for beta in p["hand_beta_grid"]:
+                for Ts, N in ((p["Ts"], p["N"]), (p["spiral_Ts"], p["spiral_N"])):
+                    C.stable_gain("hand_L_grid", L, n=2, Ts=Ts, N=N, beta=beta)
 
 
 def _quick_start(p: Mapping[str, Any]) -> None:
@@ -333,7 +339,10 @@ def _quick_start(p: Mapping[str, Any]) -> None:
 
 
 def _tuned_gains(p: Mapping[str, Any]) -> None:
-    """Only the tuning's own settings: the data, hand-tuned gains and flights come from the upstream runs."""
+    """Only the tuning's own settings: the data and flights come from the upstream runs (whose Ts and N are
+    checked there); here every gain of a grid must be > 0 (``sweep_gains`` refuses the rest)."""
+    for name in ("bottle_hand_L_grid", "quad_L_grid"):
+        _need(min(p[name]) > 0, f"{name} must list gains > 0, got {p[name]}")
 
 
 RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType({

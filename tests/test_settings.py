@@ -131,9 +131,10 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("own_system", {"N": 500}, "N must be an integer with 1 <= N < n_test"),
     ("own_system", {"spiral_tune_samples": 2000}, "spiral_tune_samples <= spiral_n_samples"),
     ("own_system", {"L0": -5.0}, "L0: .*not positive definite"),
+    ("own_system", {"hand_L_grid": [2.0, 150.0]}, "hand_L_grid"),
     ("tuned_gains", {"bottle_tune_iterations": 0}, "bottle_tune_iterations must be an integer >= 1"),
-    ("tuned_gains", {"quad_tune_flights": 0}, "quad_tune_flights"),
-    ("tuned_gains", {"quad_tune_lr": 0.0}, "quad_tune_lr must be a finite number > 0"),
+    ("tuned_gains", {"quad_tune_cases": 0}, "quad_tune_cases"),
+    ("tuned_gains", {"quad_L_grid": [0.0, 3.0]}, "quad_L_grid must list gains > 0"),
     ("tuned_gains", {"bottle_tune_throws": 0}, "bottle_tune_throws must be an integer >= 1"),
 ])
 def test_bad_values_are_refused(notebook: str, change: dict[str, Any], message: str) -> None:

@@ -32,7 +32,7 @@ import numpy as np
 from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number
 from fnnlib.stats import paired_win
 
-__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b2", "b3"]
+__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b1_summary", "b2", "b3"]
 
 KALMAN_FACTOR = 2.0
 """How much worse than the Kalman filter the tuned gains may be, unit by unit (check 3)."""
@@ -106,6 +106,16 @@ def b1_paired(errors: Errors) -> dict[str, dict]:
     """The paired statistics behind :func:`b1`: ``"<setting>: tuned vs <other>"`` -> :func:`~fnnlib.stats.paired_win`."""
     return {f"{setting}: tuned vs {other}": paired_win(e["tuned"], e[other])
             for setting, e in _checked(errors).items() for other in PREDICTORS[1:] if other in e}
+
+
+def b1_summary(errors: Errors) -> dict[str, dict]:
+    """Per setting, what the chapter reports beside the checks: the true number of paired units ``n``, each
+    predictor's mean error, and ``kalman_beats_tuned`` (where a Kalman filter is given: the filter wins over
+    the tuned gains by :func:`~fnnlib.stats.paired_win`, so the chapter must say the filter is better there;
+    ``None`` where no filter is given). Not a check: the verdict is :func:`b1`'s."""
+    return {setting: {"n": int(e["tuned"].size), "mean": {k: float(v.mean()) for k, v in e.items()},
+                      "kalman_beats_tuned": (paired_win(e["kalman"], e["tuned"])["win"] if "kalman" in e else None)}
+            for setting, e in _checked(errors).items()}
 
 
 MIN_SEEDS = 5

@@ -157,7 +157,8 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Ten
 @torch.no_grad()
 def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Sequence[float] | Tensor,
                   beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False,
-                  u: Tensor | None = None, mask: Tensor | None = None) -> Tensor:
+                  u: Tensor | None = None, mask: Tensor | None = None, C=None, x0: Tensor | None = None,
+                  A: Tensor | None = None) -> Tensor:
     r"""The N-step cascade for a batch of (base gain, decay rate) pairs in one pass.
 
     Batch element ``g`` runs :func:`cascade_predict` with gain ``L_g`` and
@@ -183,12 +184,18 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Seque
         Inputs of a controlled model, as :func:`cascade_predict` takes them.
     mask : Tensor of bool, shape (..., T) or (..., T, n), optional
         Missing samples (or NaN in ``x``), as :func:`cascade_predict` takes them.
+    C, x0, A : optional
+        Partial measurements ``y = C x``, as :func:`cascade_predict` takes them: ``x`` is then ``y``
+        (..., T, p) and ``L`` output gains (n, p) or (G, n, p); each pair runs :func:`cascade_predict`
+        (its checks included), one after another.
 
     Returns
     -------
     Tensor, shape (G, ..., T, n)
         Row ``k`` predicts the state at ``t_{k+N}``.
     """
+    if C is not None:
+        return _output_sweep(f, x, Ts, N, L, beta, allow_unstable=allow_unstable, u=u, mask=mask, C=C, x0=x0, A=A)
     meas, Ts, N = _measured(f, x, Ts, N, None, u=u, mask=mask)
     n = x.shape[-1]
     L = gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)  # (G, n) base gains
@@ -203,6 +210,23 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Seque
         return run_cascade(f, x.expand(G, *x.shape), L_stack, Ts, diagonal=True, u=u)
     meas = meas._replace(y=meas.y.expand(G, *x.shape), mask=meas.mask.expand(G, *x.shape))
     return gap_cascade(f, meas, L_stack, Ts, n, diagonal=True)
+
+
+def _output_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L, beta, **kw) -> Tensor:
+    """:func:`cascade_sweep` with ``C``: output gains ``L`` (n, p) or (G, n, p) paired with ``beta`` (B,) by
+    broadcasting, each pair through :func:`cascade_predict`; returns (G, ..., T, n)."""
+    L = torch.as_tensor(L, dtype=torch.float64)
+    if L.ndim == 2:
+        L = L[None]
+    if L.ndim != 3:
+        raise ValueError(f"with C, L must be an output gain (n, p) or a batch (G, n, p), got shape {tuple(L.shape)}")
+    beta = torch.as_tensor(beta, dtype=torch.float64).reshape(-1)
+    G, B = L.shape[0], beta.shape[0]
+    if B != 1 and G != 1 and B != G:
+        raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
+    G = max(G, B)
+    L, beta = L.expand(G, *L.shape[1:]), beta.expand(G)
+    return torch.stack([cascade_predict(f, x, Ts, N, L[g], float(beta[g]), **kw) for g in range(G)])
 
 
 @torch.no_grad()

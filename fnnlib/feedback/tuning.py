@@ -357,3 +357,50 @@ def _as_tuple(v) -> tuple:
     """A vector or matrix setting as nested tuples of floats (hashable, for the frozen recipe)."""
     t = torch.as_tensor(v, dtype=torch.float64)
     return tuple(t.tolist()) if t.ndim == 1 else tuple(tuple(r) for r in t.tolist())
+
+
+@dataclass
+class GainSweep:
+    """What :func:`sweep_gains` found: the best ``L`` and ``beta``, their ``cost``, and ``table``, the cost of
+    every pair (``len(L_grid)`` rows by ``len(beta_grid)`` columns; ``inf`` where the cost was not finite)."""
+
+    L: float
+    beta: float
+    cost: float
+    L_grid: list[float]
+    beta_grid: list[float]
+    table: list[list[float]]
+
+    def as_dict(self) -> dict:
+        """Plain values, for a results file."""
+        return {"L": self.L, "beta": self.beta, "cost": self.cost, "L_grid": self.L_grid,
+                "beta_grid": self.beta_grid, "table": self.table}
+
+
+def sweep_gains(cost: Callable[[float, float], float], L_grid, beta_grid) -> GainSweep:
+    r"""A grid search over the scalar gain :math:`L` and the decay rate :math:`\beta` of Eq. (11).
+
+    What an engineer does by hand (a few values of each, kept where the cost on *training* data is lowest),
+    or a batched closed-loop tuning where ``cost`` is the loop's error (e.g. the tracking error of flights).
+    ``cost(L, beta)`` -> a float (lower is better); a non-finite cost (a diverged run) counts as ``inf``
+    and is never kept. Ties go to the first pair in row-major order (``L`` outer). Raises ``ValueError``
+    before any call on an empty grid, a gain <= 0 or a decay < 0, and when no pair has a finite cost.
+    """
+    if not callable(cost):
+        raise TypeError(f"cost must be a callable cost(L, beta) -> float, got {type(cost).__name__}")
+    Ls, betas = ([float(v) for v in torch.as_tensor(g, dtype=torch.float64).reshape(-1).tolist()]
+                 for g in (L_grid, beta_grid))
+    if not Ls or not betas:
+        raise ValueError(f"sweep_gains needs non-empty grids, got L_grid {Ls}, beta_grid {betas}")
+    if not all(math.isfinite(v) and v > 0 for v in Ls):
+        raise ValueError(f"every gain of L_grid must be finite and > 0, got {Ls}")
+    if not all(math.isfinite(v) and v >= 0 for v in betas):
+        raise ValueError(f"every decay rate of beta_grid must be finite and >= 0, got {betas}")
+    table = []
+    for L in Ls:
+        row = [float(cost(L, b)) for b in betas]
+        table.append([c if math.isfinite(c) else math.inf for c in row])
+    i, j = min(((i, j) for i in range(len(Ls)) for j in range(len(betas))), key=lambda ij: table[ij[0]][ij[1]])
+    if not math.isfinite(table[i][j]):
+        raise ValueError("sweep_gains: no pair of the grid has a finite cost")
+    return GainSweep(Ls[i], betas[j], table[i][j], Ls, betas, table)

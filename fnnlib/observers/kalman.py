@@ -97,16 +97,15 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
                        "and Q positive definite on the unstable modes?")
 
 
-class _KalmanBase(AugmentedObserver):
-    r"""Shared set-up of the Kalman filters: the measurement ``C``, the disturbance layout ``E``, Q, R, P0,
-    the detectability check and the filterpy filter.
+class _OutputModel(AugmentedObserver):
+    r"""The augmented model with a measurement ``C`` and a disturbance layout ``E``, and its detectability check.
 
     ``disturbance`` ``E`` (n, q) (or a list of the q states it acts on): :math:`\dot x = f(x, u) + E d`,
     default every state (E = I). With a ``C`` or an ``E``, the augmented pair is checked for detectability
     at the model's Jacobian ``A`` (default: at the origin) and refused with the PBH reason.
     """
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
+    def __init__(self, f: VectorField, Ts: float, n: int, *, C=None, disturbance=None, A=None):
         super().__init__(f, Ts, n)
         self.C_x = None if C is None else check_output_matrix(C, self.n)  # partial measurements y = C x
         self.E = None if disturbance is None else disturbance_matrix(disturbance, self.n)
@@ -122,13 +121,6 @@ class _KalmanBase(AugmentedObserver):
             check_detectable(self._linearised(A), self.C, labels=[f"x{i}" for i in range(self.n)] +
                              [f"d{j}" for j in range(q)], what="the augmented [x; d] model")
         self.q, self.p = q, self.C.shape[0]
-        m = self.n + q
-        self.Q = as_covariance(Q, m, name="Q")
-        self.R = as_covariance(R, self.p, name="R", definite=True)
-        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
-            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
-            P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
-        self.P0 = as_covariance(P0, m, name="P0")
 
     def _linearised(self, A) -> Tensor:
         """The augmented transition at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
@@ -181,6 +173,36 @@ class _KalmanBase(AugmentedObserver):
             return kf.update(y[:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s, R=R)
         return kf.update(y, R=R, hx=lambda s: C @ s)
 
+    def _phi(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None) -> np.ndarray:
+        r"""The model step :math:`\Phi(x, d) = (x + T_s(f(x, u) + E d),\; d)` of a filtered ``z`` (n + q,)."""
+        n = self.n
+        x, d = z[:n], z[n:]
+        with torch.no_grad():
+            xt = torch.as_tensor(x, dtype=dtype)[None]
+            rate = (self.f(0.0, xt) if u is None else self.f(0.0, xt, u[None]))[0].double().numpy()
+        Ed = d if self.E is None else self.E.numpy() @ d
+        return np.concatenate([x + self.Ts * (rate + Ed), d])
+
+    def constant_gain_loop(self, K: np.ndarray, y: Tensor, u: Tensor | None, mask: Tensor | None) -> DisturbanceEstimate:
+        r"""A constant filter gain ``K`` (n + q, p) with the model evaluated at the estimate (partial outputs, gaps).
+
+        :math:`\hat z_{k|k} = \hat z_{k|k-1} + K\,\mathrm{diag}(m_k)(y_k - C\hat z_{k|k-1})` (``m_k`` the
+        present outputs: a missing one adds no correction, none at all moves the estimate open loop), then
+        :math:`\hat z_{k+1|k} = \Phi(\hat z_{k|k}, u_k)`, from :math:`\hat z_{0|-1} = [C^+ y_0; 0]`.
+        """
+        meas, ys, us, ms = self.measurements(y, u, mask)
+        dtype, C = meas.y.dtype, self.C.numpy()
+        z = np.empty((*ys.shape[:2], self.n + self.q))
+        for i, yi in enumerate(ys):
+            prior = self.start(yi[0], None if ms is None else ms[i, 0])[:, 0]
+            for k in range(yi.shape[0]):
+                innov = yi[k] - C @ prior
+                if ms is not None:
+                    innov = innov * ms[i, k]
+                z[i, k] = prior + K @ innov
+                prior = self._phi(z[i, k], dtype, None if us is None else us[i, k])
+        return self.split(z, meas)
+
     def split(self, z: np.ndarray, meas) -> DisturbanceEstimate:
         """Augmented estimates (B, T, n + q) -> ``x_hat``, ``d_hat`` (the disturbance on the rate, ``E d``), ``f_hat``."""
         y = meas.y
@@ -191,6 +213,20 @@ class _KalmanBase(AugmentedObserver):
         with torch.no_grad():
             f_hat = eval_field(self.f, x_hat, meas.u) + d_hat  # the filter's own model: f(x_hat, u) + E d_hat
         return DisturbanceEstimate(x_hat, d_hat, f_hat)
+
+
+class _KalmanBase(_OutputModel):
+    """Shared set-up of the Kalman filters: :class:`_OutputModel` (``C``, ``E``, detectability) and Q, R, P0."""
+
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
+        super().__init__(f, Ts, n, C=C, disturbance=disturbance, A=A)
+        q, m = self.q, self.n + self.q
+        self.Q = as_covariance(Q, m, name="Q")
+        self.R = as_covariance(R, self.p, name="R", definite=True)
+        if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
+            x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
+            P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
+        self.P0 = as_covariance(P0, m, name="P0")
 
 
 def disturbance_matrix(E, n: int) -> Tensor:
@@ -226,12 +262,28 @@ class KalmanObserver(_KalmanBase):
         Use the stationary gain (:func:`steady_state_gain`) in one scan over
         time instead of filterpy's time-varying filter (a Python loop inside
         ``KalmanFilter.batch_filter``).
+    C, disturbance, A : optional
+        Partial measurements ``y = C x`` (p, n), the disturbance layout and the model Jacobian, as
+        :class:`_KalmanBase` takes them (detectability checked there). With any of them the filter is the
+        stationary Kalman gain of the augmented model linearised at ``A`` (default: at the origin), run with
+        the model evaluated at the *estimate* (:meth:`_OutputModel.constant_gain_loop`; ``steady_state`` must
+        then be True), and it takes gaps (``mask`` or NaN). Without them the full-state filter above is unchanged.
     """
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False):
-        super().__init__(f, Ts, n, Q, R, P0=P0)  # full-state measurements: f is evaluated at y (Eq. (7))
+    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False,
+                 C=None, disturbance=None, A=None):
+        super().__init__(f, Ts, n, Q, R, P0=P0, C=C, disturbance=disturbance, A=A)
         self.steady_state = bool(steady_state)
-        self.stationary = steady_state_gain(self.A, self.C, self.Q, self.R)
+        self.output_form = C is not None or disturbance is not None
+        if self.output_form:
+            if not self.steady_state:
+                raise ValueError("KalmanObserver with C or disturbance runs the stationary gain: pass steady_state=True "
+                                 "(for a time-varying filter with C use ExtendedKalmanObserver)")
+            self.takes_gaps = True
+            self.stationary = steady_state_gain(self._linearised(A).numpy(), self.C.numpy(), self.Q.numpy(),
+                                                self.R.numpy())
+        else:  # full-state measurements: f is evaluated at y (Eq. (7))
+            self.stationary = steady_state_gain(self.A, self.C, self.Q, self.R)
 
     def make_filter(self) -> KalmanFilter:
         """A filterpy ``KalmanFilter`` with F = A, B, H = C, Q, R and P = P0 (state left at zero)."""
@@ -249,8 +301,13 @@ class KalmanObserver(_KalmanBase):
             kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
         return K
 
-    def estimate(self, x: Tensor, u_ext: Tensor | None = None) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``)."""
+    def estimate(self, x: Tensor, u_ext: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``);
+        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs."""
+        if self.output_form:
+            return self.constant_gain_loop(np.asarray(self.stationary.K), x, u_ext, mask)
+        if mask is not None:
+            raise ValueError("mask needs the output form of KalmanObserver (give C, e.g. the identity)")
         x, u = self.inputs(x, u_ext)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
             return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext)

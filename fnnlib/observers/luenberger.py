@@ -22,7 +22,8 @@ from torch import Tensor
 
 from fnnlib.feedback.gains import gain_matrix
 from fnnlib.feedback.types import VectorField
-from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate
+from fnnlib.observers.augmented import DisturbanceEstimate
+from fnnlib.observers.kalman import _OutputModel
 
 
 def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: Sequence[complex], *,
@@ -91,7 +92,7 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
     return torch.as_tensor(L, dtype=torch.float64)
 
 
-class LuenbergerObserver(AugmentedObserver):
+class LuenbergerObserver(_OutputModel):
     r"""Luenberger observer on the learned model with a constant-disturbance state.
 
     The model and gain are those of :mod:`fnnlib.observers.augmented` and
@@ -110,6 +111,13 @@ class LuenbergerObserver(AugmentedObserver):
         A ready gain instead of ``poles`` (e.g. :func:`linear_feedback_gain`).
     allow_unstable : bool
         Accept poles on or outside the unit circle.
+    C, disturbance, A : optional
+        Partial measurements ``y = C x`` (p, n), the disturbance layout (states or E (n, q)) and the model
+        Jacobian (default: at the origin), as the Kalman filters take them, detectability checked. With any of
+        them the poles are placed for the augmented model linearised at ``A`` (:math:`\Phi - LC`, ``L``
+        (n + q, p)) and the observer runs with the model evaluated at the *estimate*, filter gain
+        :math:`\Phi^{-1}L` (:meth:`~fnnlib.observers.kalman._OutputModel.constant_gain_loop`); it then takes
+        gaps (``mask`` or NaN). Without them the full-state observer above is unchanged.
 
     Attributes
     ----------
@@ -120,29 +128,37 @@ class LuenbergerObserver(AugmentedObserver):
     """
 
     def __init__(self, f: VectorField, Ts: float, n: int, poles: Sequence[complex] | None = None, *,
-                 L: Tensor | None = None, allow_unstable: bool = False):
-        super().__init__(f, Ts, n)
+                 L: Tensor | None = None, allow_unstable: bool = False, C=None, disturbance=None, A=None):
+        super().__init__(f, Ts, n, C=C, disturbance=disturbance, A=A)
         if (poles is None) == (L is None):
             raise ValueError("give exactly one of poles (to place) or L (a ready observer gain)")
+        self.output_form = C is not None or disturbance is not None
+        self.Phi = self._linearised(A) if self.output_form else self.A  # the transition the poles are placed for
+        if self.output_form:
+            self.takes_gaps = True
         if poles is not None:
-            self.L = place_observer_gain(self.A, self.C, poles, allow_unstable=allow_unstable)
+            self.L = place_observer_gain(self.Phi, self.C, poles, allow_unstable=allow_unstable)
         else:
             self.L = torch.as_tensor(L, dtype=torch.float64)
-            if self.L.shape != (2 * self.n, self.n):
-                raise ValueError(f"observer gain L must have shape {(2 * self.n, self.n)}, got {tuple(self.L.shape)}")
+            if self.L.shape != (self.n + self.q, self.p):
+                raise ValueError(f"observer gain L must have shape {(self.n + self.q, self.p)}, got {tuple(self.L.shape)}")
             rho = float(np.abs(self.error_poles()).max())
             if rho >= 1 and not allow_unstable:
                 raise ValueError(f"observer gain L gives error poles with |z| = {rho:.4g} >= 1 (unstable); "
                                  "pass allow_unstable=True to use it anyway")
         self.poles = [complex(z) for z in (poles if poles is not None else self.error_poles())]
 
-    def estimate(self, x: Tensor, u: Tensor | None = None) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u``)."""
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u``);
+        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs."""
+        if self.output_form:
+            K = torch.linalg.solve(self.Phi, self.L).numpy()  # filter form: z_{k|k} = z_{k|k-1} + Phi^{-1} L (...)
+            return self.constant_gain_loop(K, x, u, mask)
         return self.constant_gain_estimate(*self.inputs(x, u), self.L, u)
 
     def error_poles(self) -> np.ndarray:
-        """Eigenvalues of :math:`A - LC` (complex, shape (2n,))."""
-        return np.linalg.eigvals((self.A - self.L @ self.C).numpy())
+        """Eigenvalues of :math:`\Phi - LC` (complex, shape (n + q,)); :math:`\Phi = A` without ``C``."""
+        return np.linalg.eigvals((self.Phi - self.L @ self.C).numpy())
 
     def __repr__(self) -> str:
         poles = [z.real if z.imag == 0 else z for z in self.poles]

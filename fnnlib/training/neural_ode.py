@@ -168,6 +168,19 @@ class HeldInputs(nn.Module):
         return self.model(t, x, self.u[k])
 
 
+def _inputs_like(u: Tensor, x: Tensor) -> Tensor:
+    """``u`` (T, m), shared by every trajectory as :meth:`~fnnlib.systems.base.System.simulate` shares it, or
+    (n_traj, T, m), one per trajectory, as (n_traj, T, m) for ``x`` (n_traj, T, n); else a ValueError naming both."""
+    n_traj, T = x.shape[:2]
+    if u.ndim == 2 and u.shape[0] == T:
+        return u.expand(n_traj, T, u.shape[1])
+    if u.ndim == 3 and u.shape[:2] == (n_traj, T):
+        return u
+    raise ValueError(f"u must have shape (T, m) = ({T}, m), shared by every trajectory, or (n_traj, T, m) = "
+                     f"({n_traj}, {T}, m), one per trajectory, for x of shape {tuple(x.shape)}; got u of shape "
+                     f"{tuple(u.shape)}")
+
+
 def train_neural_ode(
     model: nn.Module,
     t: Tensor,
@@ -203,8 +216,9 @@ def train_neural_ode(
         Seed of the mini-batch draws.
     progress : bool
         Show a progress bar.
-    u : Tensor, shape like ``x`` with m columns, optional
-        Inputs of a controlled model, row k held over the step after sample k.
+    u : Tensor, shape (T, m) or (n_traj, T, m), optional
+        Inputs of a controlled model, row k held over the step after sample k; a (T, m) ``u`` is shared
+        by every trajectory (as ``simulate`` broadcasts it).
 
     Returns
     -------
@@ -232,10 +246,7 @@ def train_neural_ode(
     dtype = next(model.parameters()).dtype
     x = x.to(dtype)  # the data follow the model's precision (simulate returns float64)
     if u is not None:
-        u = as_trajectory(u, name="u").to(dtype)
-        u = u[None] if u.ndim == 2 else u
-        if u.shape[:2] != x.shape[:2]:
-            raise ValueError(f"u must have shape {(*x.shape[:2], 'm')}, got {tuple(u.shape)}")
+        u = _inputs_like(as_trajectory(u, name="u").to(dtype), x)
     t_seg = (torch.arange(int(batch_time), dtype=dtype) * Ts)
     options = {"step_size": Ts} if method in FIXED_STEP_METHODS else None
     kwargs: dict = {} if method in FIXED_STEP_METHODS else {"rtol": rtol, "atol": atol}

@@ -10,13 +10,17 @@
 # |---|---|---|---|
 # | pendulum (`own_system`) | one noisy test-pendulum trajectory per seed | another one | 5 seeds |
 # | noisy spiral (S3, `own_system`) | a noisy test spiral started elsewhere | the S3 trajectory | 5 seeds |
-# | bottle throws (O1) | whole **training** throws | the 9 **test** throws, 0.5 s error as in O1 | test throws |
-# | quadrotor FNN-MPC (Q3) | the **training** flights, $N = 10$ | the test Lissajous on the test vehicle | networks x disturbances |
+# | bottle throws (O1) | **training** throws, the 0.5 s position error itself | the 9 **test** throws, 0.5 s error as in O1 | test throws |
+# | quadrotor FNN-MPC (Q3) | closed-loop MPC flights on **validation** references and vehicles of the training distribution | the test Lissajous on the test vehicle | networks x disturbances |
 #
-# Nothing is retrained or reflown where the upstream task already measured it: the hand-tuned and
-# open-loop errors of the bottle come from `bottle`, the FNN (hand-tuned) and Neural (no feedback)
-# flights from `quadrotor_mpc`, the pendulum and spiral numbers from `own_system`; this chapter tunes,
-# then evaluates only the tuned gains, exactly as those tasks evaluate theirs.
+# Each setting's gains are tuned on the cost it is judged by, on data the judgement never sees: the
+# bottle on the O1 error of training throws, the quadrotor through the closed loop it serves (MPC
+# flights), the pendulum and spiral on the $N$-step error. The *hand* gains are what a careful engineer
+# sets by hand: a small documented sweep on training data (bottle, pendulum, spiral), and for the
+# quadrotor the paper's own $L = 3I$, $\beta = 0.1$ (chosen by its authors for this vehicle; also a point
+# of the tuning grid). Nothing is retrained or reflown where an upstream task already measured it: the
+# open-loop errors of the bottle come from `bottle`, the FNN (hand) and Neural (no feedback) flights
+# from `quadrotor_mpc`, the pendulum and spiral numbers from `own_system`.
 
 # %% tags=["parameters"]
 profile = "paper"
@@ -28,9 +32,12 @@ upstream_dirs = {"own_system": "outputs/manual/own_system", "bottle": "outputs/m
 bottle_tune_throws = 2
 bottle_tune_iterations = 3
 bottle_tune_lr = 0.3
-quad_tune_flights = 8
-quad_tune_iterations = 8
-quad_tune_lr = 0.2
+bottle_hand_throws = 1
+bottle_hand_L_grid = [2.0, 5.0, 10.0]
+bottle_hand_beta_grid = [0.005, 0.02, 0.1]
+quad_tune_cases = 1
+quad_L_grid = [1.5, 3.0, 6.0]
+quad_beta_grid = [0.02, 0.1]
 
 # %%
 import fnnlib as F
@@ -66,17 +73,19 @@ seconds: dict[str, float] = {}
 # at least S - 1 of S units and the 90 % t-interval of the mean paired difference below 0) over the
 # hand-tuned gains and, where given, over the open-loop model; where a Kalman filter is given, the tuned
 # error must stay within 2x its error in all units but one. All checks true: *reproduced*; some: *partly*;
-# none: *not reproduced*.
+# none: *not reproduced*. `b1_summary` adds, per setting, the true number of units and whether the Kalman
+# filter beats the tuned gains (then the chapter says so below).
 
 # %% [markdown]
 # ## The bottle throws (the O1 setting)
-# The five neural ODEs of `bottle` are loaded (one checkpoint per seed), so that task's hand-tuned and
-# open-loop errors are those of these very networks. Each network's
-# $L$ (diagonal, 6 entries) and $\beta$ start at the hand-tuned values `bottle` ran with (the paper's $L = 5$,
-# $\beta = 0.02$) and take
-# `bottle_tune_iterations` Adam steps on the 0.5 s ($N = 500$) error from every start of
-# `bottle_tune_throws` **training** throws drawn with the network's seed: the O1 error itself, on training
-# data. The tuned gains are then evaluated on the 9 test throws as O1 is (every start, Euler steps of
+# The five neural ODEs of `bottle` are loaded (one checkpoint per seed), so that task's open-loop errors
+# are those of these very networks. *Hand*: per network, a 3 x 3 sweep of a scalar $L$
+# (`bottle_hand_L_grid`) and $\beta$ (`bottle_hand_beta_grid`) on the O1 error of `bottle_hand_throws`
+# training throw(s) drawn with the network's seed (`sweep_gains`); the paper's $L = 5$, $\beta = 0.02$
+# that `bottle` ran with are reported beside, not judged. *Tuned*: each network's $L$ (diagonal, 6 entries)
+# and $\beta$ start at its hand values and take `bottle_tune_iterations` Adam steps on the judged metric
+# itself, the mean 0.5 s ($N = 500$) **position** error from every start of `bottle_tune_throws` training
+# throws drawn with the network's seed (the `objective` of `tune_gains`). The tuned gains are then evaluated on the 9 test throws as O1 is (every start, Euler steps of
 # 1 ms, position error 0.5 s ahead); units are the test throws, each throw's error averaged over the five
 # networks (O1's "per throw").
 
@@ -98,10 +107,29 @@ print(f"{len(b_nets)} neural ODEs of bottle loaded (seeds {b_seeds}); hand-tuned
       f"beta = {bottle_beta:g}, N = {bN}")
 
 # %%
-def bottle_tune(seed: int, net) -> F.TunedGains:
-    """The network's (L, beta), tuned on the O1 error of training throws drawn with its seed."""
+def o1_loss(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+    """The O1 error of cascade predictions ``z`` of throws ``x``: mean position error N = 0.5 s ahead."""
+    return F.error_norm(z[..., : x.shape[-2] - bN, :3], x[..., bN:, :3]).mean()
+
+
+def bottle_hand(seed: int, net) -> F.GainSweep:
+    """The network's hand gains: the sweep's (L, beta) with the lowest O1 error on training throws."""
+    which = torch.randperm(x_b_train.shape[0], generator=F.make_generator(seed))[:bottle_hand_throws]
+    x = x_b_train[which]
+
+    def cost(L, beta):
+        with torch.no_grad():
+            return float(o1_loss(x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, L, beta)))
+    return F.sweep_gains(cost, bottle_hand_L_grid, bottle_hand_beta_grid)
+
+
+def bottle_tune(seed: int, net, hand: F.GainSweep) -> F.TunedGains:
+    """The network's (L, beta), from its hand values, tuned on the O1 error of training throws drawn with its seed."""
     which = torch.randperm(x_b_train.shape[0], generator=F.make_generator(seed))[:bottle_tune_throws]
-    return F.tune_gains(net, x_b_train[which], b_Ts, bN, L0=bottle_L, beta0=bottle_beta,
+
+    def objective(gains, x, u, mask):  # the judged metric on the training throws, differentiable in the gains
+        return o1_loss(x, F.cascade_forward(net, x, b_Ts, bN, gains, rows=x.shape[-2] - bN))
+    return F.tune_gains(net, x_b_train[which], b_Ts, bN, L0=hand.L, beta0=hand.beta, objective=objective,
                         iterations=bottle_tune_iterations, lr=bottle_tune_lr)
 
 
@@ -112,39 +140,50 @@ def o1_errors(pred: torch.Tensor) -> torch.Tensor:
 
 # %%
 t0 = time.perf_counter()
-b_tuned = [bottle_tune(s, net) for s, net in zip(b_seeds, b_nets)]
+b_hand = [bottle_hand(s, net) for s, net in zip(b_seeds, b_nets)]
+seconds["bottle_hand_sweep"] = time.perf_counter() - t0
+t0 = time.perf_counter()
+b_tuned = [bottle_tune(s, net, h) for s, net, h in zip(b_seeds, b_nets, b_hand)]
 seconds["bottle_tune"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 starts = x_b_test[:, :-bN]  # the cascade is causal: the first T - N rows are those of the whole run
-tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, torch.tensor(r.L), r.beta))
-                              for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
-hand, open_loop = o1["per_throw_m"]["feedback"], o1["per_throw_m"]["neural ODE"]  # bottle's, same networks
+with torch.no_grad():
+    tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, torch.tensor(r.L), r.beta))
+                                  for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
+    hand_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, h.L, h.beta))
+                                 for net, h in zip(b_nets, b_hand)])
+paper_gains, open_loop = o1["per_throw_m"]["feedback"], o1["per_throw_m"]["neural ODE"]  # bottle's, same networks
 seconds["bottle_eval"] = time.perf_counter() - t0
-errors = {"bottle": {"tuned": tuned_per_seed.mean(0).tolist(), "hand": hand, "open_loop": open_loop}}
+errors = {"bottle": {"tuned": tuned_per_seed.mean(0).tolist(), "hand": hand_per_seed.mean(0).tolist(),
+                     "open_loop": open_loop}}
+paper_errors = {"bottle": paper_gains}
+hand_sweeps = {"bottle": [h.as_dict() for h in b_hand]}
 tuned_values = {"bottle": [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, b_tuned)]}
-print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k, v in errors["bottle"].items()))
+print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k, v in errors["bottle"].items())
+      + f", paper's gains {np.mean(paper_gains):.4f}")
+print("hand sweep picks (L, beta): " + ", ".join(f"({h.L:g}, {h.beta:g})" for h in b_hand))
 [(np.round(r.L, 2).tolist(), round(r.beta, 4)) for r in b_tuned]
 
 # %% [markdown]
 # ## The quadrotor FNN-MPC flight (the Q3 setting)
-# For each of the five residual networks of `quadrotor_learning`, a diagonal $L$ (12 entries) and $\beta$
-# start at the paper's $L = 3 I$, $\beta = 0.1$ and take `quad_tune_iterations` Adam steps on the
-# $N = 10$-step prediction error (the MPC horizon) of `quad_tune_flights` **training** flights drawn with the
-# network's seed, with the recorded thrusts as inputs. The cascade is the one inside the MPC horizon
-# (`FeedbackCascadeModel`): each layer's step is the model's RK4 step $\Phi$ plus $T_s L_k(z - \hat x)$, which
-# is the cascade of Sec. 3.3 with the rate $(\Phi(z, u) - z)/T_s$. FNN then flies the test Lissajous on the
-# test vehicle with the tuned gains, at the judged 6 N bound, for every network and disturbance of
-# `quadrotor_mpc` and each of its cost variants (Eq. (28) as written and as the release flies it: one B1
-# setting each, as Q3 judges both); the 4 N bound, context only in Q3-Q5, is not flown. The hand-tuned FNN
-# and the Neural model (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry:
-# the flight tests are built from that task's settings by the same function it uses. The tuning sees the
-# open-loop prediction error only, never the closed loop: gains that predict better need not fly better,
-# and the two cost variants close the loop differently.
+# The gains are tuned **through the closed loop they serve**: for each of the five residual networks of
+# `quadrotor_learning` and each cost variant of `quadrotor_mpc` (Eq. (28) as written and as the release
+# flies it: one B1 setting each, as Q3 judges both), FNN flies, at every $(L, \beta)$ of the grid
+# `quad_L_grid` x `quad_beta_grid` (a scalar $L$ times $I$; the paper's $L = 3$, $\beta = 0.1$ among them),
+# `quad_tune_cases` validation flight(s) drawn with the network's seed from `quadrotor_mpc`'s own
+# validation set (the references from the training distribution and the vehicles randomised around the
+# training vehicle on which it chose AdapNN's $\Gamma$), at the judged 6 N bound; the pair with the
+# lowest mean tracking RMSE is kept (`sweep_gains`, a diverged flight counting as infinite). The test
+# Lissajous on the test vehicle is never flown in the tuning. FNN then flies the test with the tuned
+# gains for every network and disturbance of `quadrotor_mpc`. The hand gains (FNN) and the Neural model
+# (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry; the flight tests
+# are built from that task's settings by the same function it uses. The 4 N bound, context only in
+# Q3-Q5, is not flown.
 
 # %% tags=["hide-input"]
 import fnnlib.mpc as M
-from fnnlib.data.quadrotor import load_flights
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
+from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the flight settings it flew
 quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
@@ -153,7 +192,6 @@ costs = list(q_rmse)
 members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
            F.load_seed_checkpoints(up["quadrotor_learning"], "residual", expected_kind="AeroResidual",
                                    run=upstream_parameters(up["quadrotor_learning"]))]
-flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")
 
 
 # %% tags=["hide-input"]
@@ -165,6 +203,19 @@ if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
 tests = setup.tests
 mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
+val_vehicles = M.randomized_vehicles(TRAINING_TRUTH, m["validation_vehicles"], seed=m["validation_vehicle_seed"],
+                                     **VALIDATION_RANDOMIZATION)  # quadrotor_mpc's validation set, rebuilt as it builds it
+val_refs = M.validation_references(m["validation_flights"], m["validation_steps"], quad_N, seed=m["validation_seed"],
+                                   Ts=quad_Ts, n_waypoints=m["validation_waypoints"], box=PAPER_FLIGHT_DATA["box"],
+                                   max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
+val_tests = [M.FlightTest(Quadrotor(v), x_r, u_r, steps=m["validation_steps"], Ts=quad_Ts,
+                          substeps=m["truth_substeps"], backend=tests[0].backend) for v in val_vehicles for x_r, u_r in val_refs]
+if float(quad_L) not in quad_L_grid or float(quad_beta) not in quad_beta_grid:
+    raise ValueError(f"the tuning grid must hold quadrotor_mpc's hand gains L = {quad_L}, beta = {quad_beta} "
+                     f"(got quad_L_grid {quad_L_grid}, quad_beta_grid {quad_beta_grid})")
+if not 1 <= quad_tune_cases <= len(val_tests):
+    raise ValueError(f"quad_tune_cases must lie in 1..{len(val_tests)} (quadrotor_mpc's validation flights), "
+                     f"got {quad_tune_cases}")
 
 
 # %% tags=["hide-input"]
@@ -174,33 +225,39 @@ def fnn_flight(net, L, beta, test: M.FlightTest, cost: str) -> M.FlightRow:
     return M.flight_row(M.fly(fnn, mpcs[cost], test))
 
 # %%
-def quad_tune(seed: int, net) -> F.TunedGains:
-    """The network's (L, beta), tuned on the N-step error of training flights drawn with its seed."""
-    model = M.PredictionModel("Neural", plant, net, Ts=flights.Ts)
-    which = torch.randperm(flights.n_flights, generator=F.make_generator(seed))[:quad_tune_flights]
-    x, u = flights.x[which, :-1, :12], flights.u[which]  # vehicle states and the thrusts applied, (K, T, 12), (K, T, 4)
+def quad_tune(seed: int, net, cost: str) -> F.GainSweep:
+    """The network's (L, beta) for MPC cost ``cost``: the grid pair with the lowest mean tracking RMSE of
+    closed-loop flights on validation cases drawn with its seed (never the test flight)."""
+    which = torch.randperm(len(val_tests), generator=F.make_generator(seed))[:quad_tune_cases].tolist()
 
-    def step_rate(t, z, uu):  # the Euler step of the cascade becomes the model's RK4 step Phi, as in the MPC
-        return (model.phi(z, uu) - z) / flights.Ts
-
-    return F.tune_gains(step_rate, x, flights.Ts, quad_N, u=u, L0=quad_L, beta0=quad_beta,
-                        iterations=quad_tune_iterations, lr=quad_tune_lr)
+    def rmse(L, beta):  # a flight that diverges or leaves the model's domain scores inf
+        out = []
+        for i in which:
+            try:
+                r = M.fly(M.fnn_model(net, L, beta, plant=plant, N=quad_N, Ts=quad_Ts), mpcs[cost], val_tests[i])
+            except ValueError:
+                return float("inf")
+            out.append(float("inf") if r.diverged else M.tracking_rmse(r.x, r.x_ref)["mean_axis"])
+        return float(np.mean(out))
+    return F.sweep_gains(rmse, quad_L_grid, quad_beta_grid)
 
 
 # %%
 t0 = time.perf_counter()
-q_tuned = [quad_tune(s, net) for s, net in members]
+q_tuned = {cost: [quad_tune(s, net, cost) for s, net in members] for cost in costs}
 seconds["quad_tune"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 tuned_flights = {}
 for cost in costs:  # (network, disturbance) with the disturbance fastest, as quadrotor_mpc pairs them
-    rows = [fnn_flight(net, torch.tensor(r.L), r.beta, t, cost) for (_, net), r in zip(members, q_tuned) for t in tests]
+    rows = [fnn_flight(net, r.L, r.beta, t, cost) for (_, net), r in zip(members, q_tuned[cost]) for t in tests]
     tuned_flights[cost] = [{"fallbacks": row.fallbacks, "fallback_reasons": row.fallback_reasons,
                             "diverged": row.diverged} for row in rows]
     errors[f"quadrotor {cost}"] = {"tuned": [row.mean_axis for row in rows],
                                    "hand": q_rmse[cost]["FNN"], "open_loop": q_rmse[cost]["Neural"]}
+    hand_sweeps[f"quadrotor {cost}"] = [r.as_dict() for r in q_tuned[cost]]  # the tuning grid, hand pair included
 seconds["quad_fly"] = time.perf_counter() - t0
-tuned_values["quadrotor"] = [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for (s, _), r in zip(members, q_tuned)]
+tuned_values["quadrotor"] = {cost: [{"seed": s, "L": r.L, "beta": r.beta, "validation_rmse": r.cost}
+                                    for (s, _), r in zip(members, q_tuned[cost])] for cost in costs}
 
 
 # %%
@@ -208,16 +265,18 @@ print(", ".join(f"{k}: " + ", ".join(f"{p} {np.mean(v):.4f} m" for p, v in e.ite
                 for k, e in errors.items() if k.startswith("quadrotor")))
 print("tuned flights with fallbacks: " + ", ".join(f"{cost} {sum(f['fallbacks'] > 0 for f in fl)}, diverged "
                                                     f"{sum(f['diverged'] for f in fl)}" for cost, fl in tuned_flights.items()))
-[(np.round(r.L, 2).tolist(), round(r.beta, 3)) for r in q_tuned]
+{cost: [(r.L, r.beta) for r in q_tuned[cost]] for cost in costs}
 
 # %% [markdown]
 # ## The pendulum and the noisy spiral (from `own_system`)
-# Units: the 5 seeds of that chapter; predictors: open loop, hand-picked, tuned, Kalman.
+# Units: the 5 seeds of that chapter for the pendulum, the 5 spiral networks for the spiral; predictors:
+# open loop, hand (a 3 x 3 sweep on the tuning data), tuned, Kalman.
 
 # %%
 own = upstream["own_system"].metrics["b1"]
 for k in ("pendulum", "spiral"):
     errors[k], tuned_values[k] = own["errors"][k], own["tuned"][k]
+    hand_sweeps[k], paper_errors[k] = own["hand_sweeps"][k], own["paper_gain_errors"][k]
 {k: {p: round(float(np.mean(v)), 4) for p, v in errors[k].items()} for k in ("pendulum", "spiral")}
 
 # %% [markdown]
@@ -236,12 +295,17 @@ fig_b1 = F.save_figure(fig, out, "b1_tuned_vs_hand")
 
 # %% [markdown]
 # ## Verdict
+# The checks, then per setting the true number of paired units $n$, each predictor's mean error, and where
+# the steady-state Kalman filter (pendulum, spiral) beats the tuned gains by the same paired rule: there
+# the filter, not the tuned cascade, is the better predictor, and the line says so.
 
 # %% tags=["nbval-check-output"]
 rule = rules.b1(errors)
 paired = rules.b1_paired(errors)
+summary = rules.b1_summary(errors)
 claims = [rule.replace(figure=fig_b1, title="L and beta tuned from data",
-                      numbers={"errors": errors, "paired": paired, "tuned": tuned_values,
+                      numbers={"errors": errors, "paired": paired, "summary": summary, "tuned": tuned_values,
+                               "hand_sweeps": hand_sweeps, "paper_gain_errors": paper_errors,
                                "bottle_tuned_per_seed": tuned_per_seed.tolist(),
                                "quadrotor_tuned_flights": tuned_flights},
                       headline=F.headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
@@ -252,6 +316,9 @@ for name, ok in rule.checks.items():
     print(f"{name:50s} {'holds' if ok else 'fails'}")
 for c in claims:
     print(f"{c.id}: {c.verdict}")
+for name, row in summary.items():
+    print(f"{name:24s} n = {row['n']:2d}  " + "  ".join(f"{k} {v:.4g}" for k, v in row["mean"].items())
+          + ("  (the Kalman filter beats the tuned gains here)" if row["kalman_beats_tuned"] else ""))
 
 # %%
 seconds["total"] = time.perf_counter() - t_start

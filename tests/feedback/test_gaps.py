@@ -137,3 +137,21 @@ def test_tune_gains_with_C_tunes_an_output_gain_and_checks_it():
     with pytest.raises(F.GainError, match="not detectable"):  # a Jacobian whose mode the position does not see
         F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64),
                      L0=_gain(), beta0=0.05, iterations=1, lr=0.1)
+
+
+def test_cascade_sweep_with_C_runs_each_output_gain_as_cascade_predict():
+    x, u = _data()
+    y = x @ C.T
+    y[30:45] = float("nan")
+    L1, L2 = _gain(), 0.5 * _gain()
+    sweep = F.cascade_sweep(PLANT, y, TS, 5, torch.stack([L1, L2]), [0.05, 0.2], u=u, C=C, A=A)
+    assert sweep.shape == (2, T, 2)
+    for g, (L, beta) in enumerate([(L1, 0.05), (L2, 0.2)]):
+        torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, L, beta, u=u, C=C, A=A),
+                                   rtol=0, atol=0)
+    one_gain = F.cascade_sweep(PLANT, y, TS, 5, L1, [0.05, 0.2], u=u, C=C, A=A)  # one gain, two decays
+    torch.testing.assert_close(one_gain[0], sweep[0], rtol=0, atol=0)
+    with pytest.raises(ValueError, match="do not pair up"):
+        F.cascade_sweep(PLANT, y, TS, 5, torch.stack([L1, L2, L1]), [0.05, 0.2], u=u, C=C, A=A)
+    with pytest.raises(ValueError, match=r"output gain \(n, p\) or a batch \(G, n, p\)"):
+        F.cascade_sweep(PLANT, y, TS, 5, 3.0, 0.1, u=u, C=C, A=A)

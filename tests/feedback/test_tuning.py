@@ -154,3 +154,24 @@ def test_tune_gains_equals_descent_on_the_whole_cascade():
     assert tuned.loss == pytest.approx(ref, rel=1e-12)
     assert tuned.L == pytest.approx(gains.values()["L"], rel=1e-12)
     assert tuned.beta == pytest.approx(gains.values()["beta"], rel=1e-12)
+
+
+def test_sweep_gains_keeps_the_cheapest_pair_and_skips_diverged_ones():
+    from fnnlib import sweep_gains
+
+    calls = []
+
+    def cost(L, beta):  # a bowl at L = 5, beta = 0.1; L = 20 "diverges"
+        calls.append((L, beta))
+        return float("nan") if L == 20 else (L - 5) ** 2 + (beta - 0.1) ** 2
+
+    s = sweep_gains(cost, [2.0, 5.0, 20.0], [0.02, 0.1, 0.5])
+    assert (s.L, s.beta) == (5.0, 0.1) and s.cost == 0.0 and len(calls) == 9
+    assert s.table[2] == [float("inf")] * 3 and s.as_dict()["L_grid"] == [2.0, 5.0, 20.0]
+    with pytest.raises(ValueError, match="no pair"):
+        sweep_gains(lambda L, b: float("inf"), [1.0], [0.1])
+    for bad in ([], [0.0], [float("nan")]):
+        with pytest.raises(ValueError, match="L_grid"):
+            sweep_gains(cost, bad, [0.1])
+    with pytest.raises(ValueError, match="beta_grid"):
+        sweep_gains(cost, [1.0], [-0.1])

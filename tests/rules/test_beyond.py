@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b2
+from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b1_summary, b2
 from fnnlib.results import ClaimResult, Headline, headline_number
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
@@ -121,3 +121,22 @@ def test_b2_is_computed_by_the_scoreboard_from_the_tasks_claims() -> None:
     partly = seeds_check({"spiral": spiral, "quadrotor_learning": learning})
     assert partly.verdict == "partly" and partly.numbers["claims_without_spread"] == ["Q6"]
     assert seeds_check({}) is None
+
+
+def test_summary_reports_the_true_n_and_where_kalman_wins():
+    kalman_better = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05, 1.0, 1.1], "hand": [2.0] * 7,
+                     "kalman": [0.6, 0.6, 0.5, 0.55, 0.6, 0.6, 0.6]}
+    tuned_better = {"tuned": [1.0, 1.1, 0.9], "hand": [2.0, 2.1, 2.2], "kalman": [1.5, 1.6, 1.7]}
+    s = b1_summary({"a": kalman_better, "b": tuned_better, "c": SWAPPED})
+    assert s["a"]["n"] == 7 and s["b"]["n"] == 3 and s["c"]["n"] == 5
+    assert s["a"]["kalman_beats_tuned"] is True  # the chapter must say the filter wins here
+    assert s["b"]["kalman_beats_tuned"] is False
+    assert s["c"]["kalman_beats_tuned"] is None  # no filter given
+    assert s["b"]["mean"]["hand"] == pytest.approx(2.1)
+    # within 2x of the filter, so the check holds although the filter wins: the summary says so
+    assert b1({"a": kalman_better}).checks["a: tuned within 2x Kalman"] is True
+
+
+def test_summary_refuses_what_b1_refuses():
+    with pytest.raises(ValueError, match="no 'hand'"):
+        b1_summary({"a": {"tuned": [1.0, 2.0]}})

@@ -23,12 +23,12 @@ def _model(seed=0):
     return NeuralODE(2, (16,), "tanh").double()
 
 
-def _train(model, t, x, **kw):
+def _train(model, t, x, u=None, **kw):
     settings = dict(iterations=30, batch_size=8, batch_time=5, lr=1e-2, optimizer="adam", loss="l1", method="rk4",
                     adjoint=False, rtol=1e-7, atol=1e-9, adjoint_seminorm=True)
     settings.update(kw)
     seed = settings.pop("seed", 0)
-    return train_neural_ode(model, t, x, ODERecipe(**settings), seed=seed, progress=False)
+    return train_neural_ode(model, t, x, ODERecipe(**settings), seed=seed, progress=False, u=u)
 
 
 def _full_loss(model, t, x):
@@ -174,3 +174,25 @@ def test_a_recipe_checks_its_fields_when_made(kw, match):
     """No data needed: a bad recipe is refused where it is written, before any training."""
     with pytest.raises(ValueError, match=match):
         PAPER_SPIRAL_RECIPE.replace(**kw)
+
+
+def _controlled(seed=0):
+    seed_everything(seed)
+    return NeuralODE(2, (8,), "tanh", n_input=1).double()
+
+
+def test_a_shared_input_is_broadcast_like_simulate(data):
+    """u (T, m) for x (n_traj, T, n) trains exactly as the same u repeated per trajectory."""
+    t, x = data
+    u = torch.sin(t)[:, None]
+    shared = _train(_controlled(), t, x, u=u, iterations=3).loss
+    repeated = _train(_controlled(), t, x, u=u.expand(2, -1, -1).clone(), iterations=3).loss
+    assert shared == repeated
+
+
+@pytest.mark.parametrize("shape", [(40, 1), (3, 41, 1), (2, 40, 1), (1, 2, 41, 1)])
+def test_a_wrong_input_shape_names_both_shapes(data, shape):
+    t, x = data
+    with pytest.raises(ValueError, match=(r"u must have shape \(T, m\) = \(41, m\).*\(n_traj, T, m\) = \(2, 41, m\)"
+                                          r".*x of shape \(2, 41, 2\); got u of shape")):
+        _train(_controlled(), t, x, u=torch.zeros(shape, dtype=F64))
