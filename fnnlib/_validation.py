@@ -17,15 +17,29 @@ def as_trajectory(x: Tensor, n: int | None = None, *, name: str = "x") -> Tensor
         If it has fewer than two axes, the wrong state dimension, or holds a
         NaN or infinite value.
     """
-    if not isinstance(x, Tensor):
-        raise TypeError(f"{name} must be a torch.Tensor of shape (..., T, n), got {type(x).__name__}")
-    if not x.is_floating_point():
-        raise TypeError(f"{name} must be a floating-point tensor, got dtype {x.dtype}")
-    if x.ndim < 2:
-        raise ValueError(f"{name} must have shape (..., T, n) with at least 2 axes, got shape {tuple(x.shape)}")
+    as_series(x, name=name)
     if n is not None and x.shape[-1] != n:
         raise ValueError(f"{name} has state dimension {x.shape[-1]} (shape {tuple(x.shape)}), expected n = {n}")
     check_finite(x, name=name)
+    return x
+
+
+def as_series(x: Tensor, *, name: str = "x", last: str = "n") -> Tensor:
+    """Check that ``x`` is a floating-point tensor of shape ``(..., T, <last>)`` (at least two axes).
+
+    Raises
+    ------
+    TypeError
+        If ``x`` is not a floating-point tensor.
+    ValueError
+        If it has fewer than two axes.
+    """
+    if not isinstance(x, Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor of shape (..., T, {last}), got {type(x).__name__}")
+    if not x.is_floating_point():
+        raise TypeError(f"{name} must be a floating-point tensor, got dtype {x.dtype}")
+    if x.ndim < 2:
+        raise ValueError(f"{name} must have shape (..., T, {last}) with at least 2 axes, got shape {tuple(x.shape)}")
     return x
 
 

@@ -65,6 +65,13 @@ _OPTIONAL = ("guarantees", "headline", "paper", "title", "reading", "reading_nam
              "at_paper_setting")
 
 
+def _stored_verdict_holds(result: Any, stored: str, what: str) -> Any:
+    """``result`` when the verdict stored in a file is the one its checks imply; else ValueError naming ``what``."""
+    if result.verdict != stored:
+        raise ValueError(f"{what} verdict {stored!r} is not the one its checks imply ({result.verdict!r})")
+    return result
+
+
 class GuaranteeFailed(AssertionError):
     """A guarantee of a claim (something that must hold by construction) is false."""
 
@@ -214,11 +221,7 @@ class Reading:
         """Read what :meth:`to_json` wrote; a stored verdict other than the checks' is refused (ValueError)."""
         if set(data) != {"reading", "checks", "verdict"}:
             raise ValueError(f"a reading has the keys reading, checks, verdict, got {sorted(data)}")
-        reading = cls(data["reading"], data["checks"])
-        if reading.verdict != data["verdict"]:
-            raise ValueError(f"reading verdict {data['verdict']!r} is not the one its checks imply "
-                             f"({reading.verdict!r})")
-        return reading
+        return _stored_verdict_holds(cls(data["reading"], data["checks"]), data["verdict"], "reading")
 
 
 @dataclass(frozen=True)
@@ -368,11 +371,7 @@ class ClaimResult:
             fields["headline"] = Headline.from_json(data["headline"])
         if data.get("readings") is not None:
             fields["readings"] = {k: Reading.from_json(r) for k, r in data["readings"].items()}
-        claim = cls(**fields)
-        if claim.verdict != data["verdict"]:
-            raise ValueError(f"claim {cid!r}: verdict {data['verdict']!r} is not the one its checks imply "
-                             f"({claim.verdict!r})")
-        return claim
+        return _stored_verdict_holds(cls(**fields), data["verdict"], f"claim {cid!r}:")
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
+from fnnlib._validation import as_series
 from fnnlib.feedback.layer import check_model_dtype
 
 #: A measurement function ``h(x)``, ``x`` (batch, n) -> (batch, p).
@@ -97,12 +98,7 @@ def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None
     ``f`` the model, whose parameters must share ``y``'s dtype. With ``missing`` a NaN means "no
     measurement"; without it, NaN is refused. Raises ``TypeError`` / ``ValueError`` naming what is wrong.
     """
-    if not isinstance(y, Tensor):
-        raise TypeError(f"{name} must be a torch.Tensor of shape (..., T, p), got {type(y).__name__}")
-    if not y.is_floating_point():
-        raise TypeError(f"{name} must be a floating-point tensor, got dtype {y.dtype}")
-    if y.ndim < 2:
-        raise ValueError(f"{name} must have shape (..., T, p) with at least 2 axes, got shape {tuple(y.shape)}")
+    as_series(y, name=name, last="p")
     if y.shape[-2] < int(min_samples):
         raise ValueError(f"{name} needs at least {int(min_samples)} samples, got shape {tuple(y.shape)}")
     h, Cm = (C, None) if callable(C) and not isinstance(C, Tensor) else (None, C)
