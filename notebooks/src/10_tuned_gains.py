@@ -162,7 +162,10 @@ setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built a
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
     raise ValueError(f"the disturbances of quadrotor_mpc's settings {setup.forces} are not those it flew "
                      f"{q_mpc['disturbances']}")
-tests = setup.tests
+unit_tests = setup.unit_tests  # one per independent unit of quadrotor_mpc (its metrics' "units")
+if len(unit_tests) != len(members) or len(q_mpc["units"]) != len(members):
+    raise ValueError(f"quadrotor_mpc flew {len(q_mpc['units'])} units on {len(unit_tests)} drawn disturbances; "
+                     f"{len(members)} networks here")
 mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 
@@ -193,8 +196,8 @@ q_tuned = [quad_tune(s, net) for s, net in members]
 seconds["quad_tune"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 tuned_flights = {}
-for cost in costs:  # (network, disturbance) with the disturbance fastest, as quadrotor_mpc pairs them
-    rows = [fnn_flight(net, torch.tensor(r.L), r.beta, t, cost) for (_, net), r in zip(members, q_tuned) for t in tests]
+for cost in costs:  # unit k: network k with drawn disturbance k, as quadrotor_mpc pairs them
+    rows = [fnn_flight(net, torch.tensor(r.L), r.beta, t, cost) for (_, net), r, t in zip(members, q_tuned, unit_tests)]
     tuned_flights[cost] = [{"fallbacks": row.fallbacks, "fallback_reasons": row.fallback_reasons,
                             "diverged": row.diverged} for row in rows]
     errors[f"quadrotor {cost}"] = {"tuned": [row.mean_axis for row in rows],
