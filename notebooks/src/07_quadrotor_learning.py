@@ -146,7 +146,8 @@ for e, s in enumerate(seeds):
     axes[0].semilogy(np.arange(epochs + 1), member_loss[:, e], label=f"seed {s}")
     axes[1].semilogy(fit.val_epochs, val_loss[:, e], "o-", label=f"seed {s}")
 axes[0].set(xlabel="epoch", ylabel="training loss (per segment)", title="Training curves (Fig. A, right)")
-axes[1].set(xlabel="epoch", ylabel="validation loss (per flight)", title="3 validation flights, 2.5x longer")
+axes[1].set(xlabel="epoch", ylabel="validation loss (per flight)",
+            title=f"{val.n_flights} selection flights, 2.5x longer")
 axes[0].legend(fontsize=7)
 F.save_figure(fig, out, "training_curves")
 
@@ -182,7 +183,7 @@ for e, s in enumerate(seeds):
     if e == best_mlp:
         F.save_checkpoint(out / "mlp.pt", mlps[e], meta)
 print(f"{len(seeds)} MLPs in {mlp_s:.1f} s; single-step MSE " + ", ".join(
-    f"seed {s}: {l[0]:.3f} -> {l[-1]:.4f}" for s, l in zip(seeds, mlp_loss))
+    f"seed {s}: {loss[0]:.3f} -> {loss[-1]:.4f}" for s, loss in zip(seeds, mlp_loss))
       + f" (m/s^2)^2; kept seed {seeds[best_mlp]} (lowest on the selection flights)")
 
 # %% [markdown]
@@ -271,7 +272,7 @@ claims = [
 # %%
 F.write_results(out, task="quadrotor_learning", profile=profile, claims=claims,
                 metrics={"best_seed": seeds[best], "best_mlp_seed": seeds[best_mlp],
-                         "mlp_final_mse": [l[-1] for l in mlp_loss], "mlp_selection_mse": mlp_sel_mse,
+                         "mlp_final_mse": [loss[-1] for loss in mlp_loss], "mlp_selection_mse": mlp_sel_mse,
                          "mlp_seconds": round(mlp_s, 1), "epochs": epochs, "member_checkpoints": member_files,
                          "mlp_checkpoints": mlp_files})
 for c in claims:

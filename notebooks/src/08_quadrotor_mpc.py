@@ -69,7 +69,7 @@ import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc import randomized_vehicles, validation_references
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_THRUST_MAX, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 # %%
@@ -360,7 +360,7 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
             f"{k.split(': ', 1)[1]} {'holds' if v else 'fails'}" for k, v in r[c].checks.items()))
         held = r[c].numbers.get("paired", {})
         print("   holds in " + ", ".join(f"{k}: {w['wins']}/{w['seeds']}" for k, w in held.items())
-              if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the runs")
+              if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the units")
 
 # %%
 context_rows = [(k, rows) for k, rows in table.items() if k.u_max != u_max_judged]  # reported, never judged
@@ -378,12 +378,12 @@ def merged(r, **fields):
 
 # %%
 S = len(grid[costs[0]].units)  # the independent units of every comparison
-paper_rows = table.get(M.TableKey("as_written", 4.0))  # the paper's stated setting: R = I, 4 N (None if not flown)
+paper_rows = table.get(M.TableKey("as_written", PAPER_THRUST_MAX))  # the paper's stated setting: R = I, 4 N (or None)
 
 
 def at_paper(metric, unit, compare):
     """The outcome at the paper's stated setting and why it is not judged there (the row's at_paper_setting)."""
-    return M.unjudged_bound_note(paper_rows, metric=metric, unit=unit, need=need, u_max=4.0, compare=compare,
+    return M.unjudged_bound_note(paper_rows, metric=metric, unit=unit, need=need, u_max=PAPER_THRUST_MAX, compare=compare,
                                  setting="the paper's setting (Eq. (28) as written, R = I)",
                                  flown="kept network, the paper's force, one flight per model")
 
