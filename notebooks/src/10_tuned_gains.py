@@ -11,7 +11,7 @@
 # | pendulum (`own_system`) | one noisy test-pendulum trajectory per seed | another one | 5 seeds |
 # | noisy spiral (S3, `own_system`) | a noisy test spiral started elsewhere | the S3 trajectory | 5 seeds |
 # | bottle throws (O1) | whole **training** throws | the 9 **test** throws, 0.5 s error as in O1 | test throws |
-# | quadrotor FNN-MPC (Q3) | the **training** flights, $N = 10$ | the test Lissajous on the test vehicle | networks x disturbances |
+# | quadrotor FNN-MPC (Q3) | the **training** flights, $N = 10$ | the test Lissajous on the test vehicle | units: network k with drawn disturbance k |
 #
 # Nothing is retrained or reflown where the upstream task already measured it: the hand-tuned and
 # open-loop errors of the bottle come from `bottle`, the FNN (hand-tuned) and Neural (no feedback)
@@ -133,8 +133,8 @@ print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k
 # network's seed, with the recorded thrusts as inputs. The cascade is the one inside the MPC horizon
 # (`FeedbackCascadeModel`): each layer's step is the model's RK4 step $\Phi$ plus $T_s L_k(z - \hat x)$, which
 # is the cascade of Sec. 3.3 with the rate $(\Phi(z, u) - z)/T_s$. FNN then flies the test Lissajous on the
-# test vehicle with the tuned gains, at the judged 6 N bound, for every network and disturbance of
-# `quadrotor_mpc` and each of its cost variants (Eq. (28) as written and as the release flies it: one B1
+# test vehicle with the tuned gains, at the judged 6 N bound, on every independent unit of
+# `quadrotor_mpc` (network k with its drawn disturbance k) and each of its cost variants (Eq. (28) as written and as the release flies it: one B1
 # setting each, as Q3 judges both); the 4 N bound, context only in Q3-Q5, is not flown. The hand-tuned FNN
 # and the Neural model (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry:
 # the flight tests are built from that task's settings by the same function it uses. The tuning sees the
