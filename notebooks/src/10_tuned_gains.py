@@ -134,8 +134,8 @@ print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k
 # (`FeedbackCascadeModel`): each layer's step is the model's RK4 step $\Phi$ plus $T_s L_k(z - \hat x)$, which
 # is the cascade of Sec. 3.3 with the rate $(\Phi(z, u) - z)/T_s$. FNN then flies the test Lissajous on the
 # test vehicle with the tuned gains, at the judged 6 N bound, on every independent unit of
-# `quadrotor_mpc` (network k with its drawn disturbance k) and each of its cost variants (Eq. (28) as written and as the release flies it: one B1
-# setting each, as Q3 judges both); the 4 N bound, context only in Q3-Q5, is not flown. The hand-tuned FNN
+# `quadrotor_mpc` (network k with its drawn disturbance k) and each of its cost variants (Eq. (28) as
+# written and as the release flies it: one B1 setting each, as Q3 judges both); the 4 N bound, context only in Q3-Q5, is not flown. The hand-tuned FNN
 # and the Neural model (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry:
 # the flight tests are built from that task's settings by the same function it uses. The tuning sees the
 # open-loop prediction error only, never the closed loop: gains that predict better need not fly better,
