@@ -216,7 +216,8 @@ class Reading:
             raise ValueError(f"a reading has the keys reading, checks, verdict, got {sorted(data)}")
         reading = cls(data["reading"], data["checks"])
         if reading.verdict != data["verdict"]:
-            raise ValueError(f"reading verdict {data['verdict']!r} is not the one its checks imply ({reading.verdict!r})")
+            raise ValueError(f"reading verdict {data['verdict']!r} is not the one its checks imply "
+                             f"({reading.verdict!r})")
         return reading
 
 

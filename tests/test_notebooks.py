@@ -15,7 +15,7 @@ import yaml
 from conftest import SMOKE, SmokeOutputs
 
 from fnnbook.runner import product_files
-from fnnlib.results import RESULTS_FILENAME, VERDICTS, read_results
+from fnnlib.results import RESULTS_FILENAME, STATUSES, read_results
 
 PIPELINE = Path(__file__).resolve().parents[1] / "pipeline.yaml"
 PROFILE = SMOKE
@@ -45,7 +45,7 @@ def test_task_runs_in_smoke_profile(smoke_outputs: SmokeOutputs, task: str) -> N
     assert not missing, f"{task}: results.json lacks the declared claims {missing}"
     for cid in spec_task.claims:
         claim = reported[cid]
-        assert claim.verdict in VERDICTS
+        assert claim.verdict in STATUSES
         assert claim.checks, f"{cid} has no checks"
         if claim.figure:
             assert (out / claim.figure).is_file(), f"{cid}: figure {claim.figure} missing"

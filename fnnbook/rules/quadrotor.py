@@ -18,11 +18,12 @@ import numpy as np
 from torch import Tensor
 
 from fnnlib.mpc.experiment import SIX
-from fnnlib.results import ClaimResult
+from fnnlib.results import ClaimResult, Reading
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["GROUPS", "SIX", "count_trainable", "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction",
+__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_readings", "q1_convergence",
+           "q2_prediction", "q3_tracking", "q4_prediction",
            "q5_adaptive", "q6_training_cost"]
 
 
@@ -60,19 +61,25 @@ def _wins(v: Mapping[str, np.ndarray], pairs: Iterable[tuple[str, str]], label: 
 def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> ClaimResult:
     """Q1: training converges for every one of at least ``min_members`` random initialisations (Fig. A).
 
-    ``member_loss`` (epochs + 1, E): row 0 before training. Checks: at least ``min_members`` members; every
-    final loss <= 10 % of its initial one; the last 10 % of epochs change every loss by < 20 %; the largest
-    final loss at most 2x the smallest.
+    ``member_loss`` (epochs + 1, E): row 0 before training. Checks: every final loss <= 10 % of its initial
+    one; the last 10 % of epochs change every loss by < 20 %; the largest final loss at most 2x the smallest.
+    How many initialisations were trained is a parameter of the run, not a finding: it is the claim's ``n``
+    and is stated in the rule (below ``min_members`` the rule says so), never a check.
     """
     loss = np.asarray(member_loss, dtype=float)
     if loss.ndim != 2 or loss.shape[0] < 2 or not np.isfinite(loss).all():
         raise ValueError(f"member_loss must be a finite (epochs + 1, members) array, got shape {loss.shape}")
-    checks = {f"at least {min_members} initialisations": loss.shape[1] >= min_members,
-              **convergence_checks(loss, loss.shape[0] - 1)}
-    return ClaimResult("Q1", checks=checks, numbers={"final_over_initial": (loss[-1] / loss[0]).tolist(),
-                                                    "final_loss": loss[-1].tolist()},
-                       rule=f"at least {min_members} initialisations; final <= 10 % of initial and flat over the last "
-                            "10 % of epochs for each; max/min final <= 2")
+    E = loss.shape[1]
+    count = (f"{E} initialisations (the paper's {min_members} or more)" if E >= min_members
+             else f"only {E} initialisations, fewer than the paper's {min_members}")
+    return ClaimResult("Q1", checks=convergence_checks(loss, loss.shape[0] - 1),
+                       numbers={"final_over_initial": (loss[-1] / loss[0]).tolist(), "final_loss": loss[-1].tolist(),
+                                "initialisations": E},
+                       n=E,
+                       reading="'training converges for 5-6 random initialisations' (Fig. A) read as every trained "
+                               "initialisation's loss falling to a tenth, ending flat, and the finals close together",
+                       rule=f"{count}; final <= 10 % of initial and flat over the last 10 % of epochs for each; "
+                            "max/min final <= 2")
 
 
 GROUPS = ("p", "v", "Theta", "omega")
@@ -148,23 +155,43 @@ def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[f
                 rel_tol: float = 0.25, min_inside: float = 0.95) -> ClaimResult:
     r"""Q5 (Fig. S14): AdapFNN is comparable to FNN with a slightly larger RMSE; Theorem 2's ball holds.
 
-    Checks (paired over runs): AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs; AdapFNN's mean
-    RMSE >= FNN's. Guarantee: on every run, the layer-0 error stays in the ball :math:`\gamma/\lambda_m(L)` for at
-    least ``min_inside`` of the steps after the transient, :math:`\gamma` measured on the same run (Theorem 2).
+    Strict reading (counted), paired over runs: AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs,
+    and AdapFNN's mean RMSE >= FNN's. As worded ("comparable"): the first check alone. Guarantee: on every
+    run, the layer-0 error stays in the ball :math:`\gamma/\lambda_m(L)` for at least ``min_inside`` of the
+    steps after the transient, :math:`\gamma` measured on the same run (Theorem 2).
     """
     v = _paired(rmse, ("FNN", "AdapFNN"))
     inside = np.asarray(theorem2_inside, dtype=float)
     within = np.abs(v["AdapFNN"] - v["FNN"]) <= rel_tol * v["FNN"]
     S = len(within)
-    checks = {f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN (>= {S - 1} of {S})": int(within.sum()) >= S - 1,
-              f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)": float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
+    comparable = {f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN (>= {S - 1} of {S})": int(within.sum()) >= S - 1}
+    checks = comparable | {
+        f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)": float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
     guarantees = {f"{label}: Theorem 2 ball holds >= {100 * min_inside:g} % after the transient, every run":
                   bool(inside.size > 0 and (inside >= min_inside).all())}
     numbers = {"within_fraction": float(within.mean()), "mean": {n: float(x.mean()) for n, x in v.items()},
                "theorem2_inside_min": float(inside.min()) if inside.size else None}
     return ClaimResult("Q5", checks=checks, guarantees=guarantees, numbers=numbers,
+                       reading_name="strict",
+                       reading="'performance comparable to the previous feedback neural network, with a slightly "
+                               f"larger RMSE' (App. A.9) read as: within {100 * rel_tol:g} % of FNN and a mean RMSE "
+                               "not below FNN's",
+                       readings={"as worded": Reading(
+                           f"the same words read as 'comparable' alone (within {100 * rel_tol:g} % of FNN), the "
+                           "'slightly larger' a description of the authors' run rather than a requirement",
+                           comparable)},
                        rule=f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN in >= S - 1 of S runs and its mean "
                             "RMSE >= FNN's; Theorem 2's ball is a guarantee")
+
+
+def join_readings(per_setting: Iterable[ClaimResult]) -> dict[str, Reading] | None:
+    """The other readings of one claim judged per setting (e.g. per cost variant), joined: each reading's checks
+    over every setting, its sentence from the first; None when the claims have no other readings."""
+    claims = list(per_setting)
+    if not claims or not claims[0].readings:
+        return None
+    return {name: Reading(first.sentence, {k: v for c in claims for k, v in (c.readings or {})[name].checks.items()})
+            for name, first in claims[0].readings.items()}
 
 
 def count_trainable(tensors: Iterable[Tensor]) -> int:
@@ -172,18 +199,35 @@ def count_trainable(tensors: Iterable[Tensor]) -> int:
     return int(sum(t.numel() for t in tensors if t.requires_grad))
 
 
-def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> ClaimResult:
-    """Q6: the linear feedback needs no training. The training time is reported, not judged.
+#: the authors' training time for the quadrotor's residual model: "around 30 mins to run 50 epochs on a laptop with
+#: 13th Gen Intel(R) Core(TM) i9-13900H" (App. A.6), 14 cores
+AUTHORS_SECONDS_50_EPOCHS = 30 * 60.0
 
-    ``n_trainable_feedback`` is counted on the feedback object (:func:`count_trainable`); the paper's 30 min
-    on a 14-core laptop has no baseline measured here, so ``seconds_per_model`` is a number only.
+
+def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> ClaimResult:
+    """Q6: the linear feedback needs no training; the residual model trains in about the authors' time.
+
+    Check (it fails on slower hardware or a costlier implementation): one model's 50 epochs
+    (``seconds_per_model``, measured here, scaled to 50 epochs) take at most the authors'
+    :data:`AUTHORS_SECONDS_50_EPOCHS`. The hardware differs (theirs: a 14-core laptop CPU), so a pass says the
+    cost is not larger than theirs, not that it matches. Guarantee (construction): the feedback object has no
+    trainable parameter (counted by :func:`count_trainable`).
     """
-    if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model):
+    if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model) or seconds_per_model < 0:
         raise ValueError(f"bad inputs: {n_trainable_feedback}, {seconds_per_model}")
+    minutes = AUTHORS_SECONDS_50_EPOCHS / 60
     return ClaimResult(
         "Q6",
-        checks={"linear feedback has no trainable parameter (counted on the feedback object)":
-                int(n_trainable_feedback) == 0},
+        checks={f"one model's 50 epochs within the authors' {minutes:g} min": float(seconds_per_model)
+                <= AUTHORS_SECONDS_50_EPOCHS},
+        guarantees={"linear feedback has no trainable parameter (counted on the feedback object)":
+                    int(n_trainable_feedback) == 0},
         numbers={"trainable_feedback_parameters": int(n_trainable_feedback),
-                 "seconds_per_model_50_epochs": float(seconds_per_model)},
-        rule="no trainable parameter on the feedback object; the time is reported without a baseline to judge it")
+                 "seconds_per_model_50_epochs": float(seconds_per_model),
+                 "authors_seconds_50_epochs": AUTHORS_SECONDS_50_EPOCHS,
+                 "over_authors": float(seconds_per_model) / AUTHORS_SECONDS_50_EPOCHS},
+        reading=f"'it takes around {minutes:g} mins to run 50 epochs on a laptop' (App. A.6) read as an upper bound "
+                "on the cost a reader pays: one model's 50 epochs here take no longer (on different hardware)",
+        rule=f"one model's 50 epochs (measured, scaled to 50) <= the authors' {minutes:g} min on a 14-core laptop "
+             "CPU (different hardware: a pass says not costlier, not equal); no trainable parameter on the feedback "
+             "object is a guarantee (construction)")

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, beats, most_seeds, per_seed, seeds_note
-from fnnlib.results import ClaimResult
+from fnnbook.rules.sec3 import AS_WORDED_LEVELS, residual_levels
+from fnnlib.results import ClaimResult, Reading
 
 
 
@@ -32,6 +33,8 @@ def d1(*, rel_dr: Value, rel_nominal: Value, factor: float = 1.5) -> ClaimResult
         "D1",
         checks={"dr_worse_than_nominal_by_factor": beats(factor * per_seed(rel_nominal), rel_dr)},
         guarantees={},
+        reading="Fig. 5a's 'domain randomization ... compromises accuracy on the nominal task' read as a "
+                f"domain-randomized error above {factor:g}x the nominal model's",
         rule=f"domain-randomized relative change-rate RMSE on the nominal task > {factor:g}x the nominal "
              "neural ODE's" + seeds_note(rel_dr))
 
@@ -53,6 +56,8 @@ def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool | Sequ
         "D2",
         checks={"feedback_within_factor_of_nominal": ok},
         guarantees={"frozen_neural_ode_unchanged": all(flags)},
+        reading="'maintaining accuracy on previous tasks' (Fig. 5b) read as the frozen model with its feedback "
+                f"within {factor:g}x the nominal model's error",
         rule=f"frozen neural ODE + neural feedback relative RMSE <= {factor:g}x the nominal neural ODE's "
              f"{_in_most(rel_feedback)}; every frozen model bitwise unchanged is a guarantee"
              + seeds_note(rel_feedback))
@@ -70,6 +75,7 @@ def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1)
         checks={"last_below_ratio_of_first": most_seeds(per_seed(ratio) < ratio_max),
                 "last_window_flat": most_seeds(np.abs(per_seed(trend)) < flat)},
         guarantees={},
+        reading="Fig. 5c's training curve read as a loss that falls by a factor and ends flat",
         rule=f"mean loss of the last 10 % < {ratio_max:g}x that of the first 10 %, and the last 10 % change "
              f"by < {flat:.0%} of their mean, each {_in_most(ratio)}" + seeds_note(ratio))
 
@@ -85,21 +91,31 @@ def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any) -> list[boo
 
 def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback: Any, err_N_neural_ode: Any,
        heldout_rate_neural_feedback: Any, heldout_rate_neural_ode: Any, heldout_err_N_neural_feedback: Any,
-       heldout_err_N_neural_ode: Any, N: int) -> ClaimResult:
+       heldout_err_N_neural_ode: Any, N: int, offsets: Any) -> ClaimResult:
     """D4 (Fig. S10): the neural feedback beats the neural ODE at the 12 residual levels of S8 -- which sit next
     to the domain-randomized training cases -- and at held-out levels away from them.
 
     Arrays: one row per level (one column per seed).  Win-type, paired per seed: a level is won when the neural
     feedback beats the neural ODE (:func:`fnnlib.stats.paired_win` over the seeds; one seed: lower) in both the
-    change-rate RMSE and the mean ``N``-step error.
+    change-rate RMSE and the mean ``N``-step error.  ``offsets``: the S8 levels' parameter offsets (one row
+    per level).  Strict reading (counted): every S8 level.  As worded: every S8 level with a residual to
+    correct (:func:`fnnbook.rules.sec3.residual_levels`); the held-out levels as in the strict reading.
     """
     s8 = _both_better(rate_neural_feedback, rate_neural_ode, err_N_neural_feedback, err_N_neural_ode)
     held = _both_better(heldout_rate_neural_feedback, heldout_rate_neural_ode, heldout_err_N_neural_feedback,
                         heldout_err_N_neural_ode)
+    live = residual_levels(offsets, len(s8), "D4")
+    held_check = {f"all_{len(held)}_heldout_levels": all(held)}
     return ClaimResult(
         "D4",
-        checks={f"all_{len(s8)}_S8_levels": all(s8), f"all_{len(held)}_heldout_levels": all(held)},
+        checks={f"all_{len(s8)}_S8_levels": all(s8)} | held_check,
         guarantees={},
+        reading_name="strict",
+        reading="'better generalization performance' over the 12 levels (Fig. S10) read as wins at every one of "
+                "the 12 S8 levels, the zero-residual level included, and at every held-out level",
+        readings={"as worded": Reading(AS_WORDED_LEVELS + "; held-out levels all won",
+                                       {f"the_{len(live)}_S8_levels_with_a_residual": all(s8[j] for j in live)}
+                                       | held_check)},
         rule=f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error at every S8 "
              f"level ({sum(s8)} of {len(s8)}) and at every held-out level ({sum(held)} of {len(held)})"
              + seeds_note(np.asarray(rate_neural_feedback, dtype=float).reshape(len(s8), -1)[0]))

@@ -390,7 +390,7 @@ claims = [
 claims += [
     sec3.s8(rate_neural_ode=s8["rate_rmse_neural_ode"], rate_feedback=s8["rate_rmse_feedback"],
             err_N_neural_ode=s8[f"mean_err_N{N}_neural_ode"],
-            err_N_feedback=s8[f"mean_err_N{N}_feedback"]).replace(
+            err_N_feedback=s8[f"mean_err_N{N}_feedback"], offsets=s8["offsets"]).replace(
         numbers=s8, figure=fig_s8,
         headline=F.headline_number("levels where the feedback wins the N-step error",
                                    s8["levels_multistep_better_per_seed"])),

@@ -353,7 +353,7 @@ claims += [
             heldout_rate_neural_feedback=rate_h["neural_feedback"].T,
             heldout_rate_neural_ode=rate_h["neural_ode"].T,
             heldout_err_N_neural_feedback=ms_h["neural_feedback"].T,
-            heldout_err_N_neural_ode=ms_h["neural_ode"].T, N=N).replace(
+            heldout_err_N_neural_ode=ms_h["neural_ode"].T, N=N, offsets=res_levels.tolist()).replace(
         numbers=d4 | {"held_out": held_out}, figure=fig_d4,
         headline=F.headline_number("S8 levels won in both metrics, per seed",
                                    d4["levels_both_better_per_seed"])),

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from fnnbook.rules.quadrotor import (GROUPS, SIX, count_trainable, q1_convergence, q2_prediction, q3_tracking, q4_prediction,
-                                     q5_adaptive, q6_training_cost)
+from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, GROUPS, SIX, count_trainable, join_readings, q1_convergence,
+                                     q2_prediction, q3_tracking, q4_prediction, q5_adaptive, q6_training_cost)
 from fnnlib.results import GuaranteeFailed
 
 RNG = np.random.default_rng(0)
@@ -33,7 +33,10 @@ def test_q1_passes_on_converging_members_and_fails_on_a_stalled_one() -> None:
     r = q1_convergence(stalled)
     assert not r.checks["every initialisation: final <= 10 % of initial loss"]
     assert not r.checks["initialisations agree: max/min final loss <= 2"]
-    assert not q1_convergence(loss[:, :3]).checks["at least 5 initialisations"]
+    # how many initialisations ran is a parameter, not a check: it is the claim's n and the rule says it
+    few = q1_convergence(loss[:, :3])
+    assert few.n == 3 and "only 3 initialisations" in few.rule and all(few.checks.values())
+    assert q1_convergence(loss).n == 5 and not any(k.startswith("at least") for k in few.checks)
     with pytest.raises(ValueError):
         q1_convergence(np.full((3, 5), np.nan))
 
@@ -120,8 +123,16 @@ def test_q5_comparable_and_slightly_larger_passes_far_or_smaller_fails() -> None
     assert all(r.checks.values()) and all(r.guarantees.values())
     far = q5_adaptive({"FNN": runs(0.1), "AdapFNN": runs(0.2)}, [1.0] * S, label="6 N")
     assert not far.checks[f"6 N: AdapFNN within 25 % of FNN (>= {S - 1} of {S})"]
+    assert far.reading_verdicts() == {"strict": "partly", "as worded": "not reproduced"}
     smaller = q5_adaptive({"FNN": runs(0.1), "AdapFNN": runs(0.09, 0.001)}, [1.0] * S, label="6 N")
     assert not smaller.checks["6 N: AdapFNN mean RMSE >= FNN's (slightly larger)"]
+    # AdapFNN a little better than FNN: strict fails "slightly larger", as worded "comparable" holds
+    assert smaller.reading_verdicts() == {"strict": "partly", "as worded": "reproduced"}
+    assert r.reading_verdicts() == {"strict": "reproduced", "as worded": "reproduced"}
+    # one claim over two settings: each reading's checks over both (here: labelled alike, so one check)
+    joined = join_readings([r, q5_adaptive(paper_like(), [1.0] * S, label="4 N")])
+    assert list(joined) == ["as worded"] and len(joined["as worded"].checks) == 2
+    assert join_readings([q3_tracking(paper_like(), units=UNITS, label="6 N")]) is None
     with pytest.raises(GuaranteeFailed, match="6 N: Theorem 2 ball holds >= 95 % after the transient, every run"):
         q5_adaptive(paper_like(), [1.0] * (S - 1) + [0.5], label="6 N")  # a false guarantee stops the run
 
@@ -130,9 +141,12 @@ def test_q6_counts_the_feedback_objects_parameters() -> None:
     fixed = torch.eye(3)
     learnable = torch.nn.Parameter(torch.eye(3))
     assert count_trainable([fixed]) == 0 and count_trainable([fixed, learnable]) == 9
-    assert q6_training_cost(count_trainable([fixed]), 120.0).checks == {
-        "linear feedback has no trainable parameter (counted on the feedback object)": True}
-    r = q6_training_cost(count_trainable([learnable]), 120.0)
-    assert not any(r.checks.values()) and r.numbers["trainable_feedback_parameters"] == 9
+    ok = q6_training_cost(count_trainable([fixed]), 120.0)
+    assert ok.guarantees == {"linear feedback has no trainable parameter (counted on the feedback object)": True}
+    assert ok.checks == {"one model's 50 epochs within the authors' 30 min": True} and ok.verdict == "reproduced"
+    slow = q6_training_cost(0, 2 * AUTHORS_SECONDS_50_EPOCHS)  # twice the authors' time: the check fails
+    assert slow.verdict == "not reproduced" and slow.numbers["over_authors"] == 2.0
+    with pytest.raises(GuaranteeFailed, match="no trainable parameter"):
+        q6_training_cost(count_trainable([learnable]), 120.0)
     with pytest.raises(ValueError):
         q6_training_cost(0, float("nan"))

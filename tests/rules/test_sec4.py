@@ -60,7 +60,8 @@ def d4_numbers(**over):
     lo, hi = np.full(12, 0.1), np.full(12, 0.2)
     base = dict(rate_neural_feedback=lo, rate_neural_ode=hi, err_N_neural_feedback=lo, err_N_neural_ode=hi,
                 heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=hi[:6],
-                heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=hi[:6], N=50)
+                heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=hi[:6], N=50,
+                offsets=[[-0.72 + 0.12 * j, -0.03 + 0.005 * j, -14.4 + 2.4 * j] for j in range(12)])
     return base | over
 
 
@@ -76,6 +77,12 @@ def test_d4() -> None:
     s8[6] = 0.3
     r = sec4.d4(**d4_numbers(err_N_neural_feedback=s8, heldout_err_N_neural_feedback=held))
     assert verdict("D4", r) == "not reproduced" and "11 of 12" in r.rule
+    assert r.reading_verdicts() == {"strict": "not reproduced", "as worded": "partly"}  # level 6: zero residual
+    r = sec4.d4(**d4_numbers(err_N_neural_feedback=s8))
+    assert r.reading_verdicts() == {"strict": "partly", "as worded": "reproduced"}
+    s8[6], s8[2] = 0.1, 0.3  # lost at a level with a residual: both readings
+    r = sec4.d4(**d4_numbers(err_N_neural_feedback=s8))
+    assert r.reading_verdicts() == {"strict": "partly", "as worded": "partly"}
     # per seed: a level is won only by the paired rule
     seeds = np.tile([0.1, 0.3, 0.1, 0.3, 0.1], (12, 1))
     r = sec4.d4(**d4_numbers(rate_neural_feedback=seeds, rate_neural_ode=np.full((12, 5), 0.2),
