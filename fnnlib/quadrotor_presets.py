@@ -27,6 +27,7 @@ __all__ = [
     "PAPER_MPC_WEIGHTS",
     "PAPER_RESIDUAL_RECIPE",
     "PAPER_THETA_MAX",
+    "PAPER_THRUST_MAX",
     "PAPER_TS",
     "PAPER_WAYPOINT_BOX",
     "VALIDATION_RANDOMIZATION",
@@ -47,6 +48,9 @@ PAPER_MPC_WEIGHTS = MappingProxyType({
 
 PAPER_THETA_MAX = math.pi / 2
 """Attitude box ``|Theta| <= pi/2`` of Eq. (28), rad."""
+
+PAPER_THRUST_MAX = 4.0
+"""Thrust bound per motor of Eq. (28) as the paper states it, N (the authors' release flies 6 N)."""
 
 PAPER_L = 3.0
 """Base feedback gain ``L = 3 I`` of the cascade (App. A.5.3)."""

@@ -2,29 +2,53 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 
 import numpy as np
 
 
-def paired_win(a: Sequence[float], b: Sequence[float], *, min_wins: int | None = None, level: float = 0.90) -> dict:
-    r"""Whether ``a`` beats ``b`` (lower is better) over paired runs, one pair per seed.
+def _per_unit(a: np.ndarray, b: np.ndarray, units: Sequence[Hashable]) -> tuple[np.ndarray, np.ndarray]:
+    """``a`` and ``b`` averaged within each unit id of ``units`` (one id per pair), in the order units first appear.
 
-    The rule: ``a`` wins when (i) ``a_s < b_s`` for at least ``min_wins`` of the S seeds (default: all
+    Pairs that share an id are copies or replicates of one independent unit; each unit then counts once.
+    """
+    ids = list(units)
+    if len(ids) != a.shape[0]:
+        raise ValueError(f"units must give one id per pair: {len(ids)} ids for {a.shape[0]} pairs")
+    order = list(dict.fromkeys(ids))
+    index = np.array([order.index(u) for u in ids])
+    count = np.bincount(index, minlength=len(order))
+    return np.bincount(index, a) / count, np.bincount(index, b) / count
+
+
+def paired_win(a: Sequence[float], b: Sequence[float], *, min_wins: int | None = None, level: float = 0.90,
+               units: Sequence[Hashable] | None = None) -> dict:
+    r"""Whether ``a`` beats ``b`` (lower is better) over paired runs, one pair per independent unit (seed).
+
+    The rule: ``a`` wins when (i) ``a_s < b_s`` for at least ``min_wins`` of the S units (default: all
     but one, i.e. 4 of 5) and (ii) the two-sided ``level`` Student-t interval of the mean paired
     difference :math:`d_s = a_s - b_s` lies below 0 (excludes 0).
 
-    Returns a dict of plain values: ``win`` (bool), ``wins`` (count of seeds with a < b), ``seeds``,
-    ``mean_diff``, ``ci_low``, ``ci_high`` (the interval of the mean difference), ``level``.
+    ``units`` names the independent unit of each pair (e.g. ``(network, disturbance)``, or the disturbance
+    when a model without a network flew it once). Pairs with the same id are one unit: their ``a`` and
+    their ``b`` are averaged and S counts distinct ids, so copies of one flight never count as many.
+    Without ``units`` every pair is its own unit.
+
+    Returns a dict of plain values: ``win`` (bool), ``wins`` (count of units with a < b), ``seeds`` (S,
+    the independent units), ``mean_diff``, ``ci_low``, ``ci_high`` (the interval of the mean difference),
+    ``level``; with ``units``, also ``pairs`` (how many pairs were given).
     """
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     if a.shape != b.shape or a.ndim != 1:
         raise ValueError(f"a and b must be 1-D and paired (one value per seed), got shapes {a.shape}, {b.shape}")
-    S = a.shape[0]
-    if S < 2:
-        raise ValueError(f"a paired comparison needs at least 2 seeds, got {S}")
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError("a and b must hold finite values")
+    pairs = a.shape[0]
+    if units is not None:
+        a, b = _per_unit(a, b, units)
+    S = a.shape[0]
+    if S < 2:
+        raise ValueError(f"a paired comparison needs at least 2 seeds (independent units), got {S}")
     if not 0 < level < 1:
         raise ValueError(f"level must lie in (0, 1), got {level!r}")
     need = S - 1 if min_wins is None else int(min_wins)
@@ -37,5 +61,6 @@ def paired_win(a: Sequence[float], b: Sequence[float], *, min_wins: int | None =
 
     half = float(stats.t.ppf(0.5 + level / 2, S - 1)) * sem
     wins = int((d < 0).sum())
-    return {"win": bool(wins >= need and mean + half < 0), "wins": wins, "seeds": S, "mean_diff": mean,
-            "ci_low": mean - half, "ci_high": mean + half, "level": level}
+    out = {"win": bool(wins >= need and mean + half < 0), "wins": wins, "seeds": S, "mean_diff": mean,
+           "ci_low": mean - half, "ci_high": mean + half, "level": level}
+    return out if units is None else out | {"pairs": pairs}

@@ -3,8 +3,9 @@ r"""The flight test of Sec. 5.2.2 (App. A.5.3-A.5.4, A.9): seven prediction mode
 What the ``quadrotor_mpc`` notebook computes, as functions: the QP with the paper's boxes, the flight
 tests of Sec. 5.2.2 built from a run's settings (:func:`flight_tests_from_settings`), the per-model table
 (:class:`FlightRow`, keyed by :class:`TableKey`), the AdapNN gain sweep, the speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), AdapNN's gain chosen
-on validation flights, the disturbance realisations, and the flights paired over trained networks x disturbances that
-the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
+on validation flights, the disturbance realisations, the flights paired over independent units (a trained network,
+its MLP and one drawn disturbance each, :func:`paired_units`), the thrust the test vehicle needs against a bound
+(:func:`thrust_needed`) that the rules of Q3-Q5 (:mod:`fnnbook.rules.quadrotor`) judge.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from torch import Tensor, nn
 from fnnlib.stability import theorem1_balls
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.backends import Backend
+from fnnlib.control.lissajous import lissajous
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
@@ -48,10 +50,12 @@ __all__ = [
     "fnn_model",
     "make_mpc",
     "mpc_from_settings",
-    "paired_grid",
+    "paired_units",
     "pooled_speed",
     "speed_summary",
     "theorem2_check",
+    "thrust_needed",
+    "unjudged_bound_note",
 ]
 
 QP_CLASSES: dict[str, type[OSQPMPC] | type[LinearizedMPC]] = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
@@ -111,13 +115,26 @@ def mpc_from_settings(settings: Mapping[str, Any], *, cost: str, u_max: float) -
 @dataclass(frozen=True)
 class FlightSetup:
     """The flight tests of Sec. 5.2.2: the test vehicle (with the paper's force), the forces flown, the
-    Lissajous reference ``x_r`` (steps + N + 1, 12), ``u_r`` (steps + N, 4), and one test per force."""
+    Lissajous reference ``x_r`` (steps + N + 1, 12), ``u_r`` (steps + N, 4), and one test per force.
+
+    ``tests[0]`` flies the paper's force (:attr:`paper_test`), the others the independently drawn forces, one
+    per unit of the paired comparisons (:attr:`unit_tests`, :func:`paired_units`)."""
 
     vehicle: QuadrotorParams
     forces: list[tuple[float, ...]]
     x_r: Tensor
     u_r: Tensor
     tests: list[FlightTest]
+
+    @property
+    def paper_test(self) -> FlightTest:
+        """The test under the paper's force (the table, the figures and the context bounds fly it)."""
+        return self.tests[0]
+
+    @property
+    def unit_tests(self) -> list[FlightTest]:
+        """The tests under the drawn forces, one per independent unit."""
+        return self.tests[1:]
 
 
 def flight_tests_from_settings(settings: Mapping[str, Any]) -> FlightSetup:
@@ -261,15 +278,15 @@ def pooled_speed(flights: Mapping[str, Sequence[FlightResult]]) -> dict[str, dic
 
 @dataclass(frozen=True)
 class PairedFlights(Mapping[str, list[FlightResult]]):
-    """Per model, its flights over trained networks x tests, in the order ``(network, test)``, test fastest.
+    """Per model, its flights over the independent units, entry ``k`` being unit ``k`` (:func:`paired_units`).
 
-    A mapping model name -> flights; entry ``i`` of every model's list is the same unit (network, test), so
-    the lists pair entry by entry. :meth:`unit` gives one unit's flights, :meth:`index` its position.
+    A mapping model name -> flights; entry ``k`` of every model's list is unit ``units[k]`` (a trained network,
+    its MLP and one disturbance), so the lists pair entry by entry and every entry is its own unit: nothing is
+    copied. :meth:`unit` gives one unit's flights.
     """
 
     by_model: dict[str, list[FlightResult]]
-    n_networks: int
-    n_tests: int
+    units: tuple[str, ...]
 
     def __getitem__(self, name: str) -> list[FlightResult]:
         return self.by_model[name]
@@ -280,40 +297,71 @@ class PairedFlights(Mapping[str, list[FlightResult]]):
     def __len__(self) -> int:
         return len(self.by_model)
 
-    def index(self, network: int, test: int = 0) -> int:
-        """The position of unit (``network``, ``test``) in every model's list."""
-        if not (0 <= network < self.n_networks and 0 <= test < self.n_tests):
-            raise IndexError(f"unit ({network}, {test}) outside {self.n_networks} networks x {self.n_tests} tests")
-        return network * self.n_tests + test
-
-    def unit(self, network: int, test: int = 0) -> dict[str, FlightResult]:
-        """Every model's flight of unit (``network``, ``test``)."""
-        i = self.index(network, test)
-        return {n: runs[i] for n, runs in self.by_model.items()}
+    def unit(self, k: int) -> dict[str, FlightResult]:
+        """Every model's flight of unit ``k``."""
+        if not 0 <= k < len(self.units):
+            raise IndexError(f"unit {k} outside the {len(self.units)} units")
+        return {n: runs[k] for n, runs in self.by_model.items()}
 
 
-def paired_grid(members: Sequence[tuple[str, nn.Module]], mlp: nn.Module, *, tests: Sequence[FlightTest], mpc: MPC,
-                model_settings: Mapping[str, Any], adapnn_gamma: float) -> PairedFlights:
-    """All seven models flown for every trained network x every test (one per disturbance): paired flights.
+def paired_units(members: Sequence[tuple[Any, nn.Module]], mlps: Sequence[tuple[Any, nn.Module]], *,
+                 tests: Sequence[FlightTest], mpc: MPC, model_settings: Mapping[str, Any],
+                 adapnn_gamma: float) -> PairedFlights:
+    """All seven models flown once on each independent unit: trained network k, MLP k and disturbance k.
 
-    Returns, per model, the flights in the order ``(seed, test)`` with the test varying fastest; models that
-    do not carry the network (Nomi, MLP, FB) are flown once per test and repeated for each seed, so every
-    model's list pairs entry by entry. AdapNN flies at ``adapnn_gamma``.
+    Unit ``k`` pairs ``members[k]`` (seed, residual network), ``mlps[k]`` (seed, MLP) and ``tests[k]`` (one
+    disturbance drawn independently of the others): the units share nothing random, so they are independent
+    and each model's flight of a unit is its own (Nomi and FB fly unit k's disturbance once, as every other
+    model). Every comparison of Q3-Q5 is then paired over the S units, with S their true number. AdapNN
+    flies at ``adapnn_gamma``. Raises ValueError unless the three lists have the same length >= 1.
     """
-    if not members or not tests:
-        raise ValueError("need at least one trained network and one test")
-    models = paper_models(members[0][1], mlp, **model_settings)
-    fixed = {m.name: m for m in models if m.name not in CARRYING}
-    fixed_flights = {n: [fly(m, mpc, t) for t in tests] for n, m in fixed.items()}
-    out: dict[str, list[FlightResult]] = {m.name: [] for m in models}  # the paper's order
-    for _, net in members:
-        ms = {m.name: m for m in paper_models(net, mlp, **model_settings, adapnn_gamma=adapnn_gamma)}
-        for i, t in enumerate(tests):
-            for n in fixed:
-                out[n].append(fixed_flights[n][i])
-            for n in CARRYING:
-                out[n].append(fly(ms[n], mpc, t))
-    return PairedFlights(out, n_networks=len(members), n_tests=len(tests))
+    if not members or not (len(members) == len(mlps) == len(tests)):
+        raise ValueError(f"need one trained network, one MLP and one test per unit (at least one unit), got "
+                         f"{len(members)} networks, {len(mlps)} MLPs, {len(tests)} tests")
+    out: dict[str, list[FlightResult]] = {}
+    for (_, net), (_, mlp), test in zip(members, mlps, tests):
+        for m in paper_models(net, mlp, **model_settings, adapnn_gamma=adapnn_gamma):  # the paper's order
+            out.setdefault(m.name, []).append(fly(m, mpc, test))
+    units = tuple(f"network {s}, MLP {s_m}, disturbance {k + 1}" for k, ((s, _), (s_m, _)) in
+                  enumerate(zip(members, mlps)))
+    return PairedFlights(out, units)
+
+
+def thrust_needed(vehicle: QuadrotorParams, curve: Mapping[str, float], *, steps: int, Ts: float) -> dict[str, float]:
+    r"""Thrust per motor the vehicle needs on the Lissajous reference: to hover, and at its peak acceleration.
+
+    The total thrust vector that makes the vehicle follow ``p(t)`` is :math:`m\,(g e_3 - a(t))` (z down, Eq.
+    (27) without drag or force), :math:`a(t)` the reference's analytic acceleration
+    (:func:`~fnnlib.control.lissajous.lissajous`, ``curve`` its parameters) on ``t = 0, Ts, ..., steps Ts``.
+    Returns ``hover`` (:math:`m g / 4`) and ``peak`` (:math:`m \max_t \lVert g e_3 - a(t)\rVert / 4`), in N per
+    motor, and ``t_peak`` in s. Drag and an external force come on top.
+    """
+    t = np.arange(int(steps) + 1) * float(Ts)
+    a = lissajous(t, **curve).a  # (T + 1, 3)
+    h = np.linalg.norm(np.array([0.0, 0.0, vehicle.g]) - a, axis=1)
+    return {"hover": vehicle.mass * vehicle.g / 4, "peak": float(vehicle.mass * h.max() / 4),
+            "t_peak": float(t[int(np.argmax(h))])}
+
+
+def unjudged_bound_note(rows: Mapping[str, FlightRow] | None, *, metric: str, unit: str, need: Mapping[str, float],
+                        u_max: float, setting: str, flown: str, compare: tuple[str, str]) -> str:
+    """The outcome at a thrust bound that is not judged, and why it cannot be judged there, with the number.
+
+    ``rows``: the table rows flown at ``u_max`` under ``setting`` (None when not flown in this run); ``metric``
+    a :class:`FlightRow` field; ``need`` what :func:`thrust_needed` returns; ``flown`` says which flights they
+    are; ``compare`` = (a, b) names the two models whose order is stated.
+    """
+    why = (f"not judged at {u_max:g} N: the test vehicle needs {need['peak']:.2f} N per motor at the reference's "
+           f"peak acceleration ({need['hover']:.2f} N to hover) against the {u_max:g} N bound"
+           + (", so no model can track there" if need["peak"] > u_max else ""))
+    if rows is None:
+        return f"{setting}, {u_max:g} N: not flown in this run; {why}."
+    values = {n: getattr(r, metric) for n, r in rows.items()}
+    a, b = compare
+    order = "worse than" if values[a] > values[b] else "better than or equal to"
+    listed = ", ".join(f"{n} {v:.2f}" for n, v in values.items())
+    return (f"{setting}, {u_max:g} N ({flown}): {metric} {listed} {unit}; every model "
+            f"{min(values.values()):.2f}-{max(values.values()):.2f} {unit}, {a} {order} {b}; {why}.")
 
 
 def speed_summary(timing: Mapping[str, Mapping[str, Any]], *, repeats: int, thrust_bound: float, qp: str,

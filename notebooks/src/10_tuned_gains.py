@@ -11,7 +11,7 @@
 # | pendulum (`own_system`) | one noisy test-pendulum trajectory per seed | another one | 5 seeds |
 # | noisy spiral (S3, `own_system`) | a noisy test spiral started elsewhere | the S3 trajectory | 5 seeds |
 # | bottle throws (O1) | **training** throws, the 0.5 s position error itself | the 9 **test** throws, 0.5 s error as in O1 | test throws |
-# | quadrotor FNN-MPC (Q3) | closed-loop MPC flights on **validation** references and vehicles of the training distribution | the test Lissajous on the test vehicle | networks x disturbances |
+# | quadrotor FNN-MPC (Q3) | closed-loop MPC flights on **validation** references and vehicles of the training distribution | the test Lissajous on the test vehicle | units: network k with drawn disturbance k |
 #
 # Each setting's gains are tuned on the cost it is judged by, on data the judgement never sees: the
 # bottle on the O1 error of training throws, the quadrotor through the closed loop it serves (MPC
@@ -175,7 +175,7 @@ print("hand sweep picks (L, beta): " + ", ".join(f"({h.L:g}, {h.beta:g})" for h 
 # training vehicle on which it chose AdapNN's $\Gamma$), at the judged 6 N bound; the pair with the
 # lowest mean tracking RMSE is kept (`sweep_gains`, a diverged flight counting as infinite). The test
 # Lissajous on the test vehicle is never flown in the tuning. FNN then flies the test with the tuned
-# gains for every network and disturbance of `quadrotor_mpc`. The hand gains (FNN) and the Neural model
+# gains on every independent unit of `quadrotor_mpc` (network k with its drawn disturbance k). The hand gains (FNN) and the Neural model
 # (no feedback: the open loop) are `quadrotor_mpc`'s own flights, paired entry by entry; the flight tests
 # are built from that task's settings by the same function it uses. The 4 N bound, context only in
 # Q3-Q5, is not flown.
@@ -200,7 +200,10 @@ setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built a
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
     raise ValueError(f"the disturbances of quadrotor_mpc's settings {setup.forces} are not those it flew "
                      f"{q_mpc['disturbances']}")
-tests = setup.tests
+unit_tests = setup.unit_tests  # one per independent unit of quadrotor_mpc (its metrics' "units")
+if len(unit_tests) != len(members) or len(q_mpc["units"]) != len(members):
+    raise ValueError(f"quadrotor_mpc flew {len(q_mpc['units'])} units on {len(unit_tests)} drawn disturbances; "
+                     f"{len(members)} networks here")
 mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 val_vehicles = M.randomized_vehicles(TRAINING_TRUTH, m["validation_vehicles"], seed=m["validation_vehicle_seed"],
@@ -209,7 +212,7 @@ val_refs = M.validation_references(m["validation_flights"], m["validation_steps"
                                    Ts=quad_Ts, n_waypoints=m["validation_waypoints"], box=PAPER_FLIGHT_DATA["box"],
                                    max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
 val_tests = [M.FlightTest(Quadrotor(v), x_r, u_r, steps=m["validation_steps"], Ts=quad_Ts,
-                          substeps=m["truth_substeps"], backend=tests[0].backend) for v in val_vehicles for x_r, u_r in val_refs]
+                          substeps=m["truth_substeps"], backend=unit_tests[0].backend) for v in val_vehicles for x_r, u_r in val_refs]
 if float(quad_L) not in quad_L_grid or float(quad_beta) not in quad_beta_grid:
     raise ValueError(f"the tuning grid must hold quadrotor_mpc's hand gains L = {quad_L}, beta = {quad_beta} "
                      f"(got quad_L_grid {quad_L_grid}, quad_beta_grid {quad_beta_grid})")
@@ -248,8 +251,8 @@ q_tuned = {cost: [quad_tune(s, net, cost) for s, net in members] for cost in cos
 seconds["quad_tune"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 tuned_flights = {}
-for cost in costs:  # (network, disturbance) with the disturbance fastest, as quadrotor_mpc pairs them
-    rows = [fnn_flight(net, r.L, r.beta, t, cost) for (_, net), r in zip(members, q_tuned[cost]) for t in tests]
+for cost in costs:  # unit k: network k with drawn disturbance k, as quadrotor_mpc pairs them
+    rows = [fnn_flight(net, r.L, r.beta, t, cost) for (_, net), r, t in zip(members, q_tuned[cost], unit_tests)]
     tuned_flights[cost] = [{"fallbacks": row.fallbacks, "fallback_reasons": row.fallback_reasons,
                             "diverged": row.diverged} for row in rows]
     errors[f"quadrotor {cost}"] = {"tuned": [row.mean_axis for row in rows],

@@ -13,7 +13,8 @@ from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, TableKey, acc_pred_rmse, adapnn_flights,
                                    adapnn_gain_on_validation, adapnn_model, disturbance_realisations, fallback_note,
                                    flight_row, flight_table_json, flight_tests_from_settings, fnn_model, make_mpc,
-                                   mpc_from_settings, paired_grid, pooled_speed, speed_summary, theorem2_check)
+                                   mpc_from_settings, paired_units, pooled_speed, speed_summary, theorem2_check,
+                                   thrust_needed, unjudged_bound_note)
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
 from fnnlib.mpc.models import paper_models
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
@@ -136,28 +137,68 @@ def test_adapnn_flights_fly_one_model_per_gain():
     assert not np.array_equal(runs[1.0].x, runs[8.0].x)  # the gain is used
 
 
-def test_paired_grid_pairs_every_model_over_networks_and_tests():
+def _tiny_units(n: int = 2, steps: int = 3, N: int = 3):
+    """``n`` tiny networks, ``n`` tiny MLPs and ``n`` tests under different forces."""
     torch.manual_seed(0)
-    nets = [("0", AeroResidual((4,), "tanh").double()), ("1", AeroResidual((4,), "tanh").double())]
-    N, steps = 3, 3
+    nets = [(k, AeroResidual((4,), "tanh").double()) for k in range(n)]
+    mlps = [(k, AeroResidual((4,), "tanh").double()) for k in range(n)]
     x_r, u_r = lissajous_reference(steps, N, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    forces = ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2), (0.2, 0.1, 0.45))[:n]
     tests = [FlightTest(Quadrotor(TEST_TRUTH.replace(force_disturbance=F)), x_r, u_r, steps=steps, Ts=0.02, substeps=1,
-                        backend=Backend("torch", "forward")) for F in ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2))]
+                        backend=Backend("torch", "forward")) for F in forces]
     mpc = make_mpc("osqp", N, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
                    theta_max=1.5, solver="OSQP")
     kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=N, Gamma=0.16, Ts=0.02)
-    grid = paired_grid(nets, nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
-    assert list(grid) == [*SIX, "AdapFNN"] and all(len(v) == 4 for v in grid.values())
-    assert grid["Nomi"][0] is grid["Nomi"][2] and not np.array_equal(grid["Nomi"][0].x, grid["Nomi"][1].x)
-    assert not np.array_equal(grid["FNN"][0].x, grid["FNN"][2].x)  # another network, the same test
-    assert grid.index(1) == 2 and grid.index(1, 1) == 3 and grid.unit(1)["FNN"] is grid["FNN"][2]
+    return nets, mlps, tests, mpc, kw
+
+
+def test_paired_units_fly_every_model_once_per_independent_unit():
+    nets, mlps, tests, mpc, kw = _tiny_units()
+    grid = paired_units(nets, mlps, tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+    assert list(grid) == [*SIX, "AdapFNN"] and all(len(v) == 2 for v in grid.values())
+    assert grid.units == ("network 0, MLP 0, disturbance 1", "network 1, MLP 1, disturbance 2")
+    # nothing is copied: every model's unit flights are distinct flights, Nomi's included
+    assert all(v[0] is not v[1] and not np.array_equal(v[0].x, v[1].x) for v in grid.values())
+    assert grid.unit(1)["FNN"] is grid["FNN"][1]
     with pytest.raises(IndexError):
-        grid.index(2)
-    # AdapNN flies at adapnn_gamma: as paper_models builds it with that gain
-    again = paper_models(nets[1][1], nets[0][1], **kw, adapnn_gamma=0.16)[4]
-    assert again.name == "AdapNN" and np.array_equal(fly(again, mpc, tests[1]).x, grid.unit(1, 1)["AdapNN"].x)
-    with pytest.raises(ValueError, match="at least one"):
-        paired_grid([], nets[0][1], tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+        grid.unit(2)
+    # unit 1 is network 1, MLP 1 and test 1: as paper_models builds it (AdapNN at adapnn_gamma)
+    again = paper_models(nets[1][1], mlps[1][1], **kw, adapnn_gamma=0.16)
+    for m in again:
+        assert np.array_equal(fly(m, mpc, tests[1]).x, grid.unit(1)[m.name].x), m.name
+    assert not np.array_equal(fly(again[2], mpc, tests[0]).x, grid.unit(1)["MLP"].x)  # the test matters too
+    for bad in ((nets, mlps[:1], tests), (nets, mlps, tests[:1]), ([], [], [])):
+        with pytest.raises(ValueError, match="one test per unit"):
+            paired_units(bad[0], bad[1], tests=bad[2], mpc=mpc, model_settings=kw, adapnn_gamma=0.16)
+
+
+def test_thrust_needed_is_hover_plus_the_references_peak_acceleration():
+    hover_only = thrust_needed(TEST_TRUTH, {**PAPER_LISSAJOUS, "r_x": 0.0, "r_y": 0.0, "r_z": 0.0}, steps=10, Ts=0.02)
+    assert hover_only["hover"] == pytest.approx(TEST_TRUTH.mass * TEST_TRUTH.g / 4)
+    assert hover_only["peak"] == pytest.approx(hover_only["hover"])
+    # y = r sin(2 pi t / T) alone peaks at r (2 pi / T)^2 sideways: the thrust is m sqrt(g^2 + a^2) / 4
+    r, T = 3.0, 3.0
+    side = thrust_needed(TEST_TRUTH, {**PAPER_LISSAJOUS, "r_x": 0.0, "r_y": r, "r_z": 0.0, "T_y": T}, steps=150, Ts=0.005)
+    a = r * (2 * math.pi / T) ** 2
+    assert side["peak"] == pytest.approx(TEST_TRUTH.mass * math.hypot(TEST_TRUTH.g, a) / 4, rel=1e-6)
+    assert side["t_peak"] == pytest.approx(T / 4)
+    paper = thrust_needed(TEST_TRUTH, PAPER_LISSAJOUS, steps=300, Ts=0.02)  # the paper's flight: above 4 N, below 6 N
+    assert 4.0 < paper["peak"] < 6.0 and paper["hover"] < 4.0
+
+
+def test_unjudged_bound_note_states_the_outcome_and_the_reason_with_the_numbers():
+    rows = {n: flight_row(_result(seed=k)) for k, n in enumerate(("Nomi", "FNN"))}
+    need = {"hover": 3.26, "peak": 5.53, "t_peak": 0.7}
+    note = unjudged_bound_note(rows, metric="mean_axis", unit="m", need=need, u_max=4.0, setting="as written",
+                               flown="one flight", compare=("FNN", "Nomi"))
+    v = {n: r.mean_axis for n, r in rows.items()}
+    assert f"Nomi {v['Nomi']:.2f}, FNN {v['FNN']:.2f} m" in note and "needs 5.53 N per motor" in note
+    assert ("FNN worse than Nomi" in note) == (v["FNN"] > v["Nomi"]) and "no model can track" in note
+    assert "not flown in this run" in unjudged_bound_note(None, metric="mean_axis", unit="m", need=need, u_max=4.0,
+                                                          setting="as written", flown="-", compare=("FNN", "Nomi"))
+    easy = unjudged_bound_note(rows, metric="mean_axis", unit="m", need={**need, "peak": 3.5}, u_max=4.0,
+                               setting="as written", flown="one flight", compare=("FNN", "Nomi"))
+    assert "no model can track" not in easy
 
 
 def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> None:
@@ -196,30 +237,30 @@ def test_flight_tests_from_settings_build_the_test_vehicle_per_disturbance():
     assert setup.forces == disturbance_realisations(s["disturbance"], 1, seed=11, spread=0.5)
     assert len(setup.tests) == 2 and setup.vehicle == TEST_TRUTH
     assert [t.truth.params.force_disturbance for t in setup.tests] == setup.forces
+    assert setup.paper_test is setup.tests[0] and setup.unit_tests == setup.tests[1:]
     assert setup.x_r.shape == (3 + 3 + 1, 12) and setup.tests[0].backend == Backend("torch", "forward")
     x_r, _ = lissajous_reference(3, 3, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
     assert torch.equal(setup.x_r, x_r)
     assert flight_tests_from_settings(_settings(truth_mass=0.9)).tests[0].truth.params.mass == 0.9
 
 
-def test_fnn_flown_again_from_the_settings_is_the_paired_grids_flight():
+def test_fnn_flown_again_from_the_settings_is_the_paired_units_flight():
     """What the tuned-gains chapter relies on: its FNN flight, built from quadrotor_mpc's settings with the
-    paper's gains, is bit for bit the FNN flight quadrotor_mpc flies (first network, first disturbance)."""
-    torch.manual_seed(0)
-    nets = [("0", AeroResidual((4,), "tanh").double()), ("1", AeroResidual((4,), "tanh").double())]
-    s = _settings()
-    tests = flight_tests_from_settings(s).tests
+    paper's gains, is bit for bit the FNN flight quadrotor_mpc flies (network k on unit test k)."""
+    nets, mlps, _, _, _ = _tiny_units()
+    s = _settings(disturbance_draws=2)
+    setup = flight_tests_from_settings(s)
     kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=s["N"], Gamma=0.16, Ts=s["Ts"])
-    grid = paired_grid(nets, nets[0][1], tests=tests, mpc=mpc_from_settings(s, cost="as_flown", u_max=6.0),
-                       model_settings=kw, adapnn_gamma=0.16)
+    grid = paired_units(nets, mlps, tests=setup.unit_tests, mpc=mpc_from_settings(s, cost="as_flown", u_max=6.0),
+                        model_settings=kw, adapnn_gamma=0.16)
     # as the tuned-gains chapter builds it: again from the settings, its own MPC, fnn_model
-    again_tests = flight_tests_from_settings(dict(s))
+    again_tests = flight_tests_from_settings(dict(s)).unit_tests
     mpc = mpc_from_settings(s, cost="as_flown", u_max=6.0)
-    for i, (_, net) in enumerate(nets):
-        again = fly(fnn_model(net, 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, again_tests.tests[1])
-        flown = grid.unit(i, 1)["FNN"]
+    for k, ((_, net), test) in enumerate(zip(nets, again_tests)):
+        again = fly(fnn_model(net, 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, test)
+        flown = grid.unit(k)["FNN"]
         assert np.array_equal(again.x, flown.x) and flight_row(again).mean_axis == flight_row(flown).mean_axis
     # and the check can fail: other settings fly another flight
-    other = flight_tests_from_settings(_settings(truth_mass=0.9)).tests[1]
+    other = flight_tests_from_settings(_settings(truth_mass=0.9, disturbance_draws=2)).unit_tests[0]
     moved = fly(fnn_model(nets[0][1], 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, other)
-    assert not np.array_equal(moved.x, grid.unit(0, 1)["FNN"].x)
+    assert not np.array_equal(moved.x, grid.unit(0)["FNN"].x)

@@ -223,19 +223,20 @@ def test_the_notebooks_gamma_choice_reads_nothing_of_the_test_flight() -> None:
 
 
 def _upstream(root: Path) -> Path:
-    """A tiny quadrotor_learning output: two residual networks and an MLP."""
+    """A tiny quadrotor_learning output: two residual networks and two MLPs, one of each kept."""
     up = root / "quadrotor_learning"
     up.mkdir()
     torch.manual_seed(0)
     names = []
     for seed in (0, 1):
-        net = AeroResidual((4,), "tanh").double()
-        F.save_checkpoint(up / f"residual_seed{seed}.pt", net, {"seed": seed})
-        names.append(f"residual_seed{seed}.pt")
-        if seed == 0:
-            F.save_checkpoint(up / "residual.pt", net, {"seed": seed})
-    F.save_checkpoint(up / "mlp.pt", AeroResidual((4,), "tanh").double(), {"seed": 0})
-    F.write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names})
+        for stem in ("residual", "mlp"):
+            net = AeroResidual((4,), "tanh").double()
+            F.save_checkpoint(up / f"{stem}_seed{seed}.pt", net, {"seed": seed})
+            names.append(f"{stem}_seed{seed}.pt")
+            if seed == 0:
+                F.save_checkpoint(up / f"{stem}.pt", net, {"seed": seed})
+    F.write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names[::2],
+                                                                                   "mlp_checkpoints": names[1::2]})
     (up / ".fingerprint.json").write_text(json.dumps({"parameters": {"seeds": [0, 1]}}))  # the run record
     return up
 
@@ -248,7 +249,7 @@ def _gamma_choice(up: Path, out: Path, **changes) -> dict:
     ns.update({"profile": "smoke", "out_dir": str(out), "upstream_dirs": {"quadrotor_learning": str(up)}, "steps": 4,
                "N": 3, "u_max": [6.0], "costs": ["as_flown"], "Gamma_adapnn_grid": [0.04, 2.56],
                "validation_flights": 1, "validation_steps": 50, "validation_waypoints": 2, "validation_vehicles": 2,
-               "disturbance_draws": 0, "backend": "torch", "qp": "osqp", "transient_s": 0.02, **changes})
+               "disturbance_draws": 2, "backend": "torch", "qp": "osqp", "transient_s": 0.02, **changes})
     for cell in cells[1:]:
         exec(cell.source, ns)
         if "gamma_sel" in ns:
@@ -260,7 +261,7 @@ def test_the_chosen_gamma_does_not_change_when_the_test_vehicle_changes(tmp_path
     up = _upstream(tmp_path)
     paper = _gamma_choice(up, tmp_path / "a")
     other_test = _gamma_choice(up, tmp_path / "b", truth_mass=0.9, truth_inertia=[0.003, 0.004, 0.002],
-                               truth_drag=[0.1, 0.2, 0.3], disturbance=[-0.5, 0.2, 0.0], disturbance_draws=1)
+                               truth_drag=[0.1, 0.2, 0.3], disturbance=[-0.5, 0.2, 0.0], disturbance_seed=3)
     assert other_test == paper  # the same gain and the same validation table, flight by flight
     assert set(paper) == {"as_flown"} and len(paper["as_flown"][1][0.04]["rmse_per_flight"]) == 2
     assert all(math.isfinite(r) for row in paper["as_flown"][1].values() for r in row["rmse_per_flight"])

@@ -1,4 +1,4 @@
-"""Issue 15: the Sec. 5 rules (Q1-Q6) fed numbers that must pass and numbers that must fail."""
+"""The Sec. 5 rules (Q1-Q6) fed numbers that must pass and numbers that must fail."""
 
 from __future__ import annotations
 
@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 import torch
 
-from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, SIX, count_trainable, join_readings, q1_convergence,
+from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, GROUPS, SIX, count_trainable, join_readings, q1_convergence,
                                      q2_prediction, q3_tracking, q4_prediction, q5_adaptive, q6_training_cost)
 from fnnlib.results import GuaranteeFailed
 
 RNG = np.random.default_rng(0)
-S = 15  # 5 trained networks x 3 disturbances
+S = 5  # units: trained network k (and MLP k) with drawn disturbance k
+UNITS = [f"unit {k}" for k in range(S)]
 
 
 def runs(mean: float, noise: float = 0.005) -> np.ndarray:
@@ -40,37 +41,80 @@ def test_q1_passes_on_converging_members_and_fails_on_a_stalled_one() -> None:
         q1_convergence(np.full((3, 5), np.nan))
 
 
-def test_q2_passes_within_10_percent_and_fails_above_or_behind_nominal() -> None:
-    good = {"neural ODE": {"p": 0.02, "v": 0.03, "Theta": 0.05, "omega": 0.08},
-            "nominal": {"p": 0.5, "v": 0.4, "Theta": 0.1, "omega": 0.2}}
-    assert all(q2_prediction(good).checks.values())
-    bad = {"neural ODE": {**good["neural ODE"], "omega": 0.2}, "nominal": {**good["nominal"], "p": 0.01}}
-    assert not any(q2_prediction(bad).checks.values())
+def _q2(neural_p: list[float], nominal_p: float = 0.5, omega: float = 0.08):
+    neural = [{"p": p, "v": 0.03 + 0.001 * k, "Theta": 0.05, "omega": omega} for k, p in enumerate(neural_p)]
+    return q2_prediction(neural, {"p": nominal_p, "v": 0.4, "Theta": 0.1, "omega": 0.2}, units=range(len(neural_p)))
+
+
+def test_q2_passes_within_10_percent_over_the_networks_and_fails_above_or_behind_nominal() -> None:
+    good = _q2([0.02, 0.03, 0.025, 0.04, 0.02])
+    assert all(good.checks.values()) and good.n == 5 and len(good.checks) == 2
+    assert good.numbers["networks_within"] == 5 and good.numbers["neural ODE"]["p"][3] == 0.04
+    assert all(_q2([0.02, 0.03, 0.025, 0.04, 0.15]).checks.values())  # one network of five may miss 10 %
+    two_out = _q2([0.02, 0.03, 0.025, 0.12, 0.15])
+    assert not two_out.checks["neural ODE: relative RMSE <= 10 % for p, v, Theta and omega in >= 4 of 5 networks"]
+    assert not any(_q2([0.02, 0.03, 0.025, 0.04, 0.02], nominal_p=0.01, omega=0.2).checks.values())
+    # a gap to the nominal model smaller than the spread over networks is no win
+    spread = _q2([0.02, 0.9, 0.03, 0.04, 0.02], nominal_p=0.3)
+    assert not spread.checks["neural ODE beats nominal for p and v (paired over 5 networks, >= 4 of 5)"]
+
+
+def test_q2_counts_networks_not_copies_and_refuses_bad_input() -> None:
+    neural = [{g: 0.02 for g in GROUPS}] * 5  # one network's errors, copied five times
+    nominal = {"p": 0.5, "v": 0.4, "Theta": 0.1, "omega": 0.2}
+    copied = q2_prediction(neural, nominal, units=[0, 0, 0, 1, 1])
+    assert copied.n == 2 and "paired over 2 networks, >= 1 of 2" in " ".join(copied.checks)
+    with pytest.raises(ValueError, match="distinct units"):
+        q2_prediction(neural, nominal, units=[0] * 5)
+    with pytest.raises(ValueError, match="one unit id per"):
+        q2_prediction(neural, nominal, units=[0, 1])
+    with pytest.raises(ValueError, match="groups"):
+        q2_prediction([{"p": 0.1}] * 2, nominal, units=[0, 1])
 
 
 def test_q3_passes_the_papers_order_and_fails_when_fb_tracks_best() -> None:
-    r = q3_tracking(paper_like(), label="6 N")
+    r = q3_tracking(paper_like(), units=UNITS, label="6 N")
     assert all(r.checks.values()) and len(r.checks) == 7 and r.numbers["paired"]["FNN < FB"]["wins"] == S
+    assert r.n == S and r.reading
     swapped = {**paper_like(), "FB": runs(0.05)}
-    r = q3_tracking(swapped, label="6 N")
-    assert not r.checks[f"6 N: FNN beats FB (paired, >= {S - 1} of {S})"]
-    assert r.checks[f"6 N: FNN beats Nomi (paired, >= {S - 1} of {S})"]
+    r = q3_tracking(swapped, units=UNITS, label="6 N")
+    assert not r.checks[f"6 N: FNN beats FB (paired over {S} units, >= {S - 1} of {S})"]
+    assert r.checks[f"6 N: FNN beats Nomi (paired over {S} units, >= {S - 1} of {S})"]
 
 
 def test_q3_fails_a_gap_smaller_than_the_spread() -> None:
-    tied = {**paper_like(), "Neural": runs(0.5, 0.05), "Nomi": runs(0.5, 0.05)}
-    assert not q3_tracking(tied, label="x").checks[f"x: Neural beats Nomi (paired, >= {S - 1} of {S})"]
+    tied = {**paper_like(), "Neural": np.array([0.5, 0.45, 0.55, 0.49, 0.52]),
+            "Nomi": np.array([0.52, 0.50, 0.50, 0.51, 0.49])}  # lower in 3 of 5: no win
+    assert not q3_tracking(tied, units=UNITS, label="x").checks[f"x: Neural beats Nomi (paired over {S} units, "
+                                                                f">= {S - 1} of {S})"]
     with pytest.raises(ValueError, match="paired"):
-        q3_tracking({**paper_like(), "FNN": runs(0.1)[:3]}, label="x")
+        q3_tracking({**paper_like(), "FNN": runs(0.1)[:3]}, units=UNITS, label="x")
+    with pytest.raises(ValueError, match="one unit id per"):
+        q3_tracking(paper_like(), units=UNITS[:3], label="x")
+
+
+def test_q3_counts_a_flight_copied_for_every_network_once() -> None:
+    """The former grid: 5 networks x 3 disturbances, Nomi flown once per disturbance and copied for every
+    network. Labelled with their true units (the disturbance), the 15 entries are 3 units, not 15."""
+    rng = np.random.default_rng(1)
+    disturbance = [k % 3 for k in range(15)]
+    nomi = np.array([0.5, 0.55, 0.45])[disturbance]  # copies
+    values = {m: 0.1 + 0.01 * rng.standard_normal(15) for m in SIX} | {"Nomi": nomi}
+    as_if_independent = q3_tracking(values, units=range(15), label="x")
+    r = q3_tracking(values, units=disturbance, label="x")
+    assert as_if_independent.n == 15 and r.n == 3
+    assert "x: FNN beats Nomi (paired over 3 units, >= 2 of 3)" in r.checks
+    assert r.numbers["paired"]["FNN < Nomi"]["pairs"] == 15
 
 
 def test_q4_wants_fnn_best_not_just_a_feedback_model() -> None:
     acc = {"Nomi": runs(8.0), "Neural": runs(8.0), "MLP": runs(8.0), "FB": runs(3.5), "AdapNN": runs(0.5),
            "FNN": runs(3.2)}
-    r = q4_prediction(acc, label="as flown")
-    assert not all(r.checks.values()) and r.checks[f"as flown: FNN beats Neural (paired, >= {S - 1} of {S})"]
-    assert not r.checks[f"as flown: FNN beats AdapNN (paired, >= {S - 1} of {S})"]
-    assert all(q4_prediction({**acc, "AdapNN": runs(5.0)}, label="as flown").checks.values())
+    r = q4_prediction(acc, units=UNITS, label="as flown")
+    key = f"(paired over {S} units, >= {S - 1} of {S})"
+    assert not all(r.checks.values()) and r.checks[f"as flown: FNN beats Neural {key}"]
+    assert not r.checks[f"as flown: FNN beats AdapNN {key}"] and r.n == S
+    assert all(q4_prediction({**acc, "AdapNN": runs(5.0)}, units=UNITS, label="as flown").checks.values())
     assert set(SIX) == set(acc)
 
 
@@ -88,7 +132,7 @@ def test_q5_comparable_and_slightly_larger_passes_far_or_smaller_fails() -> None
     # one claim over two settings: each reading's checks over both (here: labelled alike, so one check)
     joined = join_readings([r, q5_adaptive(paper_like(), [1.0] * S, label="4 N")])
     assert list(joined) == ["as worded"] and len(joined["as worded"].checks) == 2
-    assert join_readings([q3_tracking(paper_like(), label="6 N")]) is None
+    assert join_readings([q3_tracking(paper_like(), units=UNITS, label="6 N")]) is None
     with pytest.raises(GuaranteeFailed, match="6 N: Theorem 2 ball holds >= 95 % after the transient, every run"):
         q5_adaptive(paper_like(), [1.0] * (S - 1) + [0.5], label="6 N")  # a false guarantee stops the run
 
