@@ -53,6 +53,8 @@ import numpy as np
 import torch
 
 import fnnlib as F
+
+# %% tags=["hide-input"]
 from fnnbook.rules import sec3
 
 # refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
@@ -112,6 +114,7 @@ def per_seed(z):
     return F.split_members(z, E)
 
 
+# %%
 xs_nom, xs_test = F.stack_members(x_nom, E), F.stack_members(x_test, E)
 with torch.no_grad():
     f_nn_nom, f_nn_test = per_seed(F.eval_field(ens, xs_nom)), per_seed(F.eval_field(ens, xs_test))
@@ -282,6 +285,8 @@ i_j = noise_sweep.index(noise_std)
 every = max(1, N_max // 10)
 mean_fb, mean_nn = err_N_fb.mean(1), err_N_nn.mean(1)
 first_not_better = int(Ns[mean_fb >= mean_nn][0]) if (mean_fb >= mean_nn).any() else None
+
+# %%
 claims += [
     sec3.s3(noise_std=sweep["noise_std"], decay=sweep["feedback_decay"],
             no_decay=sweep["feedback_no_decay"], neural_ode=sweep["neural_ode"],
