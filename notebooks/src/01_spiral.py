@@ -53,10 +53,9 @@ import numpy as np
 import torch
 
 import fnnlib as F
-
-# %% tags=["hide-input"]
 from fnnbook.rules import sec3
 
+# %% tags=["hide-input"]
 # refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
 F.decayed_gains(F.check_gain(L, 2, Ts), N_max, beta)
 if not 1 <= N <= N_max < n_samples:

@@ -343,6 +343,8 @@ s10
 # %%
 fig, axes = F.new_figure(1, 3)
 ax = axes[0, 0]
+
+# %%
 ax.plot(tn, x10[:, 0], color=F.plotting.COLORS["truth"], label="x")
 ax.plot(tn, x10[:, 1], color=F.plotting.COLORS["truth"], ls="--", label="y")
 ax.set(xlabel="t [s]", ylabel="state", title="(a) switched spiral")
@@ -359,6 +361,8 @@ for e in range(S):  # one faint line per seed
                         alpha=0.6, label="neural ODE" if first else None)
     axes[0, 2].semilogy(tn[N:], e_ms[e], color=F.plotting.COLORS["feedback"], lw=0.8, alpha=0.6,
                         label="feedback" if first else None)
+
+# %%
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"(b) change-rate and observer errors ({S} seeds)")
 axes[0, 1].legend(fontsize=7)
 

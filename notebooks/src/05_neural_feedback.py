@@ -272,6 +272,7 @@ def level_errors(x_levels, f_levels):
     return rate, multistep, seconds
 
 
+# %%
 systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
 # the trajectories use the levels' parameters rounded to float32 (as every run so far has; the rates do not)
 params32 = torch.tensor([[s.omega, s.eta, s.eps] for s in systems]).tolist()

@@ -161,6 +161,7 @@ x_s = sys_s.simulate(torch.tensor(spiral_x0), t_s).float()
 x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples]).float()
 
 
+# %%
 def spiral_run(seed: int, model_s) -> dict:
     gen = F.make_generator(1000 + seed)
     y_tune, y = (F.add_measurement_noise(x, spiral_noise_std, gen) for x in (x_s_tune, x_s))
@@ -180,6 +181,7 @@ def spiral_run(seed: int, model_s) -> dict:
             "hand_sweep": hand.as_dict(), "seed": seed}
 
 
+# %%
 t0 = time.perf_counter()
 spiral = [spiral_run(s, net) for s, net, _ in spiral_nets]
 spiral_seconds = time.perf_counter() - t0
