@@ -55,6 +55,7 @@ import torch
 import fnnlib as F
 from fnnbook.rules import sec3
 
+# %% tags=["hide-input"]
 # refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
 F.decayed_gains(F.check_gain(L, 2, Ts), N_max, beta)
 if not 1 <= N <= N_max < n_samples:
@@ -112,6 +113,7 @@ def per_seed(z):
     return F.split_members(z, E)
 
 
+# %%
 xs_nom, xs_test = F.stack_members(x_nom, E), F.stack_members(x_test, E)
 with torch.no_grad():
     f_nn_nom, f_nn_test = per_seed(F.eval_field(ens, xs_nom)), per_seed(F.eval_field(ens, xs_test))
@@ -282,6 +284,8 @@ i_j = noise_sweep.index(noise_std)
 every = max(1, N_max // 10)
 mean_fb, mean_nn = err_N_fb.mean(1), err_N_nn.mean(1)
 first_not_better = int(Ns[mean_fb >= mean_nn][0]) if (mean_fb >= mean_nn).any() else None
+
+# %%
 claims += [
     sec3.s3(noise_std=sweep["noise_std"], decay=sweep["feedback_decay"],
             no_decay=sweep["feedback_no_decay"], neural_ode=sweep["neural_ode"],

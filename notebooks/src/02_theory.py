@@ -230,6 +230,8 @@ ax.axvline(1.0, color="k", lw=0.8)
 ax.set(xlabel=r"$\rho(I - T_s L)$", ylabel="growth factor", title=f"(b) divergence starts at rho = 1 ({S} seeds)")
 ax.legend(fontsize=8)
 ax = axes[0, 2]
+
+# %%
 for e in range(S):
     ax.semilogy(rho[stable], err_d[e].amax(-1)[stable], "o", color=F.plotting.COLORS["feedback"], alpha=0.6,
                 label=r"max $\|\tilde x_k\|$" if e == 0 else None)
@@ -245,11 +247,13 @@ fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
 # check is computed from the numbers above, one per seed, and holds when it holds in at least $S-1$ of the $S$
 # seeds; a guarantee must hold in every seed. The headline is the mean ± standard deviation over the seeds.
 
-# %% tags=["nbval-check-output"]
+# %%
 fb, ct = "feedback", "continuous"
 s6_rule = sec3.s6(rho=rho.tolist(), diverges=s6["diverges"], max_err=s6["max_err"], iss_bound=s6["iss_bound_max"],
                   switches=switches, rho_lo=rho_lo, rho_hi=rho_hi, rate=s6["measured_rate"],
                   rate_tolerance=rate_tolerance)
+
+# %% tags=["nbval-check-output"]
 claims = [
     sec3.s5(ball_x=s5["ball_x"], ball_f=s5["ball_f"],
             feedback_x=s5[f"{fb}_max_x_after_transient"],

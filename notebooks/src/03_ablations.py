@@ -61,6 +61,7 @@ import torch
 import fnnlib as F
 from fnnbook.rules import sec3
 
+# %% tags=["hide-input"]
 # refuse bad settings before any work: gains (Theorem 1, Eq. (25)), decay rates, horizon, switch time
 gains = F.colon_range(*gain_range)
 levels = F.paired_levels(F.colon_range(*omega_range), F.colon_range(*eta_range), F.colon_range(*eps_range))
@@ -86,6 +87,7 @@ tn = t.numpy()
 gens = [F.make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S7 and S9, drawn in that order
 
 
+# %%
 def split(z):
     """Stacked states (..., S*2) -> (S, ..., 2), seed first."""
     return F.split_members(z, S)
@@ -132,6 +134,7 @@ xs_lv = F.stack_members(x_lv, S)  # (U, T, 2S)
 x_lv_noisy = F.add_member_noise(x_lv, noise_std, gens, draws=noise_draws)  # (draws, U, T, 2S): own noise per seed
 
 
+# %%
 def map_errors(z_in, u):
     """Mean N-step error (S, G) at level ``u`` from measurements ``z_in`` (T, 2S): every seed and gain in one cascade.
 
@@ -258,6 +261,7 @@ def rmse_N(z, pool):
     return F.n_step_errors(split(z), x9, N).pow(2).mean(pool).sqrt()
 
 
+# %%
 rmse9 = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, L, betas), (2, 3))  # (S, B)
 rmse9_ext = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, L, betas_ext), (2, 3))
 rmse9_clean = rmse_N(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, L, betas), -1)
@@ -315,6 +319,7 @@ z_fb10, z_nn10 = split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), split(F.ro
 e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 
+# %%
 def reconverge(tt, err):
     """``F.reconvergence`` per seed (rows of ``err``), as one list per key."""
     rows = [F.reconvergence(tt, e, t_switch, window=steady_window, band_factor=band_factor) for e in err]
@@ -338,6 +343,8 @@ s10
 # %%
 fig, axes = F.new_figure(1, 3)
 ax = axes[0, 0]
+
+# %%
 ax.plot(tn, x10[:, 0], color=F.plotting.COLORS["truth"], label="x")
 ax.plot(tn, x10[:, 1], color=F.plotting.COLORS["truth"], ls="--", label="y")
 ax.set(xlabel="t [s]", ylabel="state", title="(a) switched spiral")
@@ -354,6 +361,8 @@ for e in range(S):  # one faint line per seed
                         alpha=0.6, label="neural ODE" if first else None)
     axes[0, 2].semilogy(tn[N:], e_ms[e], color=F.plotting.COLORS["feedback"], lw=0.8, alpha=0.6,
                         label="feedback" if first else None)
+
+# %%
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"(b) change-rate and observer errors ({S} seeds)")
 axes[0, 1].legend(fontsize=7)
 

@@ -62,6 +62,8 @@ system = F.Spiral(*test)
 x = system.simulate(torch.tensor(x0), t).float()  # (T, 2) clean test states
 f_true = system.rate(x)  # true change rates
 X_tune, _ = F.randomized_cases(F.Spiral, kf_tuning_low, kf_tuning_high, kf_tuning_cases, torch.tensor(x0), t)
+
+# %%
 y, d_true, kf_q_d = [], [], []  # per seed: what every observer sees, the residual, the Kalman q_d
 for s, model, meta in nets:
     y.append(F.add_measurement_noise(x, noise_std, F.make_generator(seed + s + 1)))  # this seed's own noise draw
@@ -115,6 +117,7 @@ def make_observers(model, q_d):
     }
 
 
+# %% tags=["remove-output"]
 observers = [make_observers(model, q_d) for (_, model, _), q_d in zip(nets, kf_q_d)]  # one set per seed
 observers[0]
 
@@ -175,6 +178,7 @@ def twin_check(rep, model, y_e, d_true_e):
                   "mean_abs_delta_f_over_L": float(d_true_e.norm(dim=-1).mean()) / L}
 
 
+# %%
 twins = [twin_check(rep, model, y_e, d_e) for rep, (_, model, _), y_e, d_e in zip(reports, nets, y, d_true)]
 d_lf = [d for d, _ in twins]  # per seed
 equiv = {k: [eq[k] for _, eq in twins] for k in twins[0][1]}  # per key: one value per seed
@@ -205,6 +209,7 @@ def design_check(obs):
             "kf_stationary_poles": sorted(np.abs(np.linalg.eigvals(kf.A.numpy() - ss.L @ kf.C.numpy())).tolist())}
 
 
+# %%
 designs = [design_check(obs) for obs in observers]
 design = {k: [d[k] for d in designs] for k in designs[0]}  # per key: one value per seed
 design

@@ -67,6 +67,7 @@ import torch
 import fnnlib as F
 from fnnbook.rules import sec4
 
+# %% tags=["hide-input"]
 task_start = time.perf_counter()
 # refuse bad settings before any work
 cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
@@ -86,6 +87,8 @@ if len(seeds) < 2 or seed not in seeds:
 meta = loaded[0][2]
 if "recipe" not in meta:
     raise ValueError("the spiral checkpoints carry no training recipe; rerun the spiral task")
+
+# %%
 E, shown = len(seeds), seeds.index(seed)
 f_ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in loaded], seeds)  # the frozen networks side by side
 recipe = F.ODERecipe(**meta["recipe"])  # the nominal models' recipe, read from their checkpoints
@@ -192,6 +195,8 @@ lc = F.plotting.plot_rate_curve(axes[0, 2], f_nom, f_fb_nom[shown], title="(b) f
                                 label="neural feedback", vmax=vmax)
 fig.colorbar(lc, ax=axes[0, 2], label="change-rate error")
 ax = axes[0, 3]
+
+# %%
 for j, (key, color) in enumerate([("nominal_neural_ode", "neural_ode"), ("dr_neural_ode", "feedback_nodecay"),
                                   ("neural_feedback", "feedback")]):
     v = np.asarray(d12[f"rel_rmse_{key}"])
@@ -267,6 +272,7 @@ def level_errors(x_levels, f_levels):
     return rate, multistep, seconds
 
 
+# %%
 systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
 # the trajectories use the levels' parameters rounded to float32 (as every run so far has; the rates do not)
 params32 = torch.tensor([[s.omega, s.eta, s.eps] for s in systems]).tolist()
@@ -291,6 +297,8 @@ fig, axes = F.new_figure(1, 2)
 idx = np.arange(len(res_levels))
 colors = {"neural_ode": F.plotting.COLORS["neural_ode"], "neural_feedback": F.plotting.COLORS["feedback"],
           "linear_feedback": F.plotting.COLORS["feedback_nodecay"]}
+
+# %%
 for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N}-step error")]):
     for j, (key, v) in enumerate(vals.items()):
         v = v.numpy()  # (E, 12)
@@ -314,6 +322,8 @@ held = [s for s, keep in zip(flipped, far.tolist()) if keep]
 if not held:
     raise ValueError(f"no held-out level is {heldout_min_distance} training steps from the cases; distances "
                      f"{dist.tolist()}")
+
+# %%
 x_h = F.simulate_levels([F.Spiral(*torch.tensor([s.omega, s.eta, s.eps]).tolist()) for s in held], x0_t, t,
                         exact=True).float()
 f_h = torch.stack([s.rate(x) for s, x in zip(held, x_h)])

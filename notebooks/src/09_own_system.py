@@ -161,6 +161,7 @@ x_s = sys_s.simulate(torch.tensor(spiral_x0), t_s).float()
 x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples]).float()
 
 
+# %%
 def spiral_run(seed: int, model_s) -> dict:
     gen = F.make_generator(1000 + seed)
     y_tune, y = (F.add_measurement_noise(x, spiral_noise_std, gen) for x in (x_s_tune, x_s))
@@ -180,6 +181,7 @@ def spiral_run(seed: int, model_s) -> dict:
             "hand_sweep": hand.as_dict(), "seed": seed}
 
 
+# %%
 t0 = time.perf_counter()
 spiral = [spiral_run(s, net) for s, net, _ in spiral_nets]
 spiral_seconds = time.perf_counter() - t0
@@ -200,6 +202,8 @@ for ax, runs, title in [(axes[0, 0], pendulum, f"pendulum, N = {N}"), (axes[0, 1
         ax.plot([i] * len(vals), vals, "k.", ms=4)
     ax.set(xticks=range(len(names)), yscale="log", ylabel="mean N-step error", title=title)
     ax.set_xticklabels(names, rotation=20)
+
+# %%
 ax = axes[0, 2]
 tr = pendulum[0]["trace"]
 tt = np.arange(N, n_test) * Ts
@@ -210,12 +214,14 @@ ax.set(xlabel="t [s]", ylabel="theta", title=f"pendulum, {N}-step predictions (s
 ax.legend(fontsize=7)
 fig_b1 = F.save_figure(fig, out, "own_system_b1")
 
-# %% tags=["nbval-check-output"]
+# %%
 errors = {"pendulum": {k: [r["errors"][k] for r in pendulum] for k in names},
           "spiral": {k: [r["errors"][k] for r in spiral] for k in names}}
 checks = b1(errors).checks
 tuned_values = {"pendulum": [{"L": r["L"], "beta": r["beta"]} for r in pendulum],
                 "spiral": [{"L": r["L"], "beta": r["beta"]} for r in spiral]}
+
+# %% tags=["nbval-check-output"]
 F.write_results(out, task="own_system", profile=profile, claims=[],
                 metrics={"b1": {"errors": errors, "paired": b1_paired(errors), "tuned": tuned_values,
                                 "figure": fig_b1,
@@ -245,6 +251,8 @@ lost = torch.rand(y_full.shape[0], generator=gen) < 0.3
 y_drop = torch.where(lost[:, None], torch.tensor(float("nan")), y_full)
 ekf_s = F.ExtendedKalmanObserver(model_s, spiral_Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
                                  P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2)
+
+# %%
 with torch.no_grad():
     drop_preds = {f"{name}, {which}": predict(y)
                   for which, y in [("every sample", y_full), ("30 % lost", y_drop)]

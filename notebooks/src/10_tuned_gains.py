@@ -123,6 +123,7 @@ def bottle_hand(seed: int, net) -> F.GainSweep:
     return F.sweep_gains(cost, bottle_hand_L_grid, bottle_hand_beta_grid)
 
 
+# %%
 def bottle_tune(seed: int, net, hand: F.GainSweep) -> F.TunedGains:
     """The network's (L, beta), from its hand values, tuned on the O1 error of training throws drawn with its seed."""
     which = torch.randperm(x_b_train.shape[0], generator=F.make_generator(seed))[:bottle_tune_throws]
@@ -152,6 +153,8 @@ with torch.no_grad():
                                   for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
     hand_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, h.L, h.beta))
                                  for net, h in zip(b_nets, b_hand)])
+
+# %%
 paper_gains, open_loop = o1["per_throw_m"]["feedback"], o1["per_throw_m"]["neural ODE"]  # bottle's, same networks
 seconds["bottle_eval"] = time.perf_counter() - t0
 errors = {"bottle": {"tuned": tuned_per_seed.mean(0).tolist(), "hand": hand_per_seed.mean(0).tolist(),
@@ -208,6 +211,8 @@ mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cos
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 val_vehicles = M.randomized_vehicles(TRAINING_TRUTH, m["validation_vehicles"], seed=m["validation_vehicle_seed"],
                                      **VALIDATION_RANDOMIZATION)  # quadrotor_mpc's validation set, rebuilt as it builds it
+
+# %% tags=["hide-input"]
 val_refs = M.validation_references(m["validation_flights"], m["validation_steps"], quad_N, seed=m["validation_seed"],
                                    Ts=quad_Ts, n_waypoints=m["validation_waypoints"], box=PAPER_FLIGHT_DATA["box"],
                                    max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
@@ -302,7 +307,7 @@ fig_b1 = F.save_figure(fig, out, "b1_tuned_vs_hand")
 # the steady-state Kalman filter (pendulum, spiral) beats the tuned gains by the same paired rule: there
 # the filter, not the tuned cascade, is the better predictor, and the line says so.
 
-# %% tags=["nbval-check-output"]
+# %%
 rule = rules.b1(errors)
 paired = rules.b1_paired(errors)
 summary = rules.b1_summary(errors)
@@ -315,6 +320,8 @@ claims = [rule.replace(figure=fig_b1, title="L and beta tuned from data",
                                                  float(np.mean(errors["bottle"]["tuned"]) /
                                                        np.mean(errors["bottle"]["hand"]))),
                       paper="no number: the paper names the choice of gains as its open problem")]
+
+# %% tags=["nbval-check-output"]
 for name, ok in rule.checks.items():
     print(f"{name:50s} {'holds' if ok else 'fails'}")
 for c in claims:
