@@ -27,12 +27,13 @@ from .nbfactory import CHILD_BODY, CHILD_PARAMS, LEAF_BODY, LEAF_PARAMS, MakePip
 
 # A leaf that records when it ran (wall clock) and sleeps `nap` seconds in between. With `meet_within` > 0 it
 # also waits (that long at most) until another timed task of the run has started: two tasks that run at the
-# same time always overlap, however slowly a loaded machine starts their kernels.
+# same time always overlap, however slowly a loaded machine starts their kernels. The tasks meet in
+# <output_root>/<profile>/started (out_dir is the run's staging folder <profile>/.staging/<run>/<task>).
 TIMED_PARAMS = LEAF_PARAMS + "nap = 0.0\nmeet_within = 0.0\n"
 TIMED_BODY = """\
 import json, pathlib, time
 start = time.time()
-meet = pathlib.Path(out_dir).parent.parent / "started"
+meet = pathlib.Path(out_dir).parents[2] / "started"
 meet.mkdir(exist_ok=True)
 (meet / pathlib.Path(out_dir).name).write_text("x")
 while time.time() - start < meet_within and len(list(meet.iterdir())) < 2:
@@ -119,6 +120,8 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     for name in ("a", "b"):
         (met / name).write_text("x")
     assert run(serial, "smoke", ["leaf"], workers=1, progress_bar=False, echo=lambda _: None).ok
+    start, end = json.loads((serial.output_dir("smoke", "leaf") / "times.json").read_text())
+    assert end - start < 30.0  # it found the meeting place full and did not wait out its 60 s
     for task in ("leaf",):
         assert (serial.output_dir("smoke", task) / "results.json").read_bytes() == (
             spec.output_dir("smoke", task) / "results.json").read_bytes()
