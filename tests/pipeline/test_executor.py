@@ -261,6 +261,8 @@ def test_runs_on_a_running_cluster(make_pipeline: MakePipeline, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
     tasks = _tasks(tmp_path)
     del tasks["pt"], tasks["agg"]
+    for name in ("leaf", "other"):
+        tasks[name]["parameters"]["smoke"]["nap"] = 0.0  # nothing here times them
     pipeline = make_pipeline(tasks, parts=[{"title": "P", "tasks": ["leaf", "other", "child"]}])
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
@@ -303,12 +305,11 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
                              str(pipeline), "--no-progress", "--workers", "2"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     logs = tmp_path / "outputs" / "smoke" / "_logs"
+    started = tmp_path / "outputs" / "smoke" / "started"  # each kernel marks its start there, then naps
     deadline = time.time() + 90
-    while time.time() < deadline and not all(
-            "--- kernel output ---" in (logs / f"{t}.log").read_text() if (logs / f"{t}.log").exists() else False
-            for t in ("leaf", "other")):
-        time.sleep(0.5)
-    time.sleep(3)  # the kernels are up and napping
+    while time.time() < deadline and not all((started / t).exists() for t in ("leaf", "other")):
+        time.sleep(0.2)
+    time.sleep(0.5)  # past the marks: napping
     family = psutil.Process(proc.pid).children(recursive=True)
     assert len(family) >= 4  # two workers (with their nanny/spawn helpers) and two kernels
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole foreground process group
