@@ -157,7 +157,7 @@ class LuenbergerObserver(_OutputModel):
         return self.constant_gain_estimate(*self.inputs(x, u), self.L, u)
 
     def error_poles(self) -> np.ndarray:
-        """Eigenvalues of :math:`\Phi - LC` (complex, shape (n + q,)); :math:`\Phi = A` without ``C``."""
+        r"""Eigenvalues of :math:`\Phi - LC` (complex, shape (n + q,)); :math:`\Phi = A` without ``C``."""
         return np.linalg.eigvals((self.Phi - self.L @ self.C).numpy())
 
     def __repr__(self) -> str:
