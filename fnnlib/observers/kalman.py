@@ -59,16 +59,14 @@ def as_covariance(M: float | Tensor | list, m: int, *, name: str, definite: bool
     return M
 
 
-def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000) -> SteadyState:
-    r"""Stationary Kalman gain by iterating the Riccati difference equation to its fixed point.
+def steady_state_gain(A, C, Q, R) -> SteadyState:
+    r"""Stationary Kalman gain from the discrete algebraic Riccati equation (``scipy.linalg.solve_discrete_are``).
 
     .. math::
-        P \leftarrow A P A^T + Q - A P C^T (C P C^T + R)^{-1} C P A^T,
-        \qquad K = P C^T (C P C^T + R)^{-1}, \qquad L = A K,
+        P = A P A^T + Q - A P C^T (C P C^T + R)^{-1} C P A^T,
+        \qquad K = P C^T (C P C^T + R)^{-1}, \qquad L = A K.
 
-    from :math:`P = Q`, until the relative change of :math:`P` is below
-    ``tol``. :math:`P` is the a-priori covariance, the solution of the
-    discrete algebraic Riccati equation that ``control.dlqe(A, I, C, Q, R)``
+    :math:`P` is the a-priori covariance, the one ``control.dlqe(A, I, C, Q, R)``
     returns with its gain :math:`L` (predictor form); filterpy's
     ``KalmanFilter.K`` converges to :math:`K` (filter form).
 
@@ -80,21 +78,24 @@ def steady_state_gain(A, C, Q, R, *, tol: float = 1e-13, max_iter: int = 200_000
         Process noise covariance (on the state directly, G = I).
     R : array, shape (q, q)
         Measurement noise covariance, positive definite.
+
+    Raises
+    ------
+    RuntimeError
+        If the equation has no stabilising solution ((A, C) not detectable, or Q not positive definite on the
+        unstable modes).
     """
+    from scipy.linalg import solve_discrete_are  # noqa: PLC0415 (scipy.linalg loads only where it is used)
+
     A, C, Q, R = (np.asarray(M, dtype=float) for M in (A, C, Q, R))
-    P = Q.copy()
-    for _ in range(int(max_iter)):
-        S = C @ P @ C.T + R
-        AK = A @ np.linalg.solve(S, C @ P).T  # A P C^T S^{-1}
-        P_next = A @ P @ A.T + Q - AK @ S @ AK.T  # P = A P A' + Q - A P C' S^-1 C P A'
-        P_next = 0.5 * (P_next + P_next.T)
-        done = np.max(np.abs(P_next - P)) <= tol * max(1.0, np.max(np.abs(P_next)))
-        P = P_next
-        if done:
-            K = np.linalg.solve(C @ P @ C.T + R, C @ P).T  # K = P C' (C P C' + R)^-1
-            return SteadyState(K=K, L=A @ K, P=P)
-    raise RuntimeError(f"the Riccati iteration did not converge in {max_iter} steps: is (A, C) detectable "
-                       "and Q positive definite on the unstable modes?")
+    try:
+        P = solve_discrete_are(A.T, C.T, Q, R)  # the filter's DARE is the control DARE of (A^T, C^T)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise RuntimeError(f"the Riccati equation has no stabilising solution ({exc}): is (A, C) detectable and "
+                           "Q positive definite on the unstable modes?") from exc
+    P = 0.5 * (P + P.T)
+    K = np.linalg.solve(C @ P @ C.T + R, C @ P).T  # K = P C' (C P C' + R)^-1
+    return SteadyState(K=K, L=A @ K, P=P)
 
 
 class _OutputModel(AugmentedObserver):

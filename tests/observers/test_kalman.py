@@ -22,6 +22,21 @@ def _dlqe(A, C, Q, R):
     return L, P
 
 
+def _riccati_iteration(A, C, Q, R, tol=1e-13, max_iter=200_000):
+    """The test reference: the Riccati difference equation iterated from P = Q to its fixed point."""
+    A, C, Q, R = (np.asarray(M, dtype=float) for M in (A, C, Q, R))
+    P = Q.copy()
+    for _ in range(max_iter):
+        S = C @ P @ C.T + R
+        AK = A @ np.linalg.solve(S, C @ P).T
+        P_next = A @ P @ A.T + Q - AK @ S @ AK.T
+        P_next = 0.5 * (P_next + P_next.T)
+        if np.max(np.abs(P_next - P)) <= tol * max(1.0, np.max(np.abs(P_next))):
+            return P_next
+        P = P_next
+    raise AssertionError("the reference iteration did not converge")
+
+
 @pytest.mark.parametrize("case", ["augmented", "augmented_slow_drift", "random_stable"])
 def test_steady_state_gain_equals_dlqe(case):
     if case.startswith("augmented"):
@@ -35,6 +50,7 @@ def test_steady_state_gain_equals_dlqe(case):
         C, Q, R = rng.normal(size=(2, 3)), np.diag([0.1, 0.2, 0.3]), np.array([[0.5, 0.1], [0.1, 0.4]])
     ss = steady_state_gain(A, C, Q, R)
     L, P = _dlqe(A, C, Q, R)
+    np.testing.assert_allclose(ss.P, _riccati_iteration(A, C, Q, R), rtol=1e-7, atol=1e-14)  # the old fixed point (its stop rule leaves ~5e-9)
     np.testing.assert_allclose(ss.L, L, rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose(ss.P, P, rtol=1e-7, atol=1e-12)
     A, C = np.asarray(A), np.asarray(C)
@@ -117,3 +133,9 @@ def test_bad_covariances_are_refused(kwargs, match):
     for cls in (KalmanObserver, ExtendedKalmanObserver):
         with pytest.raises(ValueError, match=match):
             cls(Spiral(2.0, 0.1, 0.0), TS, 2, args["Q"], args["R"], P0=P0)
+
+
+def test_an_undetectable_pair_has_no_stationary_gain():
+    A = np.diag([1.2, 0.5])  # the unstable mode is not seen by C
+    with pytest.raises(RuntimeError, match="detectable"):
+        steady_state_gain(A, np.array([[0.0, 1.0]]), np.eye(2), np.eye(1))
