@@ -1,0 +1,426 @@
+"""Why a claim stands where it stands: the claim's own rule over the settings the paper leaves open.
+
+A *why* explains one claim's verdict in the paper profile.  It rests on runs, never on prose alone:
+
+* **grids** (:class:`WhyGrid`): the claim's own rule (the function of :mod:`fnnbook.rules` that judges it)
+  applied over the seeds at every point of a grid of settings; each axis (:class:`Axis`) is named for the
+  silence of the paper it probes, with the paper's stated value (``None`` where it states none) and the
+  value the paper profile uses;
+* **the authors' networks** (:class:`AuthorsCheck`): the same rule with the networks of the authors' release
+  in place of ours;
+* **readings**: the verdicts of the claim's readings, from the paper-profile result.
+
+From these, :func:`causes` names the causes by a rule fixed here, before any why run (tested in
+``tests/rules/test_why.py``):
+
+* (a) **reading**: the claim's readings do not all give the same verdict;
+* (b) **open setting**: on some grid the rule holds at one point and fails at another, along an axis whose
+  value the paper does not state;
+* (c) **implementation**: with the authors' networks the rule gives a better verdict than with ours;
+* (d) **does not hold where tested**: some grid never lets the rule hold, and the authors' networks (where
+  evaluated) do not reproduce it either.
+
+A claim may have several causes, or none (then the why reads "robust": the verdict stands at every point).
+:func:`summary` writes the one line the scoreboard shows under **Why**, from the numbers alone.
+
+A why task writes its whys with :func:`write_whys` (``whys.json`` in its output folder); the book reads them
+with :func:`read_whys`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fnnlib.io import atomic_write
+from fnnlib.results import VERDICTS
+
+__all__ = ["CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "WhyGrid", "causes", "read_whys",
+           "summary", "write_whys"]
+
+#: the name of a why task's output file
+WHYS_FILENAME = "whys.json"
+
+#: the four causes a why can name
+CAUSES: Mapping[str, str] = {
+    "a": "the reading of the paper's words",
+    "b": "a setting the paper leaves open",
+    "c": "our implementation against the authors'",
+    "d": "the claim does not hold where it was tested",
+}
+
+_RANK = {v: i for i, v in enumerate(reversed(VERDICTS))}  # not reproduced 0 < partly 1 < reproduced 2
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    return value
+
+
+def _text(value: Any) -> str:
+    """A grid value in short: ``0.003``, ``4.5``, ``adam``, ``[2000, adam]``."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_text(v) for v in value) + "]"
+    return str(value)
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One axis of a why grid.
+
+    Attributes
+    ----------
+    name : str
+        The setting it varies (a notebook parameter's name where there is one: ``noise_std``).
+    values : tuple
+        The grid values, in the order of the grid's ``holds`` array.
+    silence : str
+        What the paper leaves open that this axis probes, in a few words ("the measurement noise of
+        Fig. 4g is not given").
+    paper : Any
+        The value the paper states, or ``None`` where it states none.
+    ours : Any
+        The value the paper profile uses (one of ``values`` where possible).
+    """
+
+    name: str
+    values: tuple[Any, ...]
+    silence: str
+    paper: Any = None
+    ours: Any = None
+
+    def __post_init__(self) -> None:
+        if not self.name or not self.silence:
+            raise ValueError("an axis needs a name and the silence it probes")
+        object.__setattr__(self, "values", tuple(_plain(v) for v in self.values))
+        if len(self.values) < 2:
+            raise ValueError(f"axis {self.name!r}: a grid axis needs at least 2 values, got {len(self.values)}")
+        if len({json.dumps(v) for v in self.values}) != len(self.values):
+            raise ValueError(f"axis {self.name!r} lists a value twice: {self.values!r}")
+
+    @property
+    def open(self) -> bool:
+        """Whether the paper leaves this setting open (states no value)."""
+        return self.paper is None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "values": list(self.values), "silence": self.silence,
+                "paper": _plain(self.paper), "ours": _plain(self.ours)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Axis:
+        return cls(name=data["name"], values=tuple(data["values"]), silence=data["silence"],
+                   paper=data.get("paper"), ours=data.get("ours"))
+
+
+@dataclass(frozen=True)
+class WhyGrid:
+    """The claim's rule at every point of a grid.
+
+    Attributes
+    ----------
+    axes : tuple of Axis
+    holds : ndarray of bool, shape ``[len(a.values) for a in axes]``
+        Whether the claim's own rule holds at each point (applied over the ``n`` units there).
+    n : int
+        Independent units (seeds, networks, draws) behind each point.
+    rule : str
+        "the claim holds at a grid point when ...": the claim's rule as applied at each point.
+    numbers : mapping of str to nested lists, optional
+        Measured values per point (same shape as ``holds``, possibly with a trailing unit axis).
+    title : str
+        A few words on what the grid varies.
+    """
+
+    axes: tuple[Axis, ...]
+    holds: np.ndarray
+    n: int
+    rule: str
+    numbers: Mapping[str, Any] = field(default_factory=dict)
+    title: str = ""
+
+    def __post_init__(self) -> None:
+        holds = np.asarray(self.holds)
+        shape = tuple(len(a.values) for a in self.axes)
+        if not self.axes:
+            raise ValueError("a why grid needs at least one axis")
+        if holds.shape != shape:
+            raise ValueError(f"holds has shape {holds.shape}, the axes give {shape}")
+        if holds.dtype != bool:
+            raise ValueError(f"holds must be booleans, got dtype {holds.dtype}")
+        if int(self.n) < 1:
+            raise ValueError(f"n must be at least 1, got {self.n}")
+        if not self.rule:
+            raise ValueError("a why grid states the rule it applies at each point")
+        object.__setattr__(self, "holds", holds)
+        object.__setattr__(self, "numbers", {k: _plain(v) for k, v in self.numbers.items()})
+
+    @property
+    def mixed(self) -> bool:
+        """The rule holds at some point and fails at another."""
+        return bool(self.holds.any() and not self.holds.all())
+
+    @property
+    def mixed_on_open_axis(self) -> bool:
+        """Along some axis the paper leaves open, the outcome changes with that axis alone."""
+        for i, axis in enumerate(self.axes):
+            if axis.open and (self.holds.any(axis=i) != self.holds.all(axis=i)).any():
+                return True
+        return False
+
+    def to_json(self) -> dict[str, Any]:
+        return {"title": self.title, "axes": [a.to_json() for a in self.axes], "holds": self.holds.tolist(),
+                "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> WhyGrid:
+        return cls(axes=tuple(Axis.from_json(a) for a in data["axes"]), holds=np.asarray(data["holds"], bool),
+                   n=int(data["n"]), rule=data["rule"], numbers=data.get("numbers") or {},
+                   title=data.get("title", ""))
+
+
+@dataclass(frozen=True)
+class AuthorsCheck:
+    """The claim's rule with the authors' trained networks in place of ours.
+
+    Attributes
+    ----------
+    verdict : str
+        The rule's verdict with the authors' networks.
+    ours : str
+        The same rule's verdict with ours, on the same evaluation.
+    checks : mapping of str to bool
+        The rule's checks with the authors' networks.
+    networks : str
+        Which of the release's networks (file names in its README).
+    n : int
+        Independent units behind the verdict (the release has one network per kind, five quadrotor runs).
+    """
+
+    verdict: str
+    ours: str
+    checks: Mapping[str, bool]
+    networks: str
+    n: int = 1
+
+    def __post_init__(self) -> None:
+        for v in (self.verdict, self.ours):
+            if v not in VERDICTS:
+                raise ValueError(f"unknown verdict {v!r}; verdicts: {', '.join(VERDICTS)}")
+        object.__setattr__(self, "checks", {str(k): bool(v) for k, v in self.checks.items()})
+
+    @property
+    def better(self) -> bool:
+        """The authors' networks give a better verdict than ours."""
+        return _RANK[self.verdict] > _RANK[self.ours]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"verdict": self.verdict, "ours": self.ours, "checks": dict(self.checks),
+                "networks": self.networks, "n": int(self.n)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> AuthorsCheck:
+        return cls(verdict=data["verdict"], ours=data["ours"], checks=data["checks"], networks=data["networks"],
+                   n=int(data.get("n", 1)))
+
+
+@dataclass(frozen=True)
+class Cause:
+    """One cause a why names: its letter (:data:`CAUSES`) and the run that backs it, in one sentence."""
+
+    letter: str
+    evidence: str
+
+    def __post_init__(self) -> None:
+        if self.letter not in CAUSES:
+            raise ValueError(f"unknown cause {self.letter!r}; causes: {', '.join(CAUSES)}")
+
+    @property
+    def name(self) -> str:
+        return CAUSES[self.letter]
+
+
+def causes(*, grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None,
+           readings: Mapping[str, str] | None = None) -> tuple[Cause, ...]:
+    """The causes (a)-(d) that the runs support, by the rule of the module docstring.
+
+    Parameters
+    ----------
+    grids : sequence of WhyGrid
+    authors : AuthorsCheck, optional
+    readings : mapping of str to str, optional
+        Reading name -> verdict (the counted reading and the others), from the paper-profile result.
+    """
+    found: list[Cause] = []
+    if readings and len(set(readings.values())) > 1:
+        found.append(Cause("a", "the readings differ: " + "; ".join(f"{k}: {v}" for k, v in readings.items())))
+    mixed = [g for g in grids if g.mixed_on_open_axis]
+    if mixed:
+        found.append(Cause("b", "; ".join(f"{g.title or _axes_text(g)}: holds at {int(g.holds.sum())} of "
+                                          f"{g.holds.size} points" for g in mixed)))
+    if authors is not None and authors.better:
+        found.append(Cause("c", f"with the authors' networks ({authors.networks}) the rule reads "
+                                f"{authors.verdict}; with ours, {authors.ours}"))
+    never = [g for g in grids if not g.holds.any()]
+    if never and (authors is None or authors.verdict != "reproduced"):
+        what = "; ".join(f"{g.title or _axes_text(g)}: at none of {g.holds.size} points" for g in never)
+        if authors is not None:
+            what += f"; nor with the authors' networks ({authors.verdict})"
+        found.append(Cause("d", what))
+    return tuple(found)
+
+
+def _axes_text(grid: WhyGrid) -> str:
+    return " x ".join(a.name for a in grid.axes)
+
+
+def _ranges(axis: Axis, ok: np.ndarray) -> str:
+    """Where along a 1-D axis the rule holds, in words: ``holds for noise_std <= 0.003, fails at 0.01 and
+    above``; ``holds at 4, 6, fails at 5``."""
+    vals = list(axis.values)
+    numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals)
+    held = [v for v, o in zip(vals, ok) if o]
+    failed = [v for v, o in zip(vals, ok) if not o]
+    if not failed:
+        return f"holds at every {axis.name} ({', '.join(_text(v) for v in vals)})"
+    if not held:
+        return f"fails at every {axis.name} ({', '.join(_text(v) for v in vals)})"
+    if numeric and vals == sorted(vals):
+        k = int(np.argmin(ok)) if ok[0] else int(np.argmax(ok))
+        if ok[0] and not ok[k:].any():
+            return f"holds for {axis.name} <= {_text(vals[k - 1])}, fails at {_text(vals[k])} and above"
+        if not ok[0] and ok[k:].all():
+            return f"fails for {axis.name} <= {_text(vals[k - 1])}, holds at {_text(vals[k])} and above"
+    return (f"holds at {axis.name} = {', '.join(_text(v) for v in held)}; "
+            f"fails at {', '.join(_text(v) for v in failed)}")
+
+
+def _grid_line(grid: WhyGrid) -> str:
+    if len(grid.axes) == 1:
+        return _ranges(grid.axes[0], grid.holds)
+    parts = [f"holds at {int(grid.holds.sum())} of {grid.holds.size} points ({_axes_text(grid)})"]
+    for i, axis in enumerate(grid.axes):
+        other = tuple(j for j in range(grid.holds.ndim) if j != i)
+        every, some = grid.holds.all(axis=other), grid.holds.any(axis=other)
+        if (every == some).all() and some.any() and not some.all():  # this axis alone decides
+            parts.append(_ranges(axis, every))
+        elif all(a.ours in a.values for j, a in enumerate(grid.axes) if j != i):  # the slice through ours
+            at = tuple(slice(None) if j == i else a.values.index(a.ours) for j, a in enumerate(grid.axes))
+            where = ", ".join(f"{a.name} = {_text(a.ours)}" for j, a in enumerate(grid.axes) if j != i)
+            parts.append(f"at {where}: {_ranges(axis, grid.holds[at])}")
+    return "; ".join(parts)
+
+
+def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> str:
+    """The one line under **Why** on the scoreboard, from the numbers alone.
+
+    >>> g = WhyGrid(axes=(Axis("noise_std", (0.001, 0.003, 0.01, 0.03), "noise not given"),),
+    ...             holds=np.array([True, True, False, False]), n=5, rule="decay beats the plain ODE")
+    >>> summary([g])
+    'holds for noise_std <= 0.003, fails at 0.01 and above (5 seeds per point)'
+    """
+    lines = [f"{_grid_line(g)} ({g.n} {'seeds' if g.n != 1 else 'seed'} per point)" for g in grids]
+    if authors is not None:
+        lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours})")
+    return "; ".join(lines)
+
+
+@dataclass(frozen=True)
+class Why:
+    """The why of one claim.
+
+    Attributes
+    ----------
+    claim : str
+        The claim ID.
+    verdict : str
+        The claim's verdict in the paper profile (what is explained), or ``"reproduced"`` for a thin margin.
+    grids : tuple of WhyGrid
+    authors : AuthorsCheck or None
+    readings : mapping of str to str
+        Reading -> verdict, from the paper-profile result (empty when the claim has one reading).
+    figure : str or None
+        The grid figure, relative to the task's output folder.
+    note : str
+        What the run shows, in the notebook's words (shown under the numbers; never decides anything).
+    """
+
+    claim: str
+    verdict: str
+    grids: tuple[WhyGrid, ...] = ()
+    authors: AuthorsCheck | None = None
+    readings: Mapping[str, str] = field(default_factory=dict)
+    figure: str | None = None
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"unknown verdict {self.verdict!r}; verdicts: {', '.join(VERDICTS)}")
+        if not self.grids and self.authors is None:
+            raise ValueError(f"why of {self.claim}: it needs a grid or the authors' networks (a run), not prose")
+        object.__setattr__(self, "grids", tuple(self.grids))
+        object.__setattr__(self, "readings", dict(self.readings))
+
+    @property
+    def causes(self) -> tuple[Cause, ...]:
+        return causes(grids=self.grids, authors=self.authors, readings=self.readings)
+
+    @property
+    def summary(self) -> str:
+        return summary(self.grids, self.authors)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"claim": self.claim, "verdict": self.verdict, "grids": [g.to_json() for g in self.grids],
+                "authors": None if self.authors is None else self.authors.to_json(),
+                "readings": dict(self.readings), "figure": self.figure, "note": self.note,
+                # derived, stored for readers of the file; recomputed (and compared) on reading
+                "summary": self.summary, "causes": [[c.letter, c.evidence] for c in self.causes]}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Why:
+        why = cls(claim=data["claim"], verdict=data["verdict"],
+                  grids=tuple(WhyGrid.from_json(g) for g in data.get("grids") or ()),
+                  authors=None if data.get("authors") is None else AuthorsCheck.from_json(data["authors"]),
+                  readings=data.get("readings") or {}, figure=data.get("figure"), note=data.get("note", ""))
+        stored = [list(c) for c in data.get("causes", [])]
+        if "causes" in data and stored != [[c.letter, c.evidence] for c in why.causes]:
+            raise ValueError(f"why of {why.claim}: the stored causes differ from the ones its runs give")
+        return why
+
+
+def write_whys(out_dir: str | os.PathLike[str], whys: Sequence[Why]) -> Path:
+    """Write ``whys.json`` into ``out_dir`` (atomically); one why per claim."""
+    ids = [w.claim for w in whys]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"two whys for one claim: {sorted(i for i in ids if ids.count(i) > 1)}")
+    path = Path(out_dir) / WHYS_FILENAME
+    with atomic_write(path, "w") as fh:
+        json.dump({"whys": [w.to_json() for w in whys]}, fh, indent=1, allow_nan=False,
+                  default=lambda v: None if isinstance(v, float) and math.isnan(v) else _plain(v))
+    return path
+
+
+def read_whys(path: str | os.PathLike[str]) -> dict[str, Why]:
+    """Read a ``whys.json``: claim ID -> :class:`Why`; a malformed file raises ``ValueError`` naming it."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return {w.claim: w for w in (Why.from_json(d) for d in data["whys"])}
+    except (KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a whys file ({exc!r})") from exc

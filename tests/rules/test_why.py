@@ -1,0 +1,78 @@
+"""The why rules: the causes (a)-(d) and the one-line summary, fixed before any why run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fnnbook.why import Axis, AuthorsCheck, Why, WhyGrid, causes, read_whys, summary, write_whys
+
+NOISE = Axis("noise_std", (0.001, 0.003, 0.01, 0.03), "the noise level of Fig. 4g is not given", ours=0.01)
+STATED = Axis("N", (10, 20), "the horizon the paper states", paper=20, ours=20)
+
+
+def grid(holds, axes=(NOISE,), n=5) -> WhyGrid:
+    return WhyGrid(axes=tuple(axes), holds=np.asarray(holds, bool), n=n, rule="the claim's rule holds")
+
+
+def letters(**kw) -> str:
+    return "".join(c.letter for c in causes(**kw))
+
+
+def test_a_threshold_along_an_open_axis_reads_as_a_range_and_cause_b() -> None:
+    g = grid([True, True, False, False])
+    assert summary([g]) == "holds for noise_std <= 0.003, fails at 0.01 and above (5 seeds per point)"
+    assert letters(grids=[g]) == "b"
+
+
+def test_a_setting_the_paper_states_is_not_an_open_setting() -> None:
+    g = grid([True, False], axes=(STATED,))
+    assert letters(grids=[g]) == ""  # mixed, but along the stated horizon: no (b)
+
+
+def test_never_holding_is_d_unless_the_authors_networks_reproduce_it() -> None:
+    g = grid([False] * 4)
+    assert letters(grids=[g]) == "d"
+    theirs = AuthorsCheck(verdict="reproduced", ours="not reproduced", checks={"x": True}, networks="theirs")
+    assert letters(grids=[g], authors=theirs) == "c"
+    same = AuthorsCheck(verdict="not reproduced", ours="not reproduced", checks={"x": False}, networks="theirs")
+    assert letters(grids=[g], authors=same) == "d"
+
+
+def test_differing_readings_are_a_and_equal_ones_are_not() -> None:
+    g = grid([True] * 4)
+    assert letters(grids=[g], readings={"strict": "partly", "as worded": "reproduced"}) == "a"
+    assert letters(grids=[g], readings={"strict": "partly", "as worded": "partly"}) == ""
+
+
+def test_a_two_axis_grid_names_the_slice_through_the_profile_point() -> None:
+    beta = Axis("beta", (0.0, 0.02), "the decay rate is not given", ours=0.02)
+    g = grid([[True, True], [True, True], [False, True], [False, False]], axes=(NOISE, beta))
+    line = summary([g])
+    assert line.startswith("holds at 5 of 8 points (noise_std x beta)")
+    assert "at beta = 0.02: holds for noise_std <= 0.01, fails at 0.03 and above" in line
+
+
+def test_shapes_values_and_runs_are_checked() -> None:
+    with pytest.raises(ValueError, match="shape"):
+        grid([True, False])
+    with pytest.raises(ValueError, match="booleans"):
+        WhyGrid(axes=(NOISE,), holds=np.zeros(4), n=5, rule="r")
+    with pytest.raises(ValueError, match="twice"):
+        Axis("x", (1, 1), "s")
+    with pytest.raises(ValueError, match="not prose"):
+        Why("S3", "partly")
+
+
+def test_round_trip_and_a_tampered_cause_is_refused(tmp_path) -> None:
+    w = Why("S3", "partly", grids=(grid([True, True, False, False]),), readings={"strict": "partly"})
+    path = write_whys(tmp_path, [w])
+    back = read_whys(path)["S3"]
+    assert back.summary == w.summary and back.causes == w.causes
+    data = json.loads(path.read_text())
+    data["whys"][0]["causes"] = [["c", "made up"]]
+    path.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="stored causes differ"):
+        read_whys(path)
