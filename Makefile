@@ -1,5 +1,6 @@
 # The two entry points (see README):
 #   make main   set up the venv from environment-lock.txt, run the pipeline (paper profile), build the book
+#   make why    the why profile (the claims over the settings the paper leaves open), then the book
 #   make test   set up the venv from environment-lock.txt, run the test suite
 #
 # Variables: PROFILE (paper|smoke), DATA_DIR (data directory, default data/ in the repository), VENV (venv folder), PYTHON (interpreter that makes the venv),
@@ -16,7 +17,7 @@ RUN_ARGS ?=
 DATA_DIR ?= data
 PY := $(VENV)/bin/python
 
-.PHONY: main test venv pipeline book lock data notebooks
+.PHONY: main why test venv pipeline book lock data notebooks
 
 # The throws are fetched when missing (one attempt per source; without network one line says so and the
 # bottle task does not run). The book is built even when a task failed or did not run (e.g. its data are
@@ -25,6 +26,13 @@ main: venv
 	$(VENV)/bin/fnn-pipeline data fetch --optional --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
 	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) && exit $$status
+
+# The why profile (after or without `make main`: it reuses the paper profile's outputs and runs what they
+# lack), then the paper book, whose scoreboard rows then carry each claim's why.
+why: venv
+	$(VENV)/bin/fnn-pipeline data fetch --optional --data-dir $(DATA_DIR)
+	$(VENV)/bin/fnn-pipeline run --profile why --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
+	$(VENV)/bin/fnn-pipeline book --profile paper && exit $$status
 
 venv: $(VENV)/.installed
 

@@ -14,6 +14,7 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +23,10 @@ import yaml
 from fnnbook.apiref import API_PAGE, write_api_page
 from fnnbook.fingerprint import stored
 from fnnbook.layout import holding, read_status
-from fnnbook.scoreboard import plot_verdicts, read_claims, render_scoreboard, score_rows, with_scoreboard_claims
+from fnnbook.scoreboard import Missing, plot_verdicts, read_claims, render_scoreboard, score_rows, with_scoreboard_claims
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write, file_sha256
+from fnnbook.why import WHYS_FILENAME, Why, read_whys
 from fnnlib.results import RESULTS_FILENAME, Results, read_results
 
 __all__ = ["GENERATED", "assemble_book", "build_book"]
@@ -179,7 +181,9 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         raise PipelineError(f"claims file {spec.claims_file} does not exist")
     claims = read_claims(spec.claims_file)
     writable = os.access(spec.output_root, os.W_OK)  # a read-only root has no writer to keep out
-    with holding(spec, profile, (), read=spec.tasks) if writable else contextlib.nullcontext():
+    with contextlib.ExitStack() as held:
+        for p in (profile, *spec.extended_by(profile)) if writable else ():  # a reader's share of all it shows
+            held.enter_context(holding(spec, p, (), read=spec.declares(p) if p != profile else spec.tasks))
         try:
             return _assemble(spec, profile, book, claims, api=api)
         finally:
@@ -198,18 +202,26 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *
     parts: list[dict[str, Any]] = []
     notes: dict[str, str] = {}
     status = read_status(spec, profile)
+    whys: dict[str, Why | Missing] = {}
+    why_pages: dict[str, str] = {}
     for part in spec.parts:
         chapters = []
         for name in part.tasks:
             if name in spec.grids:  # grid points are read by their aggregate step, not shown one by one
                 continue
-            out = spec.output_dir(profile, name)
+            shown_in = _shown_in(spec, profile, name)
+            if shown_in is None:  # a task of an extending profile (the whys) that has not run: its claims say so
+                whys.update((c, ("not run", _RUN_HINT.get(p, f"fnn-pipeline run --profile {p}")))
+                            for p in spec.extended_by(profile) if p in spec.tasks[name].parameters
+                            for c in spec.tasks[name].explains)
+                continue
+            out = spec.output_dir(shown_in, name)
             target = aside / name
             target.mkdir()
             chapters.append({"file": f"{GENERATED}/{name}/{name}"})
-            why = _damage(spec, profile, name, status)
+            why = _damage(spec, shown_in, name, status if shown_in == profile else read_status(spec, shown_in))
             if why:  # a page that says what is missing and how to rerun, never a hole in the book
-                rerun = f"fnn-pipeline run --profile {profile} {name}"
+                rerun = f"fnn-pipeline run --profile {shown_in} {name}"
                 (target / f"{name}.md").write_text(_not_run_page(spec.tasks[name].title, why, rerun),
                                                    encoding="utf-8")
                 pages[name] = f"{name}/{name}.md"
@@ -223,16 +235,21 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *
                 shutil.copy2(out / RESULTS_FILENAME, target / RESULTS_FILENAME)
             pages[name] = f"{name}/{name}.ipynb"
             figures[name] = name
+            if spec.tasks[name].explains:
+                _read_whys(out, name, spec.tasks[name].explains, target, whys, why_pages)
         if chapters:
             parts.append({"caption": part.title, "numbered": True, "chapters": chapters})
 
     declared = {n: t.claims for n, t in spec.tasks.items()}
     results = with_scoreboard_claims(claims, results, profile, declared)  # B2 from the headlines, then B3
     rows = score_rows(claims, results, declared)
+    for row in rows:  # a claim that does not reproduce and has no why says so
+        if row.verdict in ("partly", "not reproduced") and row.claim.id not in whys:
+            whys[row.claim.id] = ("no why task explains this claim yet", None)
     plot_verdicts(rows, aside / "verdicts.png")
     (aside / "scoreboard.md").write_text(
         render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes,
-                          summary_figure="verdicts.png"),
+                          summary_figure="verdicts.png", whys=whys, why_pages=why_pages),
         encoding="utf-8")
     parts.append({"caption": "Results", "chapters": [{"file": f"{GENERATED}/scoreboard"},
                                                      {"file": "paper_vs_release"}]})
@@ -245,6 +262,42 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *
     with atomic_write(path, "w") as fh:
         fh.write("# Generated by fnnbook.book.assemble_book; do not edit.\n" + yaml.safe_dump(toc, sort_keys=False))
     return path
+
+
+#: how a reader runs the tasks of a profile that extends the book's (the Makefile's target)
+_RUN_HINT = {"why": "make why"}
+
+
+def _shown_in(spec: PipelineSpec, profile: str, name: str) -> str | None:
+    """The profile whose outputs of ``name`` the book of ``profile`` shows: ``profile`` when the task declares
+    it; else the first profile extending ``profile`` that the task declares and has outputs in (None: none)."""
+    task = spec.tasks[name]
+    if profile in task.parameters and profile not in task.inherited:
+        return profile
+    for p in spec.extended_by(profile):
+        if p in task.parameters and p not in task.inherited and spec.output_dir(p, name).is_dir():
+            return p
+    return None
+
+
+def _read_whys(out: Path, name: str, explains: Sequence[str], target: Path, whys: dict[str, Why | Missing],
+               why_pages: dict[str, str]) -> None:
+    """Collect the whys a task wrote (``whys.json``) for the claims it explains; a claim it left out, or a
+    file that cannot be read, says so on the row."""
+    path = out / WHYS_FILENAME
+    try:
+        found = read_whys(path) if path.is_file() else {}
+        reason = f"not written by {name}"
+    except ValueError as exc:
+        found, reason = {}, f"{name}'s {WHYS_FILENAME} cannot be read ({exc})"
+    for claim in explains:
+        if claim in found:
+            whys[claim] = found[claim]
+            why_pages[claim] = f"{name}/{name}.ipynb"
+        else:
+            whys[claim] = (reason, None)
+    if path.is_file():
+        shutil.copy2(path, target / WHYS_FILENAME)
 
 
 def build_book(book_dir: str | os.PathLike[str], *, quiet: bool = False) -> Path:

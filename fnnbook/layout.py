@@ -47,7 +47,7 @@ _END_MARKERS = ("\n--- ok after ", "\n--- FAILED")
 
 def staging_dir(spec: PipelineSpec, profile: str, task: str, run: str) -> Path:
     """Where run ``run`` writes ``task``'s outputs before the swap (no other run writes there)."""
-    return spec.output_root / profile / ".staging" / run / task
+    return spec.output_root / spec.home(profile, task) / ".staging" / run / task
 
 
 def logs_dir(spec: PipelineSpec, profile: str) -> Path:
@@ -58,7 +58,7 @@ def logs_dir(spec: PipelineSpec, profile: str) -> Path:
 def recover(spec: PipelineSpec, profile: str, task: str) -> None:
     """Put back an output folder left aside by an interrupted swap (of any run: the caller holds the lock)."""
     final = spec.output_dir(profile, task)
-    for old in (spec.output_root / profile / ".staging").glob(f"*/{task}.old"):
+    for old in (spec.output_root / spec.home(profile, task) / ".staging").glob(f"*/{task}.old"):
         if final.exists():
             shutil.rmtree(old)
         else:
@@ -72,11 +72,11 @@ def clear_stale(spec: PipelineSpec, profile: str, tasks: Iterable[str], run: str
     Its partial outputs go; an output folder it had set aside mid-swap (``<task>.old``) is put back only for
     ``tasks``, whose writer locks the caller holds, and kept for the next run that writes it otherwise.
     """
-    staging = spec.output_root / profile / ".staging"
     tasks = set(tasks)
     for task in tasks:
         recover(spec, profile, task)
-    for folder in sorted(p for p in staging.glob("*") if p.is_dir() and p.name != run):
+    for folder in sorted(p for staging in _staging_roots(spec, profile) for p in staging.glob("*")
+                         if p.is_dir() and p.name != run):
         with _flock(folder.with_name(f"{folder.name}.lock"), fcntl.LOCK_EX | fcntl.LOCK_NB) as ended:
             if not ended:
                 continue  # a live run's
@@ -103,22 +103,32 @@ def _flock(path: Path, mode: int) -> Iterator[bool]:
         os.close(fd)  # releases the lock
 
 
+def _staging_roots(spec: PipelineSpec, profile: str) -> list[Path]:
+    """The staging folders a run of ``profile`` writes in: its own, and the extended profile's (where the
+    tasks it inherits keep their outputs)."""
+    return [spec.output_root / p / ".staging" for p in dict.fromkeys((profile, spec.home_profile(profile)))]
+
+
 @contextlib.contextmanager
 def staging_of(spec: PipelineSpec, profile: str, run: str) -> Iterator[None]:
-    """Mark run ``run`` alive for its lifetime (``.staging/<run>.lock`` held); remove its folder at the end."""
-    staging = spec.output_root / profile / ".staging"
-    try:
-        staging.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise PipelineError(f"cannot write to the output root {spec.output_root}: {_why(exc)}") from exc
-    with _flock(staging / f"{run}.lock", fcntl.LOCK_EX):
-        try:
-            yield
-        finally:
-            with contextlib.suppress(OSError):
-                (staging / run).rmdir()
-            with contextlib.suppress(OSError):
-                (staging / f"{run}.lock").unlink()
+    """Mark run ``run`` alive for its lifetime (``.staging/<run>.lock`` held, in every staging folder it writes
+    in); remove its folders at the end."""
+    with contextlib.ExitStack() as stack:
+        for staging in _staging_roots(spec, profile):
+            try:
+                staging.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise PipelineError(f"cannot write to the output root {spec.output_root}: {_why(exc)}") from exc
+            stack.enter_context(_flock(staging / f"{run}.lock", fcntl.LOCK_EX))
+            stack.callback(_remove_run, staging, run)
+        yield
+
+
+def _remove_run(staging: Path, run: str) -> None:
+    with contextlib.suppress(OSError):
+        (staging / run).rmdir()
+    with contextlib.suppress(OSError):
+        (staging / f"{run}.lock").unlink()
 
 
 def _holder(path: Path) -> str:
@@ -142,11 +152,11 @@ def holding(spec: PipelineSpec, profile: str, tasks: Iterable[str], *, read: Ite
     PipelineError
         If the output root cannot hold the lock files (read-only, full, no permission).
     """
-    folder = spec.output_root / profile / LOCKS
     modes = {t: fcntl.LOCK_SH for t in read}
     modes.update({t: fcntl.LOCK_EX for t in tasks})
     with contextlib.ExitStack() as held:
         for task in sorted(modes):
+            folder = spec.output_root / spec.home(profile, task) / LOCKS  # beside the folder it guards
             try:
                 folder.mkdir(parents=True, exist_ok=True)
                 lock = folder / f"{task}.lock"

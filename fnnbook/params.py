@@ -219,7 +219,7 @@ def resolve_parameters(
     params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
     params.update((k, v) for k, v in _presets(task).items() if params.get(k) is None)
     params.update(task.parameters[profile])
-    params["profile"] = profile
+    params["profile"] = spec.home(profile, task.name)  # a task inherited from the paper profile runs as there
     params["out_dir"] = str(out_dir)
     if "data_dir" in declared:
         if spec.data_dir is None:

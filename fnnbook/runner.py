@@ -117,7 +117,7 @@ def check(
     """
     if profile not in spec.profiles:
         raise PipelineError(f"unknown profile {profile!r}; profiles: {', '.join(spec.profiles)}")
-    selected = list(dict.fromkeys(tasks)) if tasks else list(spec.tasks)
+    selected = list(dict.fromkeys(tasks)) if tasks else spec.declares(profile)
     order = spec.closure(selected)
     claims = _known_claims(spec.claims_file)
     src = [Path(s) for s in sources] if sources is not None else [Path(fnnlib.__file__).resolve().parent]

@@ -19,6 +19,7 @@ import jinja2
 import yaml
 
 from fnnbook.rules import beyond
+from fnnbook.why import Why
 from fnnlib.results import BY_CONSTRUCTION, STATUSES, ClaimResult, Results
 
 __all__ = ["NOT_RUN", "SCOREBOARD_TASK", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of",
@@ -298,8 +299,27 @@ def plot_verdicts(rows: Sequence[ScoreRow], path: str | os.PathLike[str]) -> Pat
     return out
 
 
+#: a claim's why that is not there: the reason, and the command that makes it (or None)
+Missing = tuple[str, "str | None"]
+
+
+def why_of(claim_id: str, whys: Mapping[str, Why | Missing], why_pages: Mapping[str, str]) -> dict[str, Any] | None:
+    """What the row shows under **Why**: the why's one-line summary and causes, or why there is none yet
+    (``("not run", "make why")``); None for a claim no why task explains."""
+    why = whys.get(claim_id)
+    if why is None:
+        return None
+    if isinstance(why, tuple):
+        return {"line": why[0], "command": why[1], "causes": [], "tags": "", "link": None, "figure": None}
+    causes = [{"letter": c.letter, "name": c.name, "evidence": c.evidence} for c in why.causes]
+    page = why_pages.get(claim_id)
+    return {"line": why.summary, "command": None, "causes": causes, "link": page,
+            "tags": "".join(f"({c.letter})" for c in why.causes) or "robust",
+            "figure": f"{page.rsplit('/', 1)[0]}/{why.figure}" if page and why.figure else None}
+
+
 def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str],
-             notes: Mapping[str, str]) -> dict[str, Any]:
+             notes: Mapping[str, str], why: dict[str, Any] | None = None) -> dict[str, Any]:
     """What the template shows of a row beside the claim and its result: its summary cells and its figure."""
     result = row.result
     name, value = headline_of(result)
@@ -317,7 +337,7 @@ def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str]
             "paper": (result and result.paper) or row.claim.text,
             "paper_label": f"paper, {row.claim.figure}" if row.claim.figure else "paper",
             "where": where, "figure": figure, "figure_label": _figure_label(row), "readings": readings_of(result),
-            "n": units_of(result)}
+            "n": units_of(result), "why": why}
 
 
 def readings_of(result: ClaimResult | None) -> str:
@@ -352,6 +372,8 @@ def render_scoreboard(
     figures: Mapping[str, str] | None = None,
     notes: Mapping[str, str] | None = None,
     summary_figure: str | None = None,
+    whys: Mapping[str, Why | Missing] | None = None,
+    why_pages: Mapping[str, str] | None = None,
 ) -> str:
     """Render the scoreboard page as MyST markdown (the template ``templates/scoreboard.md.j2``).
 
@@ -378,13 +400,19 @@ def render_scoreboard(
         shown for its claims.
     summary_figure : str, optional
         Image (relative to the scoreboard) shown under the counts.
+    whys : mapping of str to Why or (str, str or None), optional
+        Claim -> its why (:class:`fnnbook.why.Why`), or the reason it has none yet and the command that
+        makes it (``("not run", "make why")``); shown under **Why**.
+    why_pages : mapping of str to str, optional
+        Claim -> link target of the page of the task that wrote its why.
 
     Returns
     -------
     str
     """
     counts = [f"{sum(r.verdict == v for r in rows)} {v}" for v in (*STATUSES, NOT_RUN)]
-    shown = [_summary(r, pages, figures or {}, notes or {}) for r in rows]
+    shown = [_summary(r, pages, figures or {}, notes or {}, why_of(r.claim.id, whys or {}, why_pages or {}))
+             for r in rows]
     return _template().render(rows=shown, profile=profile, counts=counts, summary_figure=summary_figure)
 
 

@@ -27,9 +27,9 @@ __all__ = ["Part", "PipelineError", "PipelineSpec", "Task", "load_spec"]
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 
 _TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
-_TOP_OPTIONAL = ("data_dir", "shared")
+_TOP_OPTIONAL = ("data_dir", "profiles", "shared")
 _TASK_REQUIRED = ("title", "notebook", "products", "parameters")
-_TASK_OPTIONAL = ("claims", "upstream", "grid")
+_TASK_OPTIONAL = ("claims", "explains", "upstream", "grid")
 _PART_KEYS = ("title", "tasks")
 
 
@@ -58,6 +58,11 @@ class Task:
         (``neural_ode_seed*.pt``) stands for every file it matches and must match at least one.
     parameters : mapping of str to mapping
         Profile name -> parameter name -> value.
+    explains : tuple of str
+        Claim IDs whose *why* the task writes (``whys.json``, :mod:`fnnbook.why`).
+    inherited : frozenset of str
+        Profiles the task does not declare but takes from the profile they extend (``profiles:`` in
+        ``pipeline.yaml``): there it runs as in that profile, with that profile's output folder.
     """
 
     name: str
@@ -67,6 +72,8 @@ class Task:
     upstream: tuple[str, ...]
     products: tuple[str, ...]
     parameters: Mapping[str, Mapping[str, Any]]
+    explains: tuple[str, ...] = ()
+    inherited: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,10 @@ class PipelineSpec:
         with a ``grid`` appears as one task per grid point.
     grids : mapping of str to tuple of str
         Grid task name -> the names of its points.
+    extends : mapping of str to str
+        Profile -> the profile it extends (``profiles: {why: {extends: paper}}``): a task that does not
+        declare the profile runs there as in the extended one, and keeps its outputs in that one's folder,
+        so ``run --profile why`` reuses the paper run's outputs and runs only what they lack.
     """
 
     path: Path
@@ -107,6 +118,25 @@ class PipelineSpec:
     parts: tuple[Part, ...]
     tasks: Mapping[str, Task] = field(repr=False)
     grids: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    extends: Mapping[str, str] = field(default_factory=dict)
+
+    def declares(self, profile: str) -> list[str]:
+        """The tasks that declare ``profile`` themselves (what ``run --profile`` runs by default), in order."""
+        return [n for n, t in self.tasks.items() if profile in t.parameters and profile not in t.inherited]
+
+    def home(self, profile: str, task: str) -> str:
+        """The profile whose folder holds ``task``'s outputs when it runs in ``profile``: the extended one
+        for a task that inherits ``profile``, else ``profile`` itself."""
+        t = self.tasks.get(task)
+        return self.extends[profile] if t is not None and profile in t.inherited else profile
+
+    def home_profile(self, profile: str) -> str:
+        """The profile ``profile`` extends, or ``profile`` itself."""
+        return self.extends.get(profile, profile)
+
+    def extended_by(self, profile: str) -> list[str]:
+        """The profiles that extend ``profile`` (their own tasks' outputs belong to its book)."""
+        return sorted(p for p, base in self.extends.items() if base == profile)
 
     @property
     def profiles(self) -> tuple[str, ...]:
@@ -153,8 +183,9 @@ class PipelineSpec:
         return [n for n in self.tasks if n in wanted]
 
     def output_dir(self, profile: str, task: str) -> Path:
-        """Folder holding the last good outputs of ``task`` in ``profile``."""
-        return self.output_root / profile / task
+        """Folder holding the last good outputs of ``task`` in ``profile`` (in the extended profile's folder
+        for a task that inherits ``profile``, :meth:`home`)."""
+        return self.output_root / self.home(profile, task) / task
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -266,6 +297,7 @@ def _load_task(root: Path, name: str, data: Any) -> Task:
         title=data["title"],
         notebook=notebook,
         claims=_str_list(f"{where}: claims", data.get("claims")),
+        explains=_str_list(f"{where}: explains", data.get("explains")),
         upstream=_str_list(f"{where}: upstream", data.get("upstream")),
         products=products,
         parameters=profiles,
@@ -414,6 +446,8 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
         raise PipelineError(f"{where}: tasks in no part: {', '.join(missing)} "
                             "(every task must be listed under parts)")
 
+    extends = _load_profiles(where, data.get("profiles") or {}, tasks)
+    tasks = {n: _inherit(t, extends) for n, t in tasks.items()}
     data_dir = data.get("data_dir")
     return PipelineSpec(
         path=file,
@@ -424,4 +458,39 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
         parts=tuple(parts),
         tasks={n: tasks[n] for n in order},
         grids=grids,
+        extends=extends,
     )
+
+
+def _load_profiles(where: str, raw: Any, tasks: Mapping[str, Task]) -> dict[str, str]:
+    """``profiles: {why: {extends: paper}}`` -> ``{"why": "paper"}``, checked: the extended profile exists, is
+    declared by every task that does not declare the extending one, and extends nothing itself."""
+    raw = _mapping(f"{where}: profiles", raw)
+    extends: dict[str, str] = {}
+    for name, value in raw.items():
+        pwhere = f"{where}: profiles.{name}"
+        value = _mapping(pwhere, value or {})
+        _check_keys(pwhere, value, ("extends",))
+        base = value["extends"]
+        declared = {p for t in tasks.values() for p in t.parameters}
+        if not isinstance(base, str) or base not in declared:
+            raise PipelineError(f"{pwhere}: extends {base!r}, which no task declares{_suggest(str(base), declared)}")
+        if base == name:
+            raise PipelineError(f"{pwhere} extends itself")
+        extends[name] = base
+    for name, base in extends.items():
+        if base in extends:
+            raise PipelineError(f"{where}: profiles.{name} extends {base!r}, which extends a profile itself")
+        lacking = [n for n, t in tasks.items() if name not in t.parameters and base not in t.parameters]
+        if lacking:
+            raise PipelineError(f"{where}: profile {name!r} extends {base!r}, but task {lacking[0]!r} declares "
+                                "neither")
+    return extends
+
+
+def _inherit(task: Task, extends: Mapping[str, str]) -> Task:
+    """Give ``task`` the extending profiles it does not declare, with the extended profile's parameters."""
+    taken = {p: task.parameters[base] for p, base in extends.items() if p not in task.parameters}
+    if not taken:
+        return task
+    return dataclasses.replace(task, parameters={**task.parameters, **taken}, inherited=frozenset(taken))

@@ -221,3 +221,46 @@ def test_a_failing_assembly_leaves_the_good_book(fake_outputs: PipelineSpec, tmp
     assert (book / GENERATED / "scoreboard.md").read_text() == before
     assert (book / GENERATED / "alpha" / "alpha.ipynb").is_file()
     assert not (book / f"{GENERATED}.new").exists()
+
+
+def _with_why_task(spec: PipelineSpec) -> PipelineSpec:
+    """fake_outputs plus a why task of the `why` profile (extending paper) that explains S1."""
+    doc = yaml.safe_load(spec.path.read_text())
+    nbformat.write(nbformat.read(spec.root / "notebooks" / "alpha.ipynb", as_version=4),
+                   spec.root / "notebooks" / "why_alpha.ipynb")
+    doc["profiles"] = {"why": {"extends": "paper"}}
+    doc["tasks"]["why_alpha"] = {"title": "Why alpha", "notebook": "notebooks/why_alpha.ipynb", "claims": [],
+                                 "explains": ["S1"], "upstream": ["alpha"], "products": ["whys.json"],
+                                 "parameters": {"why": {}}}
+    doc["parts"].append({"title": "Why each claim stands where it stands", "tasks": ["why_alpha"]})
+    spec.path.write_text(yaml.safe_dump(doc))
+    return load_spec(spec.path)
+
+
+def test_the_why_rows_read_not_run_then_the_runs_summary(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
+    import numpy as np  # noqa: PLC0415
+
+    from fnnbook.why import Axis, Why, WhyGrid, write_whys  # noqa: PLC0415
+
+    spec = _with_why_task(fake_outputs)
+    book = _copy_book(tmp_path)
+    toc = yaml.safe_load(assemble_book(spec, "paper", book, api=False).read_text())
+    assert "Why each claim stands where it stands" not in [p["caption"] for p in toc["parts"]]  # not run: no page
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "**Why.** not run (`make why`)" in board and "*why: not run*" in board
+
+    out = spec.output_dir("why", "why_alpha")
+    out.mkdir(parents=True)
+    _executed_notebook(out / "why_alpha.ipynb")
+    grid = WhyGrid(axes=(Axis("noise_std", (0.001, 0.01), "the noise level is not given", ours=0.01),),
+                   holds=np.array([True, False]), n=5, rule="S1's rule")
+    write_whys(out, [Why("S1", "partly", grids=(grid,))])
+    toc = yaml.safe_load(assemble_book(spec, "paper", book, api=False).read_text())
+    assert toc["parts"][2] == {"caption": "Why each claim stands where it stands", "numbered": True,
+                               "chapters": [{"file": "_generated/why_alpha/why_alpha"}]}
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert ("**Why.** holds for noise\\_std \\<= 0.001, fails at 0.01 and above (5 seeds per point) "
+            "([the runs](why_alpha/why_alpha.ipynb))") in board
+    assert "*(b) a setting the paper leaves open:*" in board and "*why: (b)*" in board
+    html = build_book(book, quiet=True)
+    assert "holds for noise_std &lt;= 0.001, fails at 0.01 and above" in (html / "_generated" / "scoreboard.html").read_text()
