@@ -30,7 +30,7 @@ main: venv
 # The why profile (after or without `make main`: it reuses the paper profile's outputs and runs what they
 # lack), then the paper book, whose scoreboard rows then carry each claim's why.
 why: venv
-	$(VENV)/bin/fnn-pipeline data fetch --optional --data-dir $(DATA_DIR)
+	$(VENV)/bin/fnn-pipeline data fetch --optional --release --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile why --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
 	$(VENV)/bin/fnn-pipeline book --profile paper && exit $$status
 

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from fnnbook.book import assemble_book, build_book
-from fnnbook.data import BOTTLE_SOURCES, fetch_bottle
+from fnnbook.data import BOTTLE_SOURCES, fetch_bottle, fetch_release
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
 from fnnbook.outcome import Status
@@ -96,6 +96,9 @@ def _parser() -> argparse.ArgumentParser:
     p_fetch.add_argument("--url", action="append", metavar="TEMPLATE",
                          help="a source: URL template with {name}; repeat it for more, tried in order (default: "
                               + "; then ".join(BOTTLE_SOURCES.values()) + ")")
+    p_fetch.add_argument("--release", action="store_true",
+                         help="also the authors' trained networks (what `make why` evaluates beside ours) into "
+                              "DATA_DIR/release/, from the official release at its pinned commit")
     p_fetch.add_argument("--optional", action="store_true",
                          help="when no source serves the files (no network), say so in one line and exit 0")
     return parser
@@ -161,6 +164,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     raise
                 print(f"note: going on without the bottle throws (the bottle task and claims O1-O2 will read "
                       f"'not run: data missing'): {exc}", flush=True)
+            if args.release:
+                try:
+                    fetch_release(spec.data_dir)
+                except DataError as exc:
+                    if not args.optional:
+                        raise
+                    print(f"note: going on without the authors' networks (the whys judge ours only): {exc}",
+                          flush=True)
             return 0
         if args.command == "book":
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"

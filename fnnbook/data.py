@@ -1,4 +1,5 @@
-"""``fnn-pipeline data fetch``: download the published throws (Sec. 5.1) and check them.
+"""``fnn-pipeline data fetch``: download the published throws (Sec. 5.1) and the authors' trained networks,
+and check them.
 
 The two files lie, byte-identical, in two public repositories, each pinned at a commit: the authors'
 official code release, then the repository the paper's review pointed to. :mod:`pooch` downloads each file
@@ -7,6 +8,10 @@ pinned in :data:`fnnlib.data.bottle.BOTTLE_FILES`; a refused file leaves nothing
 
 >>> fetch_bottle("data")      # doctest: +SKIP
 [PosixPath('data/bottle/Training_dataset.mat'), PosixPath('data/bottle/Testing_dataset.mat')]
+
+The authors' trained networks (what the why profile evaluates beside ours) come the same way from the
+official release, every file pinned in :data:`fnnlib.data.release.RELEASE_FILES`, into ``<data_dir>/release/``
+(:func:`fetch_release`). They are read from there and never redistributed.
 """
 
 from __future__ import annotations
@@ -16,9 +21,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from fnnlib.data.bottle import BOTTLE_FILES, DataError
+from fnnlib.data.release import RELEASE_FILES
 from fnnlib.io import file_sha256
 
-__all__ = ["BOTTLE_SOURCES", "fetch_bottle"]
+__all__ = ["BOTTLE_SOURCES", "RELEASE_SOURCES", "fetch_bottle", "fetch_release"]
 
 _RAW = "https://raw.githubusercontent.com"
 #: where the throws are published, tried in this order: label -> URL template with ``{name}`` (a key of
@@ -28,6 +34,11 @@ BOTTLE_SOURCES: dict[str, str] = {
                         "irregular_object/Dataset_construction/{name}",
     "review repository": f"{_RAW}/anonymity-tempo/Feedback_NN_irregular_object/"
                          "3f314167516c26bea8e1ad86a8f84ada911900bd/Dataset_construction/{name}",
+}
+#: where the authors' trained networks are published: the official release at the same pinned commit; ``{name}``
+#: is a key of RELEASE_FILES (a path in that repository)
+RELEASE_SOURCES: dict[str, str] = {
+    "official release": f"{_RAW}/JIAjindou/Feedback-neural-network/395154347267c7088fcdcecd89f6df1355758117/{{name}}",
 }
 
 
@@ -54,7 +65,7 @@ def _download(url: str, folder: Path, name: str, digest: str, timeout: float) ->
     level = logger.level
     logger.setLevel("WARNING")
     try:
-        pooch.retrieve(url, known_hash=f"sha256:{digest}", fname=name, path=folder,
+        pooch.retrieve(url, known_hash=f"sha256:{digest}", fname=Path(name).name, path=folder / Path(name).parent,
                        downloader=pooch.HTTPDownloader(progressbar=False, timeout=timeout))
     finally:
         logger.setLevel(level)
@@ -93,18 +104,47 @@ def fetch_bottle(
     DataError
         If no source serves a file with the pinned SHA-256 (the message names each source's failure).
     """
-    sources = dict(BOTTLE_SOURCES if sources is None else sources)
+    files = {name: digest for name, (_, _, digest) in BOTTLE_FILES.items()}
+    return _fetch(Path(data_dir) / "bottle", files, BOTTLE_SOURCES if sources is None else sources, timeout, echo)
+
+
+def fetch_release(
+    data_dir: str | os.PathLike[str],
+    *,
+    sources: Mapping[str, str] | None = None,
+    timeout: float = 60.0,
+    echo: Callable[[str], None] = print,
+) -> list[Path]:
+    """Download each file of :data:`~fnnlib.data.release.RELEASE_FILES` into ``<data_dir>/release/`` (same
+    relative paths as in the release), as :func:`fetch_bottle` does for the throws; one line for the files
+    already present.
+
+    Raises
+    ------
+    DataError
+        If no source serves a file with the pinned SHA-256.
+    """
+    return _fetch(Path(data_dir) / "release", RELEASE_FILES, RELEASE_SOURCES if sources is None else sources,
+                  timeout, echo, each_present=False)
+
+
+def _fetch(folder: Path, files: Mapping[str, str], sources: Mapping[str, str], timeout: float,
+           echo: Callable[[str], None], *, each_present: bool = True) -> list[Path]:
+    """Each of ``files`` (name -> SHA-256) into ``folder``: kept when present and good, else downloaded from the
+    first source that serves it with that SHA-256."""
+    sources = dict(sources)
     bad = [label for label, url in sources.items() if "{name}" not in url]
     if not sources or bad:
         raise DataError(f"each source must be a URL template containing {{name}}; got {sources!r}")
     import requests  # noqa: PLC0415 (pooch's HTTP client)
 
-    folder = Path(data_dir) / "bottle"
-    done = []
-    for name, (_, _, digest) in BOTTLE_FILES.items():
+    done, present = [], 0
+    for name, digest in files.items():
         path = folder / name
         if path.is_file() and file_sha256(path) == digest:
-            echo(f"{path}: present, SHA-256 ok")
+            if each_present:
+                echo(f"{path}: present, SHA-256 ok")
+            present += 1
             done.append(path)
             continue
         failures = []
@@ -119,4 +159,6 @@ def fetch_bottle(
             break
         else:
             raise DataError(f"cannot download {name}: " + "; ".join(failures))
+    if present and not each_present:
+        echo(f"{folder}: {present} of {len(files)} files present, SHA-256 ok")
     return done

@@ -117,3 +117,36 @@ def test_the_official_release_comes_first_both_pinned() -> None:
     commit = review.split("/")[5]
     assert review.startswith("https://raw.githubusercontent.com/anonymity-tempo/") and len(commit) == 40
     assert all(url.endswith("/{name}") for url in (official, review))
+
+
+def test_the_release_networks_land_under_their_release_paths(www: tuple[str, Path], tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """Nested paths as in the release; a second fetch keeps them (one line); a corrupt copy is refused."""
+    url, root = www
+    files = {"spiral_curve/trained_model/Neural_ODE_x.pt": b"ode", "quadrotor/log/run/loss_record.npy": b"loss"}
+    for name, data in files.items():
+        (root / "first" / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / "first" / name).write_bytes(data)
+    monkeypatch.setattr(fnnbook.data, "RELEASE_FILES", {n: hashlib.sha256(d).hexdigest() for n, d in files.items()})
+    lines: list[str] = []
+    done = fnnbook.data.fetch_release(tmp_path / "data", sources={"mirror": f"{url}/first/{{name}}"},
+                                      echo=lines.append)
+    assert [p.read_bytes() for p in done] == list(files.values())
+    assert done[0] == tmp_path / "data" / "release" / "spiral_curve" / "trained_model" / "Neural_ODE_x.pt"
+    lines.clear()
+    fnnbook.data.fetch_release(tmp_path / "data", sources={"mirror": f"{url}/nowhere/{{name}}"}, echo=lines.append)
+    assert lines == [f"{tmp_path / 'data' / 'release'}: 2 of 2 files present, SHA-256 ok"]
+    (root / "first" / "quadrotor/log/run/loss_record.npy").write_bytes(b"tampered")
+    done[1].unlink()
+    with pytest.raises(fnnbook.data.DataError, match="SHA-256 is not the pinned one"):
+        fnnbook.data.fetch_release(tmp_path / "data", sources={"mirror": f"{url}/first/{{name}}"}, echo=lines.append)
+    assert not done[1].exists()
+
+
+def test_optional_release_fetch_without_network_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(fnnbook.data, "RELEASE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    monkeypatch.setattr(fnnbook.data, "BOTTLE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    assert main(["data", "fetch", "--data-dir", str(tmp_path), "--release", "--optional"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("note: going on without the authors' networks") == 1 and "no connection" in out
