@@ -217,7 +217,8 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
                     "bottle_hand_throws": _N1, "bottle_hand_L_grid": _vec(minimum=0.0),
                     "bottle_hand_beta_grid": _vec(minimum=0.0), "quad_tune_cases": _N1,
-                    "quad_L_grid": _vec(minimum=0.0), "quad_beta_grid": _vec(minimum=0.0)},
+                    "quad_L_grid": _vec(minimum=0.0), "quad_beta_grid": _vec(minimum=0.0),
+                    "quad_hand_L_grid": _vec(minimum=0.0), "quad_hand_beta_grid": _vec(minimum=0.0)},
 })
 """Per notebook: parameter -> its check, ``check(name, value)`` (:mod:`fnnlib.checks`); every parameter of
 every ``parameters`` cell but the injected ``profile``, ``out_dir``, ``data_dir`` and ``upstream_dirs``."""
@@ -341,7 +342,7 @@ def _quick_start(p: Mapping[str, Any]) -> None:
 def _tuned_gains(p: Mapping[str, Any]) -> None:
     """Only the tuning's own settings: the data and flights come from the upstream runs (whose Ts and N are
     checked there); here every gain of a grid must be > 0 (``sweep_gains`` refuses the rest)."""
-    for name in ("bottle_hand_L_grid", "quad_L_grid"):
+    for name in ("bottle_hand_L_grid", "quad_L_grid", "quad_hand_L_grid"):
         _need(min(p[name]) > 0, f"{name} must list gains > 0, got {p[name]}")
 
 

@@ -34,3 +34,17 @@ def test_settings_are_checked_right_after_the_parameters_cell(src: Path) -> None
     task = re.sub(r"^\d+_", "", src.stem)  # files are numbered in paper order: 01_spiral.py runs task spiral
     assert f'\ncheck_notebook_settings("{task}", globals())' in nb_cells[first + 1].source
     assert "from fnnbook.settings import check_notebook_settings" in nb_cells[first + 1].source
+
+
+#: the most lines a code cell may have: its non-blank lines, comments included (what a reader sees)
+MAX_CELL_LINES = 15
+
+
+@pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
+def test_no_code_cell_is_over_15_lines(src: Path) -> None:
+    """Short cells: a longer one is split, or its helper moves into fnnlib. The ``parameters`` cell is exempt
+    (papermill overwrites it as one cell, one line a parameter)."""
+    long = [(i, n) for i, c in enumerate(read_source(src).cells)
+            if c.cell_type == "code" and "parameters" not in c.metadata.get("tags", [])
+            and (n := sum(1 for line in c.source.splitlines() if line.strip())) > MAX_CELL_LINES]
+    assert not long, f"{src.name}: code cells over {MAX_CELL_LINES} non-blank lines (cell index, lines): {long}"

@@ -3,14 +3,14 @@ numbers exist.
 
 B1: the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11), learned from training data by
 gradient descent through the differentiable cascade (``fnnlib.tune_gains``), predict (or fly) better than
-the paper's hand-tuned values on data the tuning never saw. It is judged per *setting* -- the pendulum and
-the noisy spiral of ``own_system`` (the S3 setting), the real bottle throws (the O1 setting), the quadrotor
-FNN-MPC flight at the judged thrust bound (the Q3 setting, one setting per cost variant) -- on *units* that
+gains set by hand (a small documented sweep on training data, per setting) on data the tuning never saw.
+It is judged per *setting* -- the pendulum and the noisy spiral of ``own_system`` (the S3 setting), the real
+bottle throws (the O1 setting), the quadrotor FNN-MPC flight at the judged thrust bound (the Q3 setting, one setting per cost variant) -- on *units* that
 pair the predictors: seeds, test throws, or trained networks x disturbances, as the notebook says.
 
 Per setting, with ``errors[setting][predictor]`` one error per unit (lower is better):
 
-1. ``tuned_beats_hand``: the tuned gains win over the paper's hand-tuned ones;
+1. ``tuned_beats_hand``: the tuned gains win over the hand-tuned ones;
 2. ``tuned_beats_open_loop`` (where an open-loop prediction is given): the tuned gains win over the
    model without feedback;
 3. ``tuned_within_2x_kalman`` (where a Kalman filter is given): tuned <= 2 x Kalman in all units but one.

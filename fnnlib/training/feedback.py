@@ -10,7 +10,7 @@ import torch
 from torch import Tensor, nn
 from tqdm import tqdm
 
-from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
+from fnnlib._validation import as_trajectory, check_uniform_grid
 from fnnlib.models.ensemble import stack_members
 from fnnlib.observers.neural import feedback_rollout
 from fnnlib.training.neural_ode import OPTIMIZERS, Recipe, TrainHistory
@@ -39,12 +39,8 @@ class FeedbackRecipe(Recipe):
     refresh_every: int
 
     def __post_init__(self) -> None:
-        if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"unknown optimizer {self.optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
-        if int(self.iterations) < 1 or int(self.batch_size) < 1 or int(self.refresh_every) < 1:
-            raise ValueError(f"need iterations, batch_size and refresh_every >= 1; got {self.iterations}, "
-                             f"{self.batch_size}, {self.refresh_every}")
-        check_positive(self.lr, name="lr")
+        self._check_descent({"iterations": 1, "batch_size": 1, "refresh_every": 1},
+                            "iterations, batch_size and refresh_every >= 1")
 
 
 #: App. A.3.3: RMSprop (the release's optimizer; Alg. 1 says Adam) at 0.01, batch 100, 2000 iterations,

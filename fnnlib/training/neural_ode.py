@@ -37,6 +37,18 @@ class Recipe:
         """The settings as plain values (for checkpoint metadata); ``type(self)(**d)`` rebuilds it."""
         return dataclasses.asdict(self)
 
+    def _check_descent(self, minimum: dict[str, int], need: str) -> None:
+        """The checks every gradient-descent recipe shares, in one place.
+
+        ``self.optimizer`` a key of :data:`OPTIMIZERS`, each field named in ``minimum`` at least its value
+        (else ``ValueError("need <need>; got <values>")``), ``self.lr`` finite and positive.
+        """
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {self.optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
+        if any(int(getattr(self, name)) < low for name, low in minimum.items()):
+            raise ValueError(f"need {need}; got " + ", ".join(str(getattr(self, name)) for name in minimum))
+        check_positive(self.lr, name="lr")
+
 
 @dataclass(frozen=True)
 class ODERecipe(Recipe):
@@ -79,17 +91,13 @@ class ODERecipe(Recipe):
     adjoint_seminorm: bool
 
     def __post_init__(self) -> None:
-        if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"unknown optimizer {self.optimizer!r}; choose one of {sorted(OPTIMIZERS)}")
         if self.loss not in LOSSES:
             raise ValueError(f"unknown loss {self.loss!r}; choose one of {sorted(LOSSES)}")
         if self.method not in FIXED_STEP_METHODS | ADAPTIVE_METHODS:
             raise ValueError(f"unknown solver {self.method!r}; choose one of "
                              f"{sorted(FIXED_STEP_METHODS | ADAPTIVE_METHODS)}")
-        if int(self.iterations) < 1 or int(self.batch_size) < 1 or int(self.batch_time) < 2:
-            raise ValueError(f"need iterations >= 1, batch_size >= 1 and 2 <= batch_time <= T; got "
-                             f"{self.iterations}, {self.batch_size}, {self.batch_time}")
-        check_positive(self.lr, name="lr")
+        self._check_descent({"iterations": 1, "batch_size": 1, "batch_time": 2},
+                            "iterations >= 1, batch_size >= 1 and 2 <= batch_time <= T")
 
 
 #: The spiral's recipe (App. A.3.2 and the authors' release): RMSprop at 1e-3 on the L1 loss, 400 iterations of

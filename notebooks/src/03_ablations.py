@@ -357,6 +357,10 @@ for e in range(S):  # one faint line per seed
                         label=r"feedback $\|\tilde f\|$" if first else None)
     axes[0, 1].semilogy(tn, e_x[e], color=F.plotting.COLORS["feedback"], ls=":", lw=0.8, alpha=0.6,
                         label=r"feedback $\|\tilde x\|$" if first else None)
+
+# %%
+for e in range(S):
+    first = e == 0
     axes[0, 2].semilogy(tn[N:], F.n_step_errors(z_nn10[e], x10, N), color=F.plotting.COLORS["neural_ode"], lw=0.8,
                         alpha=0.6, label="neural ODE" if first else None)
     axes[0, 2].semilogy(tn[N:], e_ms[e], color=F.plotting.COLORS["feedback"], lw=0.8, alpha=0.6,

@@ -173,6 +173,8 @@ for s in seeds:
         mlp_sel_mse.append(float(torch.mean((net(x_sel) - y_sel) ** 2)))
     mlps.append(net)
 mlp_s = time.perf_counter() - tic
+
+# %%
 best_mlp = int(np.argmin(mlp_sel_mse))
 mlp_files = []
 for e, s in enumerate(seeds):
@@ -249,18 +251,24 @@ for q, r in (("Q1", r1), ("Q2", r2), ("Q6", r6)):
     print(q, F.verdict_from_checks(r.checks), r.checks)
 
 # %%
-claims = [
-    r1.replace(figure="figures/training_curves.png",
+q1 = r1.replace(figure="figures/training_curves.png",
                numbers={"seeds": seeds, "initial_loss": first.tolist(), "val_loss_final": val_loss[-1].tolist(), **r1.numbers},
                headline=F.headline_number("final / initial training loss", final / first),
-               paper="training converges for 5-6 random initialisations (Fig. A)", title="Training converges"),
-    r2.replace(figure="figures/validation_flight_1.png",
+               paper="training converges for 5-6 random initialisations (Fig. A)", title="Training converges")
+
+# %%
+q2 = r2.replace(figure="figures/validation_flight_1.png",
                numbers={**r2.numbers, "MLP (kept)": rel["MLP"], "seeds": seeds},
                headline=F.headline_number("neural ODE relative RMSE of p, held-out flights",
                                           [r["p"] for r in rel["neural ODE"]]),
                paper="the learned model predicts all 12 states on 3 flights 2.5x longer than training (Figs. S4-S7)",
                rule=f"{r2.rule} (over {r2.n} trained networks, on {heldout.n_flights} held-out flights)",
-               title="Long-horizon prediction"),
+               title="Long-horizon prediction")
+
+# %%
+claims = [
+    q1,
+    q2,
     r6.replace(figure="figures/training_curves.png",
                numbers={**r6.numbers, "seconds_all_members": round(fit.seconds, 1), "members": len(seeds),
                         "ms_per_update": round(fit.history.ms_per_update, 1), "updates": fit.history.n_updates},

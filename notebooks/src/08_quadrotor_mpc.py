@@ -265,6 +265,8 @@ axes[0].set(xlabel="t [s]", ylabel="z [m] (z down)", title="Nomi's altitude unde
 axes[1].set(xlabel="t [s]", ylabel="total thrust [N]")
 axes[0].legend(fontsize=7)
 F.save_figure(fig, out, "nomi_z_costs")
+
+# %%
 z = {cost: judged[cost]["Nomi"].z for cost in costs}
 share = {cost: z[cost] / judged[cost]["Nomi"].mean_axis / 3 for cost in costs}
 print(" ".join(f"{cost}: Nomi's z RMSE {z[cost]:.3f} m, {100 * share[cost]:.0f} % of its summed per-axis RMSE, "
@@ -389,12 +391,16 @@ def at_paper(metric, unit, compare):
                                  flown="kept network, the paper's force, one flight per model")
 
 
+# %%
+q3 = merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
+            headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
+            paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
+            title="MPC tracking with the feedback model", n=S, at_paper_setting=at_paper("mean_axis", "m", ("FNN", "Nomi")),
+            rule=f"paired wins over {S} independent units per cost at {u_max_judged:g} N")
+
+# %%
 claims = [
-    merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
-           headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
-           paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
-           title="MPC tracking with the feedback model", n=S, at_paper_setting=at_paper("mean_axis", "m", ("FNN", "Nomi")),
-           rule=f"paired wins over {S} independent units per cost at {u_max_judged:g} N"),
+    q3,
     merged(r4, figure=f"figures/acc_prediction_{costs[-1]}.png",
            headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
            paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
@@ -408,17 +414,19 @@ claims = [
 ]
 
 # %%
+gamma_protocol = {"rule": f"lowest median validation RMSE (diverged = worst); ties within {Gamma_rtol:g} "
+                          "relative go to the smaller gain",
+                  "randomization": dict(VALIDATION_RANDOMIZATION), "references": len(val_refs),
+                  "vehicles": [{"mass": v.mass, "inertia": v.inertia, "drag": v.drag,
+                                "force": v.force_disturbance} for v in val_vehicles],
+                  "test_vehicle_in_ranges": test_in_range}
+
+# %%
 F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
                 metrics={"table": M.flight_table_json(table, u_max_judged), "speed": speed, "disturbances": forces,
                          "units": list(grid[costs[0]].units), "thrust_needed_per_motor": need,
                          "adapnn_gamma": {c: {"chosen": s.value, "validation": s.table} for c, s in gamma_sel.items()},
-                         "adapnn_gamma_protocol": {
-                             "rule": f"lowest median validation RMSE (diverged = worst); ties within {Gamma_rtol:g} "
-                                     "relative go to the smaller gain",
-                             "randomization": dict(VALIDATION_RANDOMIZATION), "references": len(val_refs),
-                             "vehicles": [{"mass": v.mass, "inertia": v.inertia, "drag": v.drag,
-                                           "force": v.force_disturbance} for v in val_vehicles],
-                             "test_vehicle_in_ranges": test_in_range},
+                         "adapnn_gamma_protocol": gamma_protocol,
                          "adapnn_oracle_sweep": {c: {g: M.flight_row(r).to_dict() for g, r in runs.items()}
                                                  for c, runs in oracle.items()},
                          "paired_mean_axis_rmse_m": rmse, "paired_acc_pred_rmse": acc})

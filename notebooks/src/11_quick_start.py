@@ -5,7 +5,8 @@
 # measured, with noise, and some samples are lost. Your model `f(t, x, u)` is the cart with a damping
 # that is off by 40 %. Out come feedback gains tuned on one record, the $N$-step predictions on another,
 # and the comparison with an extended and an unscented Kalman filter on the same model. Every call is
-# `fnnlib`'s public API; the code is the cell below.
+# `fnnlib`'s public API; the code is the cells below: the system, its logs, then the model with its tuned
+# feedback and the two filters.
 
 # %% tags=["parameters"]
 profile = "paper"
@@ -37,6 +38,7 @@ class Cart(F.DynamicalSystem):  # your own f(t, x, u): x = (position, velocity),
         return torch.stack([x[:, 1], -self.k * x[:, 0] - self.c * x[:, 1] + u[:, 0]], -1)
 
 
+# %%
 gen = F.make_generator(0)
 C = torch.tensor([[1.0, 0.0]], dtype=torch.float64)  # y = C x: the position only
 t = torch.arange(T, dtype=torch.float64) * Ts
@@ -44,6 +46,8 @@ u = torch.sin(0.8 * t)[None, :, None] + torch.randn(2, 1, 1, generator=gen, dtyp
 x = Cart().simulate(torch.tensor([[1.0, 0.0], [-0.5, 0.5]], dtype=torch.float64), t, u)  # (2, T, 2), the truth
 y = F.add_measurement_noise(x @ C.T, noise_std, gen)  # noisy logs (2, T, 1) ...
 y[torch.rand(y.shape, generator=gen) < drop] = float("nan")  # ... with lost samples
+
+# %%
 model = Cart(c=0.3)  # your model: the damping is off
 A = F.model_jacobian(model, torch.zeros(2, dtype=torch.float64), torch.zeros(1, dtype=torch.float64))
 L0 = F.place_observer_gain(torch.eye(2, dtype=torch.float64) + Ts * A, Ts * C, [0.8, 0.85])  # a stable start
