@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 from fnnlib.data.bottle import BOTTLE_FILES, DataError
 from fnnlib.data.release import RELEASE_FILES
@@ -108,24 +109,19 @@ def fetch_bottle(
     return _fetch(Path(data_dir) / "bottle", files, BOTTLE_SOURCES if sources is None else sources, timeout, echo)
 
 
-def fetch_release(
-    data_dir: str | os.PathLike[str],
-    *,
-    sources: Mapping[str, str] | None = None,
-    timeout: float = 60.0,
-    echo: Callable[[str], None] = print,
-) -> list[Path]:
+def fetch_release(data_dir: str | os.PathLike[str], **options: Any) -> list[Path]:
     """Download each file of :data:`~fnnlib.data.release.RELEASE_FILES` into ``<data_dir>/release/`` (same
-    relative paths as in the release), as :func:`fetch_bottle` does for the throws; one line for the files
-    already present.
+    relative paths as in the release), as :func:`fetch_bottle` does for the throws, with its options
+    (``sources`` default :data:`RELEASE_SOURCES`, ``timeout``, ``echo``); one line for the files already there.
 
     Raises
     ------
     DataError
         If no source serves a file with the pinned SHA-256.
     """
+    sources = options.pop("sources", None)
     return _fetch(Path(data_dir) / "release", RELEASE_FILES, RELEASE_SOURCES if sources is None else sources,
-                  timeout, echo, each_present=False)
+                  options.pop("timeout", 60.0), options.pop("echo", print), each_present=False, **options)
 
 
 def _fetch(folder: Path, files: Mapping[str, str], sources: Mapping[str, str], timeout: float,

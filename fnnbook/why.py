@@ -49,12 +49,12 @@ __all__ = ["CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "W
 WHYS_FILENAME = "whys.json"
 
 #: the four causes a why can name
-CAUSES: Mapping[str, str] = {
-    "a": "the reading of the paper's words",
-    "b": "a setting the paper leaves open",
-    "c": "our implementation against the authors'",
-    "d": "the claim does not hold where it was tested",
-}
+CAUSES: Mapping[str, str] = dict(
+    a="the reading of the paper's words",
+    b="a setting the paper leaves open",
+    c="our implementation against the authors'",
+    d="the claim does not hold where it was tested",
+)
 
 _RANK = {v: i for i, v in enumerate(reversed(VERDICTS))}  # not reproduced 0 < partly 1 < reproduced 2
 
@@ -343,22 +343,11 @@ def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> st
 
 @dataclass(frozen=True)
 class Why:
-    """The why of one claim.
-
-    Attributes
-    ----------
-    claim : str
-        The claim ID.
-    verdict : str
-        The claim's verdict in the paper profile (what is explained), or ``"reproduced"`` for a thin margin.
-    grids : tuple of WhyGrid
-    authors : AuthorsCheck or None
-    readings : mapping of str to str
-        Reading -> verdict, from the paper-profile result (empty when the claim has one reading).
-    figure : str or None
-        The grid figure, relative to the task's output folder.
-    note : str
-        What the run shows, in the notebook's words (shown under the numbers; never decides anything).
+    """The why of one claim: its ``claim`` ID and ``verdict`` in the paper profile (what is explained;
+    ``"reproduced"`` for a thin margin), the runs behind it (``grids``: :class:`WhyGrid`, ``authors``:
+    :class:`AuthorsCheck` or None; at least one), the ``readings`` (reading -> verdict, from the paper-profile
+    result; empty for a claim with one reading), the grid ``figure`` (relative to the task's output folder, or
+    None) and a ``note`` in the notebook's words (shown under the numbers; it never decides anything).
     """
 
     claim: str
