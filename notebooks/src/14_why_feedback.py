@@ -209,43 +209,38 @@ if authors is not None:
 
 # %% [markdown]
 # ## One figure per why
-# Per claim, the number its rule reads, per seed, at every grid point (the profile point first); a filled
-# marker where the rule holds there, an open one where it fails; the rule's threshold dashed; the authors'
-# networks as a star.
+# Per claim, the number its rule reads, per seed, at every grid point; a filled marker where the rule holds
+# at the point, an open one where it fails; the rule's per-seed threshold dashed (D3: the ratio check only);
+# the authors' networks as a star.
 
 # %%
-def point_label(grid_axis, value):
-    return f"{grid_axis.name} = {value}" + (" (profile)" if value == grid_axis.ours else "")
-
-
-def why_figure(cid, key, threshold, ylabel, theirs=None):
+def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
     fig, ax = F.new_figure()
-    x = 0
+    labels = []
     for g in grids[cid]:
         axis = g.axes[0]
         for i, v in enumerate(axis.values):
             vals = np.asarray(g.numbers[key][i], dtype=float)
-            ax.plot(np.full(vals.size, x), vals, "o", color=F.plotting.COLORS["feedback"],
-                    mfc=F.plotting.COLORS["feedback"] if g.holds[i] else "none", alpha=0.8)
-            ax.annotate(point_label(axis, v), (x, 0), xycoords=("data", "axes fraction"), rotation=90, fontsize=7,
-                        ha="center", va="bottom")
-            x += 1
+            color = F.plotting.COLORS["feedback"]
+            ax.plot(np.full(vals.size, len(labels)), vals, "o", color=color, mfc=color if g.holds[i] else "none")
+            labels.append(f"{axis.name} = {v}" + (" (profile)" if v == axis.ours else ""))
     if theirs is not None:
-        ax.plot([x], [theirs], "*", ms=12, color=F.plotting.COLORS["neural_ode"], label="authors' networks")
-        ax.legend(fontsize=8)
+        ax.plot([len(labels)], [theirs], "*", ms=12, color=F.plotting.COLORS["neural_ode"])
+        labels.append("authors' networks (n = 1)")
     ax.axhline(threshold, ls="--", color="k", lw=0.8)
-    ax.set(ylabel=ylabel, title=f"{cid}: its rule over the feedback-training grid", xticks=[])
+    ax.set_xticks(range(len(labels)), labels, rotation=35, ha="right", fontsize=7)
+    ax.set(ylabel=ylabel, title=f"{cid} (filled: its rule holds)", yscale="log" if log else "linear")
     return F.save_figure(fig, out, f"why_{cid.lower()}")
 
 
 # %%
 a_num = None if authors is None else authors[1]
 figs = {
-    "D2": why_figure("D2", "D2", d2_factor, "relative RMSE, with feedback / nominal neural ODE",
+    "D2": why_figure("D2", "D2", d2_factor, "rel. RMSE: feedback / alone",
                      None if a_num is None else float(a_num["rel_rmse_neural_feedback"][0]
-                                                      / a_num["rel_rmse_nominal_neural_ode"][0])),
-    "D3": why_figure("D3", "D3_ratio", d3_ratio, "Eq. (12) loss, last / first 10 %"),
-    "D4": why_figure("D4", "D4", len(setup.offsets) - 0.5, f"S8 levels won (of {len(setup.offsets)}), per seed",
+                                                      / a_num["rel_rmse_nominal_neural_ode"][0]), log=True),
+    "D3": why_figure("D3", "D3_ratio", d3_ratio, "loss: last / first 10 %"),
+    "D4": why_figure("D4", "D4", len(setup.offsets) - 0.5, f"S8 levels won of {len(setup.offsets)}",
                      None if a_num is None else float(levels_won(a_num["s8"])[0])),
 }
 
