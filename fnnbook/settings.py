@@ -30,6 +30,7 @@ from fnnlib import quadrotor_presets as QP
 from fnnlib import spiral_presets as SP
 from fnnlib.checks import MissingDataError
 from fnnlib.data.bottle import BOTTLE_FILES, TS as BOTTLE_TS
+from fnnlib.data.release import SPIRAL_FEEDBACK_NAMES, SPIRAL_ODE_NAMES
 from fnnlib.feedback import GainWarning
 from fnnlib.models import ACTIVATIONS
 from fnnlib.systems.quadrotor import TEST_TRUTH, TRAINING_TRUTH
@@ -62,6 +63,11 @@ NOTEBOOK_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
     "neural_feedback": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, **_SPIRAL_FEEDBACK,
                         "fb_hidden": SP.PAPER_SPIRAL_HIDDEN, "fb_activation": SP.SPIRAL_ACTIVATION,
                         "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID},
+    "why_feedback_point": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, "N": SP.PAPER_SPIRAL_N,
+                           "fb_hidden": SP.PAPER_SPIRAL_HIDDEN, "fb_activation": SP.SPIRAL_ACTIVATION,
+                           "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID},
+    "why_feedback": {**_SPIRAL_DATA, "nominal": SP.SPIRAL_NOMINAL, "N": SP.PAPER_SPIRAL_N,
+                     "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID},
     "bottle": _recipe(PAPER_BOTTLE_RECIPE, "iterations", "batch_size", "batch_time", "lr", "method", "adjoint"),
     "quadrotor_learning": {
         "Ts": QP.PAPER_TS, "n_waypoints": QP.PAPER_FLIGHT_DATA["n_waypoints"],
@@ -141,6 +147,13 @@ _GAINS = C.number_list  # scalar gains, each stable at the step Ts (RELATIONS)
 
 
 
+def _changes(name: str, value: Any) -> Mapping[str, Any]:
+    """One-factor changes to a training recipe: a mapping (its keys are checked with the other settings)."""
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{name} must be a mapping of changes, got {value!r}")
+    return value
+
+
 def _fraction(name: str, value: Any) -> float:
     """A share in [0, 1), e.g. of the samples a sensor loses."""
     share = C.nonnegative(name, value)
@@ -186,6 +199,22 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                         "refresh_every": _N1, **_SPIRAL_FB, "residual_base": _SPIRAL3, "domega_range": _GRID,
                         "deta_range": _GRID, "deps_range": _GRID, "d1_factor": _POS, "d2_factor": _POS,
                         "d3_ratio": _POS, "d3_flat": _POS, "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS},
+    "why_feedback_point": {"n_seeds": _N2, "change": _changes,
+                           "x0": _X0, "nominal": _SPIRAL3, "n_samples": _N2, "Ts": _POS,
+                           "dr_omega_range": _GRID, "dr_eta_range": _GRID, "dr_eps_range": _GRID,
+                           "dr_n_samples": _N2, "dr_Ts": _POS, "fb_hidden": _WIDTHS, "fb_activation": _ACT,
+                           "fb_iterations": _N1, "fb_batch_size": _N1, "fb_lr": _POS, "fb_optimizer": _OPTIMIZER,
+                           "refresh_every": _N1, "N": _N1, "residual_base": _SPIRAL3, "domega_range": _GRID,
+                           "deta_range": _GRID, "deps_range": _GRID, "d2_factor": _POS, "d3_ratio": _POS,
+                           "d3_flat": _POS, "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS},
+    "why_feedback": {"x0": _X0, "nominal": _SPIRAL3, "n_samples": _N2, "Ts": _POS, "N": _N1,
+                     "dr_omega_range": _GRID, "dr_eta_range": _GRID, "dr_eps_range": _GRID,
+                     "residual_base": _SPIRAL3, "domega_range": _GRID, "deta_range": _GRID, "deps_range": _GRID,
+                     "fb_iterations": _N1, "fb_lr": _POS, "fb_optimizer": _OPTIMIZER, "refresh_every": _N1,
+                     "d1_factor": _POS, "d2_factor": _POS, "d3_ratio": _POS, "d3_flat": _POS,
+                     "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS,
+                     "authors_ode": _choice(*SPIRAL_ODE_NAMES), "authors_dr_ode": _choice(*SPIRAL_ODE_NAMES),
+                     "authors_feedback": _choice(*SPIRAL_FEEDBACK_NAMES)},
     "bottle": {"data": _choice("real", "synthetic"), "seeds": _SEEDS2, **_ODE_FIT, **_SPIRAL_FB,
                "synthetic_sizes": _synthetic_sizes},
     "quadrotor_learning": {"seed": _SEED, "seeds": _SEEDS1, "n_flights": _N1, "n_nodes": _N2, "n_waypoints": _N2,
@@ -281,6 +310,22 @@ def _neural_feedback(p: Mapping[str, Any]) -> None:
     _need(p["dr_n_samples"] >= 2, f"dr_n_samples must be >= 2, got {p['dr_n_samples']}")
 
 
+#: the one-factor changes a why_feedback_point may make to the paper profile's feedback training
+WHY_FEEDBACK_CHANGES = ("optimizer", "lr_times", "iterations_times", "refresh_every")
+
+
+def _why_feedback_point(p: Mapping[str, Any]) -> None:
+    change = p["change"]
+    _need(isinstance(change, Mapping) and set(change) <= set(WHY_FEEDBACK_CHANGES),
+          f"change must be a mapping with keys among {', '.join(WHY_FEEDBACK_CHANGES)}, got {change!r}")
+    _OPTIMIZER("change.optimizer", change.get("optimizer", "adam"))
+    for key in ("lr_times", "iterations_times"):
+        _POS(f"change.{key}", change.get(key, 1.0))
+    _N1("change.refresh_every", change.get("refresh_every", 1))
+    _horizon(p)
+    _need(p["dr_n_samples"] >= 2, f"dr_n_samples must be >= 2, got {p['dr_n_samples']}")
+
+
 def _bottle_data(p: Mapping[str, Any]) -> int:
     """The throws: real ones must be in ``data_dir`` with their pinned SHA-256. Returns the samples per throw."""
     if p["data"] == "synthetic":
@@ -350,7 +395,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
     "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system, "tuned_gains": _tuned_gains,
-    "quick_start": _quick_start,
+    "quick_start": _quick_start, "why_feedback_point": _why_feedback_point, "why_feedback": _horizon,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

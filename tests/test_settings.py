@@ -136,6 +136,11 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("tuned_gains", {"quad_tune_cases": 0}, "quad_tune_cases"),
     ("tuned_gains", {"quad_L_grid": [0.0, 3.0]}, "quad_L_grid must list gains > 0"),
     ("tuned_gains", {"bottle_tune_throws": 0}, "bottle_tune_throws must be an integer >= 1"),
+    ("why_feedback_point", {"change": {"batch_size": 10}}, "change must be a mapping with keys among optimizer"),
+    ("why_feedback_point", {"change": {"optimizer": "sgd"}}, "change.optimizer must be one of"),
+    ("why_feedback_point", {"change": {"lr_times": 0.0}}, "change.lr_times"),
+    ("why_feedback_point", {"change": [1]}, "change must be a mapping"),
+    ("why_feedback", {"authors_feedback": "FeedbackNN_nope.pt"}, "authors_feedback must be one of"),
 ])
 def test_bad_values_are_refused(notebook: str, change: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -63,6 +63,23 @@ def d2(*, rel_feedback: Value, rel_nominal: Value, frozen_unchanged: bool | Sequ
              + seeds_note(rel_feedback))
 
 
+def loss_convergence(loss: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The two numbers D3's rule reads from a training-loss curve ``loss`` (iterations,) or (iterations, E).
+
+    With ``m`` = 10 % of the iterations (at least 2): ``ratio`` = mean of the last ``m`` / mean of the first
+    ``m``; ``trend`` = the least-squares line's change over the last ``m``, over their mean. One value per seed
+    (shape (E,), or (1,) for one curve).
+    """
+    loss = np.asarray(loss, dtype=float)
+    loss = loss[:, None] if loss.ndim == 1 else loss
+    if loss.ndim != 2 or len(loss) < 4 or not np.isfinite(loss).all():
+        raise ValueError(f"D3: a finite loss curve of at least 4 iterations, got shape {loss.shape}")
+    m = max(2, len(loss) // 10)
+    first, last = loss[:m].mean(0), loss[-m:].mean(0)
+    slope = np.polyfit(np.arange(m), loss[-m:], 1)[0]
+    return last / first, slope * m / last
+
+
 def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1) -> ClaimResult:
     """D3 (Fig. 5c): the feedback's training loss converges.
 

@@ -102,3 +102,18 @@ def test_d4() -> None:
                              heldout_rate_neural_feedback=lo[:6], heldout_rate_neural_ode=np.full((6, 5), 0.2),
                              heldout_err_N_neural_feedback=lo[:6], heldout_err_N_neural_ode=np.full((6, 5), 0.2)))
     assert r.checks == {"all_12_S8_levels": False, "all_6_heldout_levels": True} and "11 of 12" in r.rule
+
+
+def test_loss_convergence_reads_the_first_and_last_tenth() -> None:
+    falling_then_flat = np.r_[np.linspace(1.0, 0.2, 80), np.full(20, 0.2)]
+    ratio, trend = sec4.loss_convergence(falling_then_flat)
+    assert ratio.shape == trend.shape == (1,)
+    assert ratio[0] == pytest.approx(0.2 / np.linspace(1.0, 0.2, 80)[:10].mean()) and abs(trend[0]) < 1e-12
+    still_falling = np.linspace(1.0, 0.1, 100)
+    two = np.stack([falling_then_flat, still_falling], 1)  # (iterations, E): one value per seed
+    ratio, trend = sec4.loss_convergence(two)
+    assert trend[1] == pytest.approx(-(0.9 / 99) * 10 / still_falling[-10:].mean()) and trend[1] < -0.1
+    assert sec4.d3(ratio=ratio[1:], trend=trend[1:]).checks == {"last_below_ratio_of_first": True,
+                                                                 "last_window_flat": False}  # still falling
+    with pytest.raises(ValueError, match="loss curve"):
+        sec4.loss_convergence([1.0, np.nan, 0.5, 0.4])

@@ -1,0 +1,132 @@
+r"""The Sec. 4 evaluation of a frozen neural ODE with a neural feedback (Fig. 5b, Fig. S10), for any networks.
+
+The ``neural_feedback`` notebook evaluates our trained networks; the why notebooks evaluate retrained
+feedbacks and the authors' released networks the same way, through :func:`evaluation_setup` and
+:func:`judge`: the nominal task (D1, D2), the 12 residual levels of S8 and the held-out levels (D4), and the
+feedback's training loss (D3), judged by the claims' own rules (:mod:`fnnbook.rules.sec4`).
+
+Systems are made by ``make`` (``fnnlib.Spiral`` for Eq. (26); ``fnnlib.data.release.release_spiral`` for the
+release's transposed spiral, in which the authors' networks were trained).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+import fnnlib as F
+from fnnbook.rules import sec4
+from fnnlib.results import ClaimResult
+
+__all__ = ["EvaluationSetup", "evaluation_setup", "field_errors", "judge", "nominal_errors"]
+
+
+@dataclass(frozen=True)
+class EvaluationSetup:
+    """The trajectories of the Sec. 4 evaluation (float32, noise-free, closed form).
+
+    ``x_nom`` (T, 2) / ``f_nom`` (T, 2): the nominal task; ``x_s8``, ``f_s8`` (12, T, 2): the S8 levels;
+    ``x_held``, ``f_held`` (H, T, 2): the held-out levels; ``offsets`` (12, 3): the S8 offsets.
+    """
+
+    x_nom: Tensor
+    f_nom: Tensor
+    x_s8: Tensor
+    f_s8: Tensor
+    x_held: Tensor
+    f_held: Tensor
+    offsets: Tensor
+    Ts: float
+    N: int
+
+
+def _trajectories(make: Callable[..., Any], params: Tensor, x0: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """Closed-form trajectories (levels, T, 2) of ``make(*p)`` per row of ``params`` (rounded to float32, as the
+    neural_feedback notebook does) and their true rates (at the unrounded parameters)."""
+    rounded = params.float().tolist()
+    x = F.simulate_levels([make(*p) for p in rounded], x0, t, exact=True).float()
+    f = torch.stack([make(*p).rate(xi) for p, xi in zip(params.tolist(), x)])
+    return x, f
+
+
+def evaluation_setup(p: Mapping[str, Any], make: Callable[..., Any] = F.Spiral) -> EvaluationSetup:
+    """The evaluation of the neural_feedback notebook from its parameters ``p`` (its presets: ``x0``, ``nominal``,
+    ``n_samples``, ``Ts``, ``N``, ``residual_base``, the residual and training ranges, ``heldout_flip``,
+    ``heldout_min_distance``), with systems made by ``make``."""
+    t = torch.arange(p["n_samples"], dtype=torch.float64) * p["Ts"]
+    x0 = torch.tensor(p["x0"], dtype=torch.float64)
+    sys_nom = make(*p["nominal"])
+    x_nom = sys_nom.exact_solution(x0, t).float()
+    offsets = F.paired_levels(*(F.colon_range(*p[k]) for k in ("domega_range", "deta_range", "deps_range")))
+    base = torch.tensor(p["residual_base"], dtype=torch.float64)
+    x8, f8 = _trajectories(make, base + offsets, x0, t)
+    cases = F.paired_levels(*(F.colon_range(*p[k]) for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")))
+    steps = torch.tensor([p[k][1] for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")], dtype=torch.float64)
+    flipped = base + offsets * torch.tensor(p["heldout_flip"], dtype=torch.float64)
+    far = torch.cdist(flipped / steps, cases / steps).amin(-1) >= p["heldout_min_distance"]
+    if not far.any():
+        raise ValueError(f"no held-out level is {p['heldout_min_distance']} training steps from the cases")
+    xh, fh = _trajectories(make, flipped[far], x0, t)
+    return EvaluationSetup(x_nom, sys_nom.rate(x_nom), x8, f8, xh, fh, offsets, float(p["Ts"]), int(p["N"]))
+
+
+def _per_seed(z: Tensor, E: int) -> Tensor:
+    return F.split_members(z, E)
+
+
+def nominal_errors(f: torch.nn.Module, h: torch.nn.Module | None, setup: EvaluationSetup, E: int) -> np.ndarray:
+    """Relative change-rate RMSE on the nominal task, per seed (E,): of ``f`` alone when ``h`` is None, else of
+    the frozen ``f`` with the feedback ``h`` (the observer's :math:`\\hat f`)."""
+    xs = F.stack_members(setup.x_nom, E)
+    if h is None:
+        with torch.no_grad():
+            fhat = _per_seed(F.eval_field(f, xs), E)
+    else:
+        fhat = _per_seed(F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E).observe(xs).f_hat, E)
+    return np.array([F.relative_rmse(fhat[e], setup.f_nom) for e in range(E)])
+
+
+def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tensor, setup: EvaluationSetup,
+                 E: int) -> dict[str, np.ndarray]:
+    """Per seed and level (E, levels): change-rate RMSE and mean ``N``-step error of the neural ODE ``f`` (Euler
+    rollout) and of ``f`` with the neural feedback ``h`` (its cascade), on the levels ``x`` (levels, T, 2)."""
+    xs = F.stack_members(x, E)
+    nf = F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E)
+    with torch.no_grad():
+        f_nn = _per_seed(F.eval_field(f, xs), E)
+    z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N, method="euler"), E),
+         "neural_feedback": _per_seed(nf.predict(xs, setup.N), E)}
+    rate = {"neural_ode": f_nn, "neural_feedback": _per_seed(nf.observe(xs).f_hat, E)}
+    out = {f"rate_{k}": F.rmse_over_time(v, f_true.expand_as(v)).numpy() for k, v in rate.items()}
+    return out | {f"err_N_{k}": F.n_step_errors(v, x, setup.N).mean(-1).numpy() for k, v in z.items()}
+
+
+def judge(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationSetup, E: int, *,
+          loss: Sequence[float] | np.ndarray | None, factor: float, ratio_max: float, flat: float,
+          f_dr: torch.nn.Module | None = None, d1_factor: float = 1.5) -> tuple[dict[str, ClaimResult], dict]:
+    """D2 and D4 (and D1 with the domain-randomized ``f_dr``, D3 with the feedback's training ``loss``
+    (iterations,) or (iterations, E)) by the claims' own rules, for E seeds side by side; and the numbers."""
+    rel_nominal, rel_fb = nominal_errors(f, None, setup, E), nominal_errors(f, h, setup, E)
+    s8 = field_errors(f, h, setup.x_s8, setup.f_s8, setup, E)
+    held = field_errors(f, h, setup.x_held, setup.f_held, setup, E)
+    numbers: dict[str, Any] = {"rel_rmse_nominal_neural_ode": rel_nominal, "rel_rmse_neural_feedback": rel_fb,
+                               "s8": s8, "held_out": held}
+    out = {"D2": sec4.d2(rel_feedback=rel_fb, rel_nominal=rel_nominal, frozen_unchanged=True, factor=factor),
+           "D4": sec4.d4(**{f"{k}_{m}": s8[f"{k}_{m}"].T for k in ("rate", "err_N")
+                            for m in ("neural_feedback", "neural_ode")},
+                         **{f"heldout_{k}_{m}": held[f"{k}_{m}"].T for k in ("rate", "err_N")
+                            for m in ("neural_feedback", "neural_ode")},
+                         N=setup.N, offsets=setup.offsets.tolist())}
+    if f_dr is not None:
+        numbers["rel_rmse_dr_neural_ode"] = rel_dr = nominal_errors(f_dr, None, setup, E)
+        out["D1"] = sec4.d1(rel_dr=rel_dr, rel_nominal=rel_nominal, factor=d1_factor)
+    if loss is not None:
+        ratio, trend = sec4.loss_convergence(loss)
+        numbers |= {"ratio": ratio, "last_window_trend_relative": trend}
+        out["D3"] = sec4.d3(ratio=ratio, trend=trend, ratio_max=ratio_max, flat=flat)
+    return dict(sorted(out.items())), numbers

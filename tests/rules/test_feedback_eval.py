@@ -1,0 +1,48 @@
+"""The Sec. 4 evaluation shared by the neural-feedback notebooks (fnnbook.feedback_eval), on tiny networks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import fnnlib as F
+from fnnbook.feedback_eval import evaluation_setup, judge, nominal_errors
+from fnnbook.settings import notebook_presets
+
+SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_range": [-0.03, 0.0275, 0.025],
+         "deps_range": [-14.4, 13.2, 12.0], "dr_omega_range": [0.8, 0.12, 3.08], "dr_eta_range": [0.04, 0.005, 0.135],
+         "dr_eps_range": [-24.0, 2.4, 21.6], "heldout_flip": [1.0, -1.0, 1.0], "heldout_min_distance": 1.0}
+
+
+def networks(E: int):
+    seeds = list(range(E))
+    f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in seeds], seeds)
+    h = F.NeuralFeedbackEnsemble(2, [8], "relu", seeds)
+    return f, h
+
+
+def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
+    s = evaluation_setup(notebook_presets("neural_feedback") | SMALL)
+    assert s.x_s8.shape == (3, 60, 2) and s.x_held.shape[1:] == (60, 2) and s.offsets.shape == (3, 3)
+    f, h = networks(2)
+    with torch.no_grad():
+        for p in h.parameters():
+            p.zero_()  # h = 0: f_hat is f's rate
+    alone, with_h = nominal_errors(f, None, s, 2), nominal_errors(f, h, s, 2)
+    assert alone.shape == (2,) and np.allclose(alone, with_h)
+    res, numbers = judge(f, h, s, 2, loss=np.linspace(1, 0.1, 50)[:, None].repeat(2, 1), factor=1.5,
+                         ratio_max=0.5, flat=0.1)
+    assert list(res) == ["D2", "D3", "D4"]
+    assert res["D2"].verdict == "reproduced"  # equal errors: within 1.5x
+    assert res["D3"].checks == {"last_below_ratio_of_first": True, "last_window_flat": False}  # still falling
+    assert res["D4"].checks["all_3_S8_levels"] is False  # equal errors never beat
+    assert numbers["s8"]["rate_neural_ode"].shape == (2, 3)
+
+
+def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
+    p = notebook_presets("neural_feedback") | SMALL
+    ours, theirs = evaluation_setup(p), evaluation_setup(p, F.data.release.release_spiral)
+    assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
+    with pytest.raises(ValueError, match="held-out"):
+        evaluation_setup(p | {"heldout_min_distance": 100.0})
