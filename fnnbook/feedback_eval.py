@@ -23,7 +23,27 @@ import fnnlib as F
 from fnnbook.rules import sec4
 from fnnlib.results import ClaimResult
 
-__all__ = ["EvaluationSetup", "evaluation_setup", "field_errors", "judge", "nominal_errors"]
+__all__ = ["EvaluationSetup", "evaluation_setup", "feedback_ensemble", "field_errors", "judge", "nominal_errors"]
+
+
+def feedback_ensemble(members: Sequence[F.NeuralFeedback], seeds: Sequence[int]) -> F.NeuralFeedbackEnsemble:
+    """The ensemble of trained neural feedbacks (Eq. (12); weights copied), e.g. one per seed loaded by
+    :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
+
+    The ensemble's stacked MLP is a :class:`fnnlib.NeuralODEEnsemble` of input-free neural ODEs holding the
+    feedbacks' MLPs (the layout :class:`fnnlib.NeuralFeedbackEnsemble` keeps).
+    """
+    if not all(isinstance(m, F.NeuralFeedback) for m in members):
+        raise TypeError("every member must be a NeuralFeedback")
+    as_odes = []
+    for m in members:
+        ode = F.NeuralODE(m.n_state, m.hidden, m.activation).to(next(m.parameters()).dtype)
+        ode.net.load_state_dict(m.net.state_dict())
+        as_odes.append(ode)
+    ens = F.NeuralFeedbackEnsemble.__new__(F.NeuralFeedbackEnsemble)
+    torch.nn.Module.__init__(ens)
+    ens.stacked = F.NeuralODEEnsemble.from_members(as_odes, seeds)
+    return ens
 
 
 @dataclass(frozen=True)

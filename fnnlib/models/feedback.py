@@ -9,7 +9,7 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.models.ensemble import NeuralODEEnsemble
-from fnnlib.models.neural_ode import NeuralODE, mlp
+from fnnlib.models.neural_ode import mlp
 
 
 class NeuralFeedback(nn.Module):
@@ -81,22 +81,6 @@ class NeuralFeedbackEnsemble(nn.Module):
         # NeuralFeedback and an input-free NeuralODE build the same MLP (`mlp(n, n, hidden, activation)`), so the
         # stacked MLP of a NeuralODEEnsemble starts every member from its seed's NeuralFeedback weights
         self.stacked = NeuralODEEnsemble(n_state, hidden, activation, seeds)
-
-    @classmethod
-    def from_members(cls, members: Sequence[NeuralFeedback], seeds: Sequence[int]) -> NeuralFeedbackEnsemble:
-        """The ensemble of trained feedbacks (weights copied), e.g. one per seed loaded by
-        :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``."""
-        if not all(isinstance(m, NeuralFeedback) for m in members):
-            raise TypeError("every member must be a NeuralFeedback")
-        as_odes = []
-        for m in members:  # the same MLP as an input-free NeuralODE (see __init__)
-            ode = NeuralODE(m.n_state, m.hidden, m.activation).to(next(m.parameters()).dtype)
-            ode.net.load_state_dict(m.net.state_dict())
-            as_odes.append(ode)
-        ens = cls.__new__(cls)
-        nn.Module.__init__(ens)
-        ens.stacked = NeuralODEEnsemble.from_members(as_odes, seeds)
-        return ens
 
     @property
     def size(self) -> int:

@@ -58,7 +58,7 @@ import numpy as np
 
 import fnnlib as F
 from fnnbook import why as W
-from fnnbook.feedback_eval import evaluation_setup, judge
+from fnnbook.feedback_eval import evaluation_setup, feedback_ensemble, judge
 from fnnbook.rules import sec4
 from fnnlib.data import release
 
@@ -81,15 +81,15 @@ print(f"{len(points)} grid points: {[p['change'] for p in points]}")
 # the paper profile's checks of D1, D2 and D4 (checked below); D3 reads the paper profile's loss numbers.
 
 # %%
-def ensemble(stem, kind, cls):
+def ensemble(stem, kind, build):
     folder = Path(upstream_dirs["spiral"]) if stem == "neural_ode" else nf_dir
     loaded = F.load_seed_checkpoints(folder, stem=stem, expected_kind=kind)
-    return cls.from_members([m for _, m, _ in loaded], [s for s, _, _ in loaded]), [s for s, _, _ in loaded]
+    return build([m for _, m, _ in loaded], [s for s, _, _ in loaded]), [s for s, _, _ in loaded]
 
 
-f_ours, seeds = ensemble("neural_ode", "NeuralODE", F.NeuralODEEnsemble)
-h_ours, _ = ensemble("neural_feedback", "NeuralFeedback", F.NeuralFeedbackEnsemble)
-dr_ours, _ = ensemble("neural_ode_dr", "NeuralODE", F.NeuralODEEnsemble)
+f_ours, seeds = ensemble("neural_ode", "NeuralODE", F.NeuralODEEnsemble.from_members)
+h_ours, _ = ensemble("neural_feedback", "NeuralFeedback", feedback_ensemble)
+dr_ours, _ = ensemble("neural_ode_dr", "NeuralODE", F.NeuralODEEnsemble.from_members)
 setup = evaluation_setup(globals())
 ours, ours_numbers = judge(f_ours, h_ours, setup, len(seeds), loss=None, factor=d2_factor, ratio_max=d3_ratio,
                            flat=d3_flat, f_dr=dr_ours, d1_factor=d1_factor)

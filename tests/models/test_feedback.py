@@ -51,16 +51,6 @@ def test_ensemble_members_start_from_their_seeds_feedback_and_evaluate_as_alone(
             torch.testing.assert_close(out[m], out[(m + 1) % 3])
 
 
-def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds():
-    members = [_alone(s, (8,), "relu") for s in (4, 9)]
-    ens = NeuralFeedbackEnsemble.from_members(members, [4, 9])
-    assert ens.seeds == [4, 9]
-    for m, alone in enumerate(members):
-        assert all(torch.equal(a, b) for a, b in zip(ens.member(m).parameters(), alone.parameters()))
-    with pytest.raises(TypeError, match="NeuralFeedback"):
-        NeuralFeedbackEnsemble.from_members([NeuralODE(2, (8,), "relu")], [0])
-
-
 def test_ensemble_gradients_do_not_depend_on_the_other_members():
     e = torch.randn(40, 2)
     ens, one = NeuralFeedbackEnsemble(2, (8,), "relu", [0, 1, 2]), NeuralFeedbackEnsemble(2, (8,), "relu", [1])

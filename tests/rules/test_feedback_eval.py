@@ -46,3 +46,22 @@ def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
     assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
     with pytest.raises(ValueError, match="held-out"):
         evaluation_setup(p | {"heldout_min_distance": 100.0})
+
+
+def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -> None:
+    import pytest  # noqa: PLC0415
+    import torch  # noqa: PLC0415
+
+    import fnnlib as F  # noqa: PLC0415
+    from fnnbook.feedback_eval import feedback_ensemble  # noqa: PLC0415
+
+    members = []
+    for s in (4, 9):
+        torch.manual_seed(s)
+        members.append(F.NeuralFeedback(2, (8,), "relu"))
+    ens = feedback_ensemble(members, [4, 9])
+    assert ens.seeds == [4, 9]
+    for m, alone in enumerate(members):
+        assert all(torch.equal(a, b) for a, b in zip(ens.member(m).parameters(), alone.parameters()))
+    with pytest.raises(TypeError, match="NeuralFeedback"):
+        feedback_ensemble([F.NeuralODE(2, (8,), "relu")], [0])
