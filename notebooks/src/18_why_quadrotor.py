@@ -22,6 +22,10 @@ profile = "why"
 out_dir = "outputs/manual/why_quadrotor"
 upstream_dirs = {"quadrotor_mpc": "outputs/paper/quadrotor_mpc"}
 
+# %%
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("why_quadrotor", globals())
+
 # %% tags=["hide-input"]
 import json
 from pathlib import Path
