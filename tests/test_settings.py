@@ -136,6 +136,10 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("tuned_gains", {"quad_tune_cases": 0}, "quad_tune_cases"),
     ("tuned_gains", {"quad_L_grid": [0.0, 3.0]}, "quad_L_grid must list gains > 0"),
     ("tuned_gains", {"bottle_tune_throws": 0}, "bottle_tune_throws must be an integer >= 1"),
+    ("why_quadrotor_point", {"u_max": 0.0}, "u_max must be a finite number > 0"),
+    ("why_quadrotor_point", {"Gamma_grid": [0.0, 8.0]}, "Gamma_grid must list at least 2 gains > 0"),
+    ("why_quadrotor_point", {"Gamma_adapnn_grid": [0.16]}, "Gamma_adapnn_grid must list at least 2 gains > 0"),
+    ("why_quadrotor_point", {"Gamma_grid": [8.0, 8.0]}, "Gamma_grid"),
 ])
 def test_bad_values_are_refused(notebook: str, change: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
