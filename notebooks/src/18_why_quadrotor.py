@@ -170,7 +170,10 @@ def grid_figure(q):
         ax.imshow(g.holds.T.astype(float), origin="lower", cmap="Greens", vmin=0, vmax=1.5, aspect="auto")
         ax.set(xticks=range(len(u.values)), xticklabels=[f"{v:g}" for v in u.values], yticks=range(len(gain.values)),
                yticklabels=[f"{v:g}" for v in gain.values], xlabel="thrust bound u_max [N]", ylabel=gain.name,
-               title=f"{g.title}: holds at {int(g.holds.sum())}/{g.holds.size}")
+               title=f"{g.title.split(',')[0]}, {g.title.split('(28) ')[1]}: holds at {int(g.holds.sum())}/{g.holds.size}")
+        ax.title.set_fontsize(8)
+        for (i, j), h in np.ndenumerate(g.holds):
+            ax.text(i, j - 0.3, "holds" if h else "fails", ha="center", va="center", fontsize=7, color="0.3")
         short = sum(v < need for v in u.values)
         if short:
             ax.axvline(short - 0.5, color="k", ls="--", lw=1, label=f"needs {need:.2f} N at the peak")
