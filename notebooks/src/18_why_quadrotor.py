@@ -190,13 +190,34 @@ figures = {q: grid_figure(q) for q in grids}
 # profile's readings; nothing here names them by hand.
 
 # %% tags=["hide-input"]
-NOTE = ("Thrust bounds below the {need:.2f} N the test vehicle needs at the reference's peak cannot follow the "
-        "Lissajous curve (the paper's own 4 N among them); there every model tracks far off the reference.")
+def mean_of(rec, c, n):
+    """The mean RMSE over the units at the profile's gains (AdapNN at its chosen gain, AdapFNN at Gamma)."""
+    v = rec[c][n]
+    gain = {"AdapNN": first["profile_Gamma_adapnn"][c], "AdapFNN": profile_G}.get(n)
+    return float(np.mean((v if gain is None else v[str(gain)])["rmse"]))
+
+
+def compare(names):
+    """Mean RMSE of ``names`` at the profile's point per cost, ours and (where flown) the authors'."""
+    recs = {"ours": judged["ours"]} | ({"the authors'": judged["authors"]} if authors else {})
+    return "; ".join(f"{who}, {c}: " + ", ".join(f"{n} {mean_of(rec, c, n):.3f} m" for n in names)
+                     for who, rec in recs.items() for c in costs)
+
+
+THRUST = (f"Bounds below the {need:.2f} N per motor the test vehicle needs at the reference's peak (the paper's "
+          f"own {first['paper_u_max']:g} N among them) cannot follow the Lissajous curve: FNN's mean RMSE, "
+          + ", ".join(f"{c}: {mean_of(first['ours'], c, 'FNN'):.3f} m at {bounds[0]:g} N against "
+                      f"{mean_of(judged['ours'], c, 'FNN'):.3f} m at {judged['u_max']:g} N" for c in costs) + ".")
+AUTH = (" The authors' AdapNN adapts at the gain chosen on validation with our network, and unit k flies the "
+        "release's MLP k mod 2 (it has two)." if authors else "")
+notes = {"Q3": f"Neural against MLP at the profile's point: {compare(['Neural', 'MLP'])}.",
+         "Q4": f"AdapNN's gain chosen on validation flights: {first['profile_Gamma_adapnn']}.",
+         "Q5": f"FNN against AdapFNN at the profile's point: {compare(['FNN', 'AdapFNN'])}."}
 whys = []
 for q in ("Q3", "Q4", "Q5"):
     c = profile_result.claim(q)
     whys.append(Why(q, c.verdict, grids=grids[q], authors=authors.get(q), readings=c.reading_verdicts(),
-                    figure=figures[q], note=NOTE.format(need=need)))
+                    figure=figures[q], note=f"{notes[q]} {THRUST}{AUTH}"))
 write_whys(out, whys)
 for w in whys:
     print(f"{w.claim} ({w.verdict}): {w.summary}")
