@@ -233,6 +233,9 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                       "linearize_method": _from_mpc("METHODS", "linearize"),
                       "backend": _from_mpc("BACKENDS", "backends"), "transient_s": _NONNEG,
                       "validation_vehicles": _N1, "validation_vehicle_seed": _SEED},
+    "why_quadrotor_point": {"u_max": _POS, "Gamma_grid": _SWEEP0, "Gamma_adapnn_grid": _SWEEP0,
+                            "authors_u_max": _SWEEP0},
+    "why_quadrotor": {},
     "own_system": {"seeds": _SEEDS2, "Ts": _POS, "n_train": _N2, "n_test": _N2, "nominal": _vec(4),
                    "test": _vec(4), "u_amp": _NONNEG, "hidden": _WIDTHS, "activation": _ACT, "iterations": _N1,
                    "noise_std": _POS, "N": _N1, "L_hand": _GAIN, "beta_hand": _NONNEG, "L0": _GAIN, "beta0": _NONNEG,
@@ -391,11 +394,23 @@ def _tuned_gains(p: Mapping[str, Any]) -> None:
         _need(min(p[name]) > 0, f"{name} must list gains > 0, got {p[name]}")
 
 
+def _why_quadrotor_point(p: Mapping[str, Any]) -> None:
+    """The adaptive gains of the why grid: > 0 (the flight test's own gains must be among them: checked against
+    its run record in the notebook)."""
+    for name in ("Gamma_grid", "Gamma_adapnn_grid"):
+        _need(len(p[name]) >= 2 and min(p[name]) > 0, f"{name} must list at least 2 gains > 0, got {p[name]}")
+
+
+def _aggregate(p: Mapping[str, Any]) -> None:
+    """An aggregate of a why grid: no settings of its own (its points' records carry them)."""
+
+
 RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType({
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
     "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system, "tuned_gains": _tuned_gains,
     "quick_start": _quick_start, "why_feedback_point": _why_feedback_point, "why_feedback": _horizon,
+    "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

@@ -141,6 +141,10 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("why_feedback_point", {"change": {"lr_times": 0.0}}, "change.lr_times"),
     ("why_feedback_point", {"change": [1]}, "change must be a mapping"),
     ("why_feedback", {"authors_feedback": "FeedbackNN_nope.pt"}, "authors_feedback must be one of"),
+    ("why_quadrotor_point", {"u_max": 0.0}, "u_max must be a finite number > 0"),
+    ("why_quadrotor_point", {"Gamma_grid": [0.0, 8.0]}, "Gamma_grid must list at least 2 gains > 0"),
+    ("why_quadrotor_point", {"Gamma_adapnn_grid": [0.16]}, "Gamma_adapnn_grid must list at least 2 gains > 0"),
+    ("why_quadrotor_point", {"Gamma_grid": [8.0, 8.0]}, "Gamma_grid"),
 ])
 def test_bad_values_are_refused(notebook: str, change: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -18,13 +18,13 @@ import numpy as np
 from torch import Tensor
 
 from fnnlib.mpc.experiment import SIX
-from fnnlib.results import ClaimResult, Reading
+from fnnlib.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_readings", "q1_convergence",
-           "q2_prediction", "q3_tracking", "q4_prediction",
-           "q5_adaptive", "q6_training_cost"]
+__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_readings", "joined_verdict",
+           "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction", "q5_adaptive", "q6_training_cost",
+           "rules_at_setting"]
 
 
 def _paired(values: Mapping[str, Sequence[float]], names: Iterable[str]) -> dict[str, np.ndarray]:
@@ -192,6 +192,38 @@ def join_readings(per_setting: Iterable[ClaimResult]) -> dict[str, Reading] | No
         return None
     return {name: Reading(first.sentence, {k: v for c in claims for k, v in (c.readings or {})[name].checks.items()})
             for name, first in claims[0].readings.items()}
+
+
+def rules_at_setting(rmse: Mapping[str, Sequence[float]], acc_rmse: Mapping[str, Sequence[float]],
+                     theorem2_inside: Sequence[float], *, units: Sequence[Hashable],
+                     label: str) -> dict[str, ClaimResult | None]:
+    """Q3, Q4 and Q5 at one setting (one cost variant at one thrust bound and gain), as the flight-test notebook
+    applies them: :func:`q3_tracking` on ``rmse`` (the seven models), :func:`q4_prediction` on the six of
+    ``acc_rmse``, :func:`q5_adaptive` on ``rmse`` with ``theorem2_inside``. Nothing is added to the rules: a why
+    grid point holds where the claim's result reads reproduced. Q5 is ``None`` where its Theorem 2 guarantee
+    fails (the rule then stops: no verdict, so the point cannot hold).
+    """
+    out: dict[str, ClaimResult | None] = {
+        "Q3": q3_tracking(rmse, units=units, label=label),
+        "Q4": q4_prediction({n: acc_rmse[n] for n in SIX}, units=units, label=label)}
+    try:
+        out["Q5"] = q5_adaptive(rmse, theorem2_inside, label=label)
+    except GuaranteeFailed:
+        out["Q5"] = None
+    return out
+
+
+def joined_verdict(per_setting: Iterable[ClaimResult | None]) -> tuple[str, dict[str, bool]]:
+    """One claim over several settings (e.g. the two cost variants), as the flight-test notebook joins them: the
+    verdict of every setting's checks together, and those checks. A missing result (a failed guarantee) makes
+    the verdict "not reproduced"."""
+    claims = list(per_setting)
+    if not claims:
+        raise ValueError("need at least one setting's result")
+    if any(c is None for c in claims):
+        return "not reproduced", {}
+    checks = {k: v for c in claims for k, v in c.checks.items()}
+    return verdict_from_checks(checks), checks
 
 
 def count_trainable(tensors: Iterable[Tensor]) -> int:

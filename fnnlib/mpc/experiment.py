@@ -306,22 +306,28 @@ class PairedFlights(Mapping[str, list[FlightResult]]):
 
 def paired_units(members: Sequence[tuple[Any, nn.Module]], mlps: Sequence[tuple[Any, nn.Module]], *,
                  tests: Sequence[FlightTest], mpc: MPC, model_settings: Mapping[str, Any],
-                 adapnn_gamma: float) -> PairedFlights:
+                 adapnn_gamma: float, only: Iterable[str] | None = None) -> PairedFlights:
     """All seven models flown once on each independent unit: trained network k, MLP k and disturbance k.
 
     Unit ``k`` pairs ``members[k]`` (seed, residual network), ``mlps[k]`` (seed, MLP) and ``tests[k]`` (one
     disturbance drawn independently of the others): the units share nothing random, so they are independent
     and each model's flight of a unit is its own (Nomi and FB fly unit k's disturbance once, as every other
     model). Every comparison of Q3-Q5 is then paired over the S units, with S their true number. AdapNN
-    flies at ``adapnn_gamma``. Raises ValueError unless the three lists have the same length >= 1.
+    flies at ``adapnn_gamma``. ``only`` flies just the named models (all seven when ``None``; e.g. AdapFNN alone
+    at another ``Gamma``). Raises ValueError unless the three lists have the same length >= 1, or for a name
+    ``only`` lists that is not one of the seven.
     """
     if not members or not (len(members) == len(mlps) == len(tests)):
         raise ValueError(f"need one trained network, one MLP and one test per unit (at least one unit), got "
                          f"{len(members)} networks, {len(mlps)} MLPs, {len(tests)} tests")
+    names = None if only is None else set(only)
+    if names is not None and (not names or names - {*SIX, "AdapFNN"}):
+        raise ValueError(f"only must name some of {[*SIX, 'AdapFNN']}, got {sorted(names)}")
     out: dict[str, list[FlightResult]] = {}
     for (_, net), (_, mlp), test in zip(members, mlps, tests):
         for m in paper_models(net, mlp, **model_settings, adapnn_gamma=adapnn_gamma):  # the paper's order
-            out.setdefault(m.name, []).append(fly(m, mpc, test))
+            if names is None or m.name in names:
+                out.setdefault(m.name, []).append(fly(m, mpc, test))
     units = tuple(f"network {s}, MLP {s_m}, disturbance {k + 1}" for k, ((s, _), (s_m, _)) in
                   enumerate(zip(members, mlps)))
     return PairedFlights(out, units)

@@ -167,6 +167,10 @@ def test_paired_units_fly_every_model_once_per_independent_unit():
     for m in again:
         assert np.array_equal(fly(m, mpc, tests[1]).x, grid.unit(1)[m.name].x), m.name
     assert not np.array_equal(fly(again[2], mpc, tests[0]).x, grid.unit(1)["MLP"].x)  # the test matters too
+    some = paired_units(nets, mlps, tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16, only=["FB", "AdapFNN"])
+    assert list(some) == ["FB", "AdapFNN"] and np.array_equal(some["AdapFNN"][1].x, grid["AdapFNN"][1].x)
+    with pytest.raises(ValueError, match="only must name"):
+        paired_units(nets, mlps, tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16, only=["FNN", "LSTM"])
     for bad in ((nets, mlps[:1], tests), (nets, mlps, tests[:1]), ([], [], [])):
         with pytest.raises(ValueError, match="one test per unit"):
             paired_units(bad[0], bad[1], tests=bad[2], mpc=mpc, model_settings=kw, adapnn_gamma=0.16)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, GROUPS, SIX, count_trainable, join_readings, q1_convergence,
-                                     q2_prediction, q3_tracking, q4_prediction, q5_adaptive, q6_training_cost)
+from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, GROUPS, SIX, count_trainable, join_readings,
+                                     joined_verdict, q1_convergence, q2_prediction, q3_tracking, q4_prediction,
+                                     q5_adaptive, q6_training_cost, rules_at_setting)
 from fnnlib.results import GuaranteeFailed
 
 RNG = np.random.default_rng(0)
@@ -150,3 +151,25 @@ def test_q6_counts_the_feedback_objects_parameters() -> None:
         q6_training_cost(count_trainable([learnable]), 120.0)
     with pytest.raises(ValueError):
         q6_training_cost(0, float("nan"))
+
+
+def test_rules_at_a_setting_are_the_claims_own_rules_and_join_like_the_notebook() -> None:
+    good = paper_like()
+    acc = {n: v / 10 for n, v in good.items()}
+    r = rules_at_setting(good, acc, [1.0] * S, units=UNITS, label="as_flown")
+    assert r["Q3"].checks == q3_tracking(good, units=UNITS, label="as_flown").checks
+    assert r["Q4"].checks == q4_prediction({n: acc[n] for n in SIX}, units=UNITS, label="as_flown").checks
+    assert r["Q5"].checks == q5_adaptive(good, [1.0] * S, label="as_flown").checks
+    assert all(c.verdict == "reproduced" for c in r.values())
+    # the MLP as good as Neural fails Q3 at this setting; the two settings join as the notebook joins them
+    bad = {**good, "MLP": good["Neural"] - 0.001}
+    b = rules_at_setting(bad, acc, [1.0] * S, units=UNITS, label="as_written")
+    assert b["Q3"].verdict == "partly"
+    verdict, checks = joined_verdict([r["Q3"], b["Q3"]])
+    assert verdict == "partly" and len(checks) == 2 * len(r["Q3"].checks)
+    assert joined_verdict([r["Q3"]])[0] == "reproduced"
+    # a failed Theorem 2 guarantee stops Q5 (no verdict): the setting cannot hold
+    assert rules_at_setting(good, acc, [0.5] * S, units=UNITS, label="x")["Q5"] is None
+    assert joined_verdict([r["Q5"], None]) == ("not reproduced", {})
+    with pytest.raises(ValueError):
+        joined_verdict([])

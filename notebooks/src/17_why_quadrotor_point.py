@@ -1,0 +1,152 @@
+# %% [markdown]
+# # Why Q3-Q5 stand where they stand: one thrust bound (Sec. 5.2.2, App. A.5.4, A.9; Eqs. (27)-(30))
+#
+# One point of the why grid of the flight test: the MPC of Eq. (28) with the thrust box $[0, u_{max}]$ at this
+# task's `u_max`, flown under both cost variants (Eq. (28) as written, R = I; and as the authors' release flies
+# it), with the two adaptive gains the paper does not state swept: AdapNN's (App. A.5.4: "adjusted for optimal
+# performance") over `Gamma_adapnn_grid` and AdapFNN's $\Gamma$ of Eq. (30) over `Gamma_grid`. Every other
+# setting, the five trained networks and MLPs and the drawn disturbances are those of the paper-profile flight
+# test (`quadrotor_mpc`), read from its run record, so at its bound the flights are its own.
+#
+# Where `data_dir` holds the authors' release and `u_max` is one of `authors_u_max`, their five residual
+# networks (and their two MLPs) fly the same units too. This task only flies and records; the aggregate
+# `why_quadrotor` applies the claims' rules.
+
+# %% tags=["parameters"]
+profile = "why"
+out_dir = "outputs/manual/why_quadrotor_point"
+upstream_dirs = {"quadrotor_learning": "outputs/paper/quadrotor_learning", "quadrotor_mpc": "outputs/paper/quadrotor_mpc"}
+data_dir = None
+u_max = 6.0
+Gamma_grid = [2.0, 8.0, 32.0]
+Gamma_adapnn_grid = [0.16, 0.64, 2.56]
+authors_u_max = [6.0]
+
+# %%
+from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
+check_notebook_settings("why_quadrotor_point", globals())
+
+# %% tags=["hide-input"]
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import fnnlib as F
+import fnnlib.mpc as M
+from fnnbook.params import upstream_parameters
+from fnnlib.data import release
+from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
+from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+
+t_start = time.perf_counter()
+out = Path(out_dir)
+out.mkdir(parents=True, exist_ok=True)
+up = {k: Path(v) for k, v in upstream_dirs.items()}
+ran = upstream_parameters(up["quadrotor_mpc"])  # the flight test's settings, as it flew them
+q_mpc = F.read_results(up["quadrotor_mpc"] / F.RESULTS_FILENAME).metrics
+costs = list(ran["costs"])
+chosen = {c: q_mpc["adapnn_gamma"][c]["chosen"] for c in costs}  # AdapNN's gain chosen on validation there
+
+# %% [markdown]
+# ## The paper profile's units, rebuilt
+# Unit $k$: trained residual network $k$, MLP $k$ and drawn disturbance $k$ (`flight_tests_from_settings`, the
+# builder the flight test uses). The profile's own gains must be grid values, so that the grid passes through
+# the profile's point.
+
+# %% tags=["hide-input"]
+members, mlps = ([(seed, net.double()) for seed, net, _ in
+                  F.load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
+                                          run=upstream_parameters(up["quadrotor_learning"]))]
+                 for stem in ("residual", "mlp"))
+setup = M.flight_tests_from_settings(ran)
+if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
+    raise ValueError(f"the rebuilt disturbances {setup.forces} are not those quadrotor_mpc flew {q_mpc['disturbances']}")
+if ran["Gamma"] not in Gamma_grid or not set(chosen.values()) <= set(Gamma_adapnn_grid):
+    raise ValueError(f"the grids must hold the profile's gains: Gamma = {ran['Gamma']} in Gamma_grid = {Gamma_grid}, "
+                     f"AdapNN's {chosen} in Gamma_adapnn_grid = {Gamma_adapnn_grid}")
+kw = dict(plant=Quadrotor(NOMINAL), L=ran["L"], beta=ran["beta"], N=ran["N"], Gamma=ran["Gamma"], Ts=ran["Ts"])
+need = M.thrust_needed(setup.vehicle, PAPER_LISSAJOUS, steps=ran["steps"], Ts=ran["Ts"])
+compile_s = M.warm_up(*[n for _, n in members + mlps]) if ran["backend"] == "numba" else 0.0
+print(f"u_max = {u_max:g} N; the test vehicle needs {need['hover']:.2f} N per motor to hover and {need['peak']:.2f} N "
+      f"at the reference's peak: {'enough' if u_max >= need['peak'] else 'NOT enough'} thrust")
+
+
+# %% [markdown]
+# ## The flights
+# The five models without an adaptive gain fly once per unit and cost; AdapNN once per value of
+# `Gamma_adapnn_grid`, AdapFNN once per value of `Gamma_grid` (the other models do not depend on them).
+
+# %% tags=["hide-input"]
+def numbers(runs):
+    """Per model: the mean per-axis tracking RMSE, the first-step acceleration RMSE (Fig. S8), whether diverged."""
+    return {"rmse": [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs],
+            "acc": [M.acc_pred_rmse(r) for r in runs], "diverged": [bool(r.diverged) for r in runs]}
+
+
+def fly_set(nets, nn_mlps, mpc, cost, names):
+    """``names`` flown over the units; AdapNN per gain of its grid, AdapFNN per Gamma (with Theorem 2's check)."""
+    pu = dict(tests=setup.unit_tests, mpc=mpc)
+    base = M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=chosen[cost], only=names)
+    rec = {n: numbers(r) for n, r in base.items()}
+    rec["AdapNN"] = {str(g): numbers(M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=g,
+                                                    only=["AdapNN"])["AdapNN"]) for g in Gamma_adapnn_grid}
+    transient = int(round(ran["transient_s"] / ran["Ts"]))
+    rec["AdapFNN"] = {}
+    for G in Gamma_grid:
+        runs = M.paired_units(nets, nn_mlps, **pu, model_settings={**kw, "Gamma": G}, adapnn_gamma=chosen[cost],
+                              only=["AdapFNN"])["AdapFNN"]
+        rec["AdapFNN"][str(G)] = numbers(runs) | {
+            "theorem2_inside": [M.theorem2_check(r, ran["L"], transient)["inside_fraction"] for r in runs]}
+    return rec
+
+
+# %% tags=["hide-input"]
+mpcs = {c: M.mpc_from_settings(ran, cost=c, u_max=u_max) for c in costs}
+ours = {c: fly_set(members, mlps, mpcs[c], c, ["Nomi", "Neural", "MLP", "FB", "FNN"]) for c in costs}
+units = [f"network {s}, MLP {m}, disturbance {k + 1}" for k, ((s, _), (m, _)) in enumerate(zip(members, mlps))]
+if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to the last digit of the record
+    for c in costs:
+        same = {n: ours[c][n]["rmse"] if n not in ("AdapNN", "AdapFNN") else
+                ours[c][n][str(chosen[c] if n == "AdapNN" else ran["Gamma"])]["rmse"] for n in ours[c]}
+        for n, v in same.items():
+            if not np.allclose(v, q_mpc["paired_mean_axis_rmse_m"][c][n], rtol=1e-9, atol=0):
+                raise ValueError(f"{c}, {n}: RMSE {v} here, {q_mpc['paired_mean_axis_rmse_m'][c][n]} in quadrotor_mpc")
+    print("at the profile's bound the flights are quadrotor_mpc's own (RMSE equal to 1e-9 relative)")
+
+# %% [markdown]
+# ## The authors' networks on the same units
+# Unit $k$ pairs the release's residual run $k$ (`load_release_residual`, five random initialisations) with
+# disturbance $k$; the release has two MLPs, so unit $k$ flies MLP $k \bmod 2$ (the MLP comparison then rests on
+# two MLPs). Nomi and FB carry no network: their flights are ours above, flight for flight.
+
+# %% tags=["hide-input"]
+rel = Path(data_dir) / "release" if data_dir else None
+authors = None
+if rel is None or not rel.is_dir():
+    print(f"authors' networks: not evaluated (no release under data_dir = {data_dir!r})")
+elif u_max not in authors_u_max:
+    print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")
+else:
+    S = len(setup.unit_tests)  # the release's first S runs (all five for the paper profile's five units)
+    if S > len(release.RESIDUAL_RUNS):
+        raise ValueError(f"{S} units, the release has {len(release.RESIDUAL_RUNS)} residual runs")
+    theirs = [(r, release.load_release_residual(data_dir, r).double()) for r in release.RESIDUAL_RUNS[:S]]
+    mlp_run = [release.MLP_RUNS[k % len(release.MLP_RUNS)] for k in range(S)]
+    their_mlps = [(r, release.load_release_mlp(data_dir, r).double()) for r in mlp_run]
+    compile_s += M.warm_up(*[n for _, n in theirs + their_mlps]) if ran["backend"] == "numba" else 0.0
+    authors = {c: {"Nomi": ours[c]["Nomi"], "FB": ours[c]["FB"]} | fly_set(theirs, their_mlps, mpcs[c], c,
+                                                                          ["Neural", "MLP", "FNN"]) for c in costs}
+    authors["units"] = [f"release run {r}, MLP {m}, disturbance {k + 1}"
+                        for k, ((r, _), (m, _)) in enumerate(zip(theirs, their_mlps))]
+    print(f"authors' networks flown: {len(theirs)} residual runs, MLPs {sorted(set(m for m, _ in their_mlps))}")
+
+# %%
+seconds = time.perf_counter() - t_start
+point = {"u_max": u_max, "costs": costs, "units": units, "ours": ours, "authors": authors, "need": need,
+         "Gamma_grid": Gamma_grid, "Gamma_adapnn_grid": Gamma_adapnn_grid, "profile_Gamma": ran["Gamma"],
+         "profile_Gamma_adapnn": chosen, "u_max_judged": ran["u_max_judged"], "paper_u_max": PAPER_THRUST_MAX,
+         "seconds": seconds, "compile_s": compile_s}
+(out / "point.json").write_text(json.dumps(point, indent=1))
+print(f"{u_max:g} N: flown in {seconds:.1f} s (compile {compile_s:.1f} s)")
