@@ -145,7 +145,9 @@ class WhyGrid:
     numbers : mapping of str to nested lists, optional
         Measured values per point (same shape as ``holds``, possibly with a trailing unit axis).
     title : str
-        A few words on what the grid varies.
+        A few words on what the grid varies (named in the summary where a why has several grids).
+    unit : str
+        What one of the ``n`` units is ("seed", "network", "unit"), in the singular.
     """
 
     axes: tuple[Axis, ...]
@@ -154,6 +156,7 @@ class WhyGrid:
     rule: str
     numbers: Mapping[str, Any] = field(default_factory=dict)
     title: str = ""
+    unit: str = "seed"
 
     def __post_init__(self) -> None:
         holds = np.asarray(self.holds)
@@ -186,13 +189,13 @@ class WhyGrid:
 
     def to_json(self) -> dict[str, Any]:
         return {"title": self.title, "axes": [a.to_json() for a in self.axes], "holds": self.holds.tolist(),
-                "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers)}
+                "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers), "unit": self.unit}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> WhyGrid:
         return cls(axes=tuple(Axis.from_json(a) for a in data["axes"]), holds=np.asarray(data["holds"], bool),
                    n=int(data["n"]), rule=data["rule"], numbers=data.get("numbers") or {},
-                   title=data.get("title", ""))
+                   title=data.get("title", ""), unit=data.get("unit", "seed"))
 
 
 @dataclass(frozen=True)
@@ -335,7 +338,9 @@ def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> st
     >>> summary([g])
     'holds for noise_std <= 0.003, fails at 0.01 and above (5 seeds per point)'
     """
-    lines = [f"{_grid_line(g)} ({g.n} {'seeds' if g.n != 1 else 'seed'} per point)" for g in grids]
+    named = len(grids) > 1  # several grids: each line says which
+    lines = [f"{g.title + ': ' if named and g.title else ''}{_grid_line(g)} "
+             f"({g.n} {g.unit if g.n == 1 else g.unit + 's'} per point)" for g in grids]
     if authors is not None:
         lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours})")
     return "; ".join(lines)

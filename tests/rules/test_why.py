@@ -76,3 +76,12 @@ def test_round_trip_and_a_tampered_cause_is_refused(tmp_path) -> None:
     path.write_text(json.dumps(data))
     with pytest.raises(ValueError, match="stored causes differ"):
         read_whys(path)
+
+
+def test_several_grids_are_named_and_the_unit_is_the_grids_own() -> None:
+    a = WhyGrid(axes=(NOISE,), holds=np.array([True] * 4), n=5, rule="r", title="as written", unit="unit")
+    b = WhyGrid(axes=(NOISE,), holds=np.array([False] * 4), n=1, rule="r", title="as flown", unit="network")
+    line = summary([a, b])
+    assert line.startswith("as written: holds at every noise_std (0.001, 0.003, 0.01, 0.03) (5 units per point)")
+    assert "; as flown: fails at every noise_std (0.001, 0.003, 0.01, 0.03) (1 network per point)" in line
+    assert summary([a]).startswith("holds at every")  # one grid: no name
