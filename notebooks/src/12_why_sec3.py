@@ -67,7 +67,7 @@ from fnnbook.rules import sec3, why_sec3
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
-started = time.perf_counter()
+started, started_cpu = time.perf_counter(), time.process_time()
 nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
 seeds = [s for s, _, _ in nets]
 S = len(seeds)
@@ -399,9 +399,30 @@ for cid, (task, grid, fig_path) in sources.items():
     whys.append(W.Why(cid, verdict, grids=(grid,), readings=readings, figure=fig_path, note=notes[cid]))
 W.write_whys(out, whys)
 
+# %% [markdown]
+# Each grid passes through the paper profile's point (S8: the profile's gain, every level); there the rule must
+# give what the profile's counted reading gave.
+
+# %%
+def at_profile(grid):
+    """Whether the rule holds at the profile's point (every value of an axis without one); None if not on the grid."""
+    at = []
+    for a in grid.axes:
+        if a.ours is not None and a.ours not in a.values:
+            return None
+        at.append(slice(None) if a.ours is None else a.values.index(a.ours))
+    return bool(np.all(grid.holds[tuple(at)]))
+
+
+for w in whys:  # the verdict is the counted reading's
+    on_grid = at_profile(w.grids[0])
+    where = "is off the grid" if on_grid is None else ("holds" if on_grid else "fails")
+    same = "" if on_grid is None else (" (agrees)" if on_grid == (w.verdict == "reproduced") else " (DIFFERS)")
+    print(f"{w.claim}: at the profile's point the rule {where}; the profile's verdict: {w.verdict}{same}")
+
 # %%
 for w in whys:
     print(f"{w.claim} ({w.verdict}): {w.summary}")
     for c in w.causes:
         print(f"   ({c.letter}) {c.name}: {c.evidence}")
-print(f"whole notebook: {time.perf_counter() - started:.1f} s")
+print(f"grids: {time.perf_counter() - started:.1f} s wall, {time.process_time() - started_cpu:.1f} s CPU")
