@@ -92,20 +92,27 @@ def profile_claim(task, claim_id):
 
 # %%
 def heat(ax, grid, xi, yi, title, value=None):
-    """A 2-D why grid as a map: holds (green) or fails (grey) at each point, ``value`` written in each cell."""
+    """A 2-D why grid as a map: holds (green) or fails (orange) at each point, ``value`` written in each cell."""
     h = np.asarray(grid.holds if grid.holds.ndim == 2 else grid.holds[:, None])
     h = h if (xi, yi) == (1, 0) else h.T
     ax.imshow(h, cmap="RdYlGn", vmin=-0.5, vmax=1.5, origin="lower", aspect="auto")
     xa, ya = grid.axes[xi], grid.axes[yi]
     ax.set_xticks(range(len(xa.values)), [f"{v:g}" for v in xa.values])
     ax.set_yticks(range(len(ya.values)), [f"{v:g}" for v in ya.values])
-    for (i, j), ok in np.ndenumerate(h):
-        txt = ("holds" if ok else "fails") + ("" if value is None else f"\n{np.asarray(value).reshape(h.shape)[i, j]:.3g}")
-        ax.text(j, i, txt, ha="center", va="center", fontsize=7)
-    ax.set(xlabel=xa.name, ylabel=ya.name, title=title)
-    for k, a in ((0, xa), (1, ya)):
+    for (i, j), ok in np.ndenumerate(h):  # the value where given, "x" marking a failing point
+        txt = ("holds" if ok else "fails") if value is None else f"{np.asarray(value).reshape(h.shape)[i, j]:.3g}"
+        ax.text(j, i, txt + ("" if ok or value is None else " x"), ha="center", va="center", fontsize=7)
+    ax.set(xlabel=xa.name, ylabel=ya.name)
+    ax.set_title(title, fontsize=8)
+    mark_profile(ax, xa, ya)
+
+
+# %%
+def mark_profile(ax, xa, ya):
+    """Dotted lines through the paper profile's value of each axis (where the grid has it)."""
+    for line, a in ((ax.axvline, xa), (ax.axhline, ya)):
         if a.ours in a.values:
-            (ax.axvline if k == 0 else ax.axhline)(a.values.index(a.ours), color="k", ls=":", lw=1)
+            line(a.values.index(a.ours), color="k", ls=":", lw=1)
 
 # %% [markdown]
 # ## S3: gain decay under noise (Fig. 4g) over the noise level and the decay rate
@@ -149,7 +156,7 @@ grid3 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid3, 1, 0, f"S3: the rule per point ({S} seeds); decayed / open-loop error", ratio3.T)
+heat(ax, grid3, 1, 0, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3.T)
 fig_s3 = F.save_figure(fig, out, "why_s3")
 
 # %% [markdown]
@@ -170,6 +177,7 @@ after_tr, last_half = t >= t_tr, t >= t[-1] / 2
 points5 = [F.Spiral(test[0], eta, eps) for eps in s5_eps for eta in s5_eta]  # the grid's spirals, row-major
 
 
+# %%
 class PointSpirals:
     """The grid's spirals side by side: row ``p`` of the state (P, S n) is spiral ``p`` for every seed, so one
     dopri5 integration runs Theorem 1's continuous observer at every point and seed (Eq. (26) per block)."""
@@ -212,6 +220,7 @@ def s5_at(p):
     return r, rx
 
 
+# %%
 results5 = [s5_at(p) for p in range(len(points5))]
 holds5 = np.array([why_sec3.holds(r) for r, _ in results5]).reshape(len(s5_eps), len(s5_eta))
 ratio5 = np.array([float(np.min(rx)) for _, rx in results5]).reshape(holds5.shape)  # the smallest over seeds
@@ -226,7 +235,7 @@ grid5 = W.WhyGrid(
          f"{conservative_ratio:g}x the measured limit, and the limit falling as L grows, in >= S-1 seeds)",
     numbers={"ratio_x_min_over_seeds": ratio5})
 fig, ax = F.new_figure()
-heat(ax, grid5, 1, 0, f"S5: the rule per point ({S} seeds); ball / limit of |x~| (min)", ratio5)
+heat(ax, grid5, 1, 0, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
 fig_s5 = F.save_figure(fig, out, "why_s5")
 
 # %% [markdown]
@@ -268,10 +277,14 @@ grid8 = W.WhyGrid(
          "beats the neural ODE in change-rate RMSE and in mean N-step error, paired over the seeds)",
     numbers={"multistep_feedback_over_neural_ode": margin8, "rate_feedback_over_neural_ode":
              (rate8_fb.mean(0) / rate8_nn.mean(1)[None]).T.numpy()})
+
+# %%
 fig, ax = F.new_figure()
-heat(ax, grid8, 1, 0, f"S8: per level ({S} seeds); feedback / neural ODE N-step error", margin8)
-for j in sorted(set(range(len(domega))) - set(sec3.residual_levels(res_levels, len(domega), "S8"))):
-    ax.axhline(j, color="tab:blue", lw=2, alpha=0.4)  # the zero-residual level
+heat(ax, grid8, 1, 0, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
+zero = set(range(len(domega))) - set(sec3.residual_levels(res_levels, len(domega), "S8").tolist())
+ax.set_yticks(range(len(domega)), [f"{v:g}" + (" (zero residual)" if j in zero else "") for j, v in enumerate(domega)])
+for j in zero:
+    ax.get_yticklabels()[j].set(color="tab:blue", fontweight="bold")
 fig_s8 = F.save_figure(fig, out, "why_s8")
 
 # %% [markdown]
@@ -306,6 +319,8 @@ for i, step in enumerate(s9_beta_steps):
         r = sec3.s9(beta=betas9[::k].tolist(), rmse_noisy=noisy9[j][:, ::k].T, rmse_noise_free=clean9[:, ::k].T)
         holds9[i, j] = why_sec3.holds(r)
         best9[i, j] = float(np.median(betas9[::k][noisy9[j][:, ::k].argmin(1)]))
+
+# %%
 grid9 = W.WhyGrid(
     axes=(W.Axis("beta_step", s9_beta_steps, "the decay grid's step (the paper states 0.01)", paper=0.01, ours=0.01),
           W.Axis("noise_std", s9_noise, "the noise of Fig. S11 is not given", ours=noise_std)),
@@ -317,7 +332,7 @@ grid9 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid9, 1, 0, f"S9: the rule per point ({S} seeds); best noisy beta (median)", best9)
+heat(ax, grid9, 1, 0, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
 fig_s9 = F.save_figure(fig, out, "why_s9")
 holds9
 
@@ -369,7 +384,7 @@ grid10 = W.WhyGrid(
     numbers={"peak_over_steady_x": (np.array(peak10["x"]) / np.array(
         [F.reconvergence(t, e, t_switch, window=steady_window, band_factor=1.0)["band"] for e in e10["x"][1]])).tolist()})
 fig, ax = F.new_figure()
-heat(ax, grid10, 1, 0, f"S10: the rule per point ({S} seeds, strict reading)")
+heat(ax, grid10, 1, 0, f"S10 ({S} seeds): the strict reading per point")
 fig_s10 = F.save_figure(fig, out, "why_s10")
 holds10
 
@@ -391,6 +406,8 @@ notes = {  # what the grids above show (the causes and the summaries are compute
     "S10": "the observer error rises by only about 10 % at the step: it leaves a band of 1.02-1.05x its steady "
            "level, and is back within 0.5 s, not within 0.25 s",
 }
+
+# %%
 sources = {"S3": ("spiral", grid3, fig_s3), "S5": ("theory", grid5, fig_s5), "S8": ("ablations", grid8, fig_s8),
            "S9": ("ablations", grid9, fig_s9), "S10": ("ablations", grid10, fig_s10)}
 whys = []
@@ -414,6 +431,7 @@ def at_profile(grid):
     return bool(np.all(grid.holds[tuple(at)]))
 
 
+# %%
 for w in whys:  # the verdict is the counted reading's
     on_grid = at_profile(w.grids[0])
     where = "is off the grid" if on_grid is None else ("holds" if on_grid else "fails")
