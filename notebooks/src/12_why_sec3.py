@@ -156,7 +156,7 @@ grid3 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid3, 1, 0, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3.T)
+heat(ax, grid3, 1, 0, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
 fig_s3 = F.save_figure(fig, out, "why_s3")
 
 # %% [markdown]
