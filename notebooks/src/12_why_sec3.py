@@ -91,25 +91,26 @@ def profile_claim(task, claim_id):
 
 
 # %%
-def heat(ax, grid, xi, yi, title, value=None):
-    """A 2-D why grid as a map: holds (green) or fails (orange) at each point, ``value`` written in each cell."""
-    h = np.asarray(grid.holds if grid.holds.ndim == 2 else grid.holds[:, None])
-    h = h if (xi, yi) == (1, 0) else h.T
+def heat(ax, grid, title, value=None):
+    """A 2-D why grid as a map (rows: its first axis, columns: its second): holds (green) or fails (orange) at each
+    point, ``value`` (same shape as ``grid.holds``) written in each cell."""
+    h = np.asarray(grid.holds)
     ax.imshow(h, cmap="RdYlGn", vmin=-0.5, vmax=1.5, origin="lower", aspect="auto")
-    xa, ya = grid.axes[xi], grid.axes[yi]
+    ya, xa = grid.axes
     ax.set_xticks(range(len(xa.values)), [f"{v:g}" for v in xa.values])
     ax.set_yticks(range(len(ya.values)), [f"{v:g}" for v in ya.values])
+    v = None if value is None else np.asarray(value, dtype=float).reshape(h.shape)
     for (i, j), ok in np.ndenumerate(h):  # the value where given, "x" marking a failing point
-        txt = ("holds" if ok else "fails") if value is None else f"{np.asarray(value).reshape(h.shape)[i, j]:.3g}"
-        ax.text(j, i, txt + ("" if ok or value is None else " x"), ha="center", va="center", fontsize=7)
-    ax.set(xlabel=xa.name, ylabel=ya.name)
-    ax.set_title(title, fontsize=8)
-    mark_profile(ax, xa, ya)
+        txt = ("holds" if ok else "fails") if v is None else f"{v[i, j]:.3g}"
+        ax.text(j, i, txt + ("" if ok or v is None else " x"), ha="center", va="center", fontsize=7)
+    label_axes(ax, xa, ya, title)
 
 
 # %%
-def mark_profile(ax, xa, ya):
-    """Dotted lines through the paper profile's value of each axis (where the grid has it)."""
+def label_axes(ax, xa, ya, title):
+    """Axis names, the title, and dotted lines through the paper profile's value of each axis (where it is one)."""
+    ax.set(xlabel=xa.name, ylabel=ya.name)
+    ax.set_title(title, fontsize=8)
     for line, a in ((ax.axvline, xa), (ax.axhline, ya)):
         if a.ours in a.values:
             line(a.values.index(a.ours), color="k", ls=":", lw=1)
@@ -156,7 +157,7 @@ grid3 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid3, 1, 0, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
+heat(ax, grid3, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
 fig_s3 = F.save_figure(fig, out, "why_s3")
 
 # %% [markdown]
@@ -235,7 +236,7 @@ grid5 = W.WhyGrid(
          f"{conservative_ratio:g}x the measured limit, and the limit falling as L grows, in >= S-1 seeds)",
     numbers={"ratio_x_min_over_seeds": ratio5})
 fig, ax = F.new_figure()
-heat(ax, grid5, 1, 0, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
+heat(ax, grid5, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
 fig_s5 = F.save_figure(fig, out, "why_s5")
 
 # %% [markdown]
@@ -280,7 +281,7 @@ grid8 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid8, 1, 0, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
+heat(ax, grid8, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
 zero = set(range(len(domega))) - set(sec3.residual_levels(res_levels, len(domega), "S8").tolist())
 ax.set_yticks(range(len(domega)), [f"{v:g}" + (" (zero residual)" if j in zero else "") for j, v in enumerate(domega)])
 for j in zero:
@@ -332,7 +333,7 @@ grid9 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid9, 1, 0, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
+heat(ax, grid9, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
 fig_s9 = F.save_figure(fig, out, "why_s9")
 holds9
 
@@ -384,7 +385,7 @@ grid10 = W.WhyGrid(
     numbers={"peak_over_steady_x": (np.array(peak10["x"]) / np.array(
         [F.reconvergence(t, e, t_switch, window=steady_window, band_factor=1.0)["band"] for e in e10["x"][1]])).tolist()})
 fig, ax = F.new_figure()
-heat(ax, grid10, 1, 0, f"S10 ({S} seeds): the strict reading per point")
+heat(ax, grid10, f"S10 ({S} seeds): the strict reading per point")
 fig_s10 = F.save_figure(fig, out, "why_s10")
 holds10
 
