@@ -85,6 +85,8 @@ NOTEBOOK_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
         "spiral_n_samples": SP.SPIRAL_SAMPLES, "spiral_Ts": SP.SPIRAL_TS, "spiral_test": SP.SPIRAL_TEST,
         "spiral_x0": SP.SPIRAL_X0, "spiral_N": SP.PAPER_SPIRAL_N, "spiral_noise_std": SP.SPIRAL_NOISE_STD,
         "spiral_L": SP.PAPER_SPIRAL_L, "spiral_beta": SP.PAPER_SPIRAL_BETA},
+    "why_sec3": {**_SPIRAL_DATA, "test": SP.SPIRAL_TEST, **_SPIRAL_FEEDBACK, "noise_std": SP.SPIRAL_NOISE_STD,
+                 "residual_base": SP.SPIRAL_NOMINAL, **SP.RESIDUAL_GRID, "before": SP.SPIRAL_TEST},
 })
 """Per notebook: the parameters its ``parameters`` cell leaves at ``None``, and the paper value each takes.
 
@@ -173,6 +175,17 @@ def _synthetic_sizes(name: str, value: Any) -> list[int]:
 
 _SPIRAL_TRAJ = {"n_samples": _N2, "Ts": _POS, "x0": _X0}
 _GAIN = C.finite  # a gain L: stable at the step Ts (RELATIONS)
+
+
+def _why_axis(name: str, value: Any, *, positive: bool = False) -> list[float]:
+    """A why grid's axis: at least 2 distinct finite numbers (each > 0 with ``positive``)."""
+    values = C.number_list(name, value, distinct=True)
+    _need(len(values) >= 2, f"{name}: a grid axis needs at least 2 values, got {value!r}")
+    _need(not positive or min(values) > 0, f"{name} must list values > 0, got {value!r}")
+    return values
+
+
+_WHY_AXIS, _WHY_AXIS_POS = _why_axis, partial(_why_axis, positive=True)
 _SPIRAL_FB = {"L": _GAIN, "beta": _NONNEG, "N": _N1}
 _ODE_FIT = {"hidden": _WIDTHS, "activation": _ACT, "iterations": _N1, "batch_size": _N1, "batch_time": _N2,
             "lr": _POS, "method": _METHOD, "adjoint": _BOOL}
@@ -251,6 +264,13 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                     "bottle_hand_beta_grid": _vec(minimum=0.0), "quad_tune_cases": _N1,
                     "quad_L_grid": _vec(minimum=0.0), "quad_beta_grid": _vec(minimum=0.0),
                     "quad_hand_L_grid": _vec(minimum=0.0), "quad_hand_beta_grid": _vec(minimum=0.0)},
+    "why_sec3": {"seed": _SEED, **_SPIRAL_TRAJ, "test": _SPIRAL3, **_SPIRAL_FB, "noise_std": _POS,
+                 "s3_noise": _WHY_AXIS_POS, "s3_beta": _WHY_AXIS_POS, "s5_eps": _WHY_AXIS, "s5_eta": _WHY_AXIS_POS,
+                 "L_sweep": _GAINS, "transient_time_constants": _POS, "conservative_ratio": _POS,
+                 "residual_base": _SPIRAL3, "domega_range": _GRID, "deta_range": _GRID, "deps_range": _GRID,
+                 "s8_L": _WHY_AXIS_POS, "s9_beta_steps": _WHY_AXIS_POS, "s9_beta_max": _POS,
+                 "s9_noise": _WHY_AXIS_POS, "noise_draws": _N1, "t_switch": _POS, "before": _SPIRAL3,
+                 "after": _SPIRAL3, "steady_window": _POS, "s10_band": _WHY_AXIS_POS, "s10_settle": _WHY_AXIS_POS},
 })
 """Per notebook: parameter -> its check, ``check(name, value)`` (:mod:`fnnlib.checks`); every parameter of
 every ``parameters`` cell but the injected ``profile``, ``out_dir``, ``data_dir`` and ``upstream_dirs``."""
@@ -387,6 +407,30 @@ def _quick_start(p: Mapping[str, Any]) -> None:
     C.horizon("N", p["N"], below=p["T"], below_name="T")
 
 
+def _why_sec3(p: Mapping[str, Any]) -> None:
+    """The why grids of Sec. 3: every gain of S8 and of the L sweep stable, every decay rate over N layers,
+    the S9 grid steps dividing its end, the S5 axes inside the (eta > 0) spirals, the switch as in ablations."""
+    _gain(p, 2, p["Ts"], p["N"])
+    _horizon(p)
+    for name in ("s8_L", "L_sweep"):
+        for g in p[name]:
+            C.stable_gain(name, g, n=2, Ts=p["Ts"], N=p["N"], beta=p["beta"])
+    for b in p["s3_beta"]:
+        C.stable_gain("L", p["L"], n=2, Ts=p["Ts"], N=p["N"], beta=b)
+    finest = min(p["s9_beta_steps"])
+    for step in p["s9_beta_steps"]:
+        k, n = step / finest, p["s9_beta_max"] / finest
+        _need(abs(k - round(k)) < 1e-9 and abs(n - round(n)) < 1e-9 and round(n) >= 2 * round(k),
+              f"s9_beta_steps must be whole multiples of the finest step that divide s9_beta_max "
+              f"({p['s9_beta_max']}) into >= 3 values, got {p['s9_beta_steps']}")
+    end, w = (p["n_samples"] - 1) * p["Ts"], p["steady_window"]
+    _need(w < p["t_switch"] < end - w, f"need steady_window < t_switch < the run's end {end:g} s - steady_window, "
+                                       f"got t_switch={p['t_switch']}, steady_window={w}")
+    _need(p["noise_std"] in p["s3_noise"] and p["beta"] in p["s3_beta"],
+          f"the S3 grid must pass through the profile's point: noise_std = {p['noise_std']} in s3_noise, "
+          f"beta = {p['beta']} in s3_beta")
+
+
 def _tuned_gains(p: Mapping[str, Any]) -> None:
     """Only the tuning's own settings: the data and flights come from the upstream runs (whose Ts and N are
     checked there); here every gain of a grid must be > 0 (``sweep_gains`` refuses the rest)."""
@@ -411,6 +455,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "quadrotor_mpc": _quadrotor_mpc, "own_system": _own_system, "tuned_gains": _tuned_gains,
     "quick_start": _quick_start, "why_feedback_point": _why_feedback_point, "why_feedback": _horizon,
     "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
+    "why_sec3": _why_sec3,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 
