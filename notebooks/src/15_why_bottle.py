@@ -117,16 +117,16 @@ grid_seconds = time.perf_counter() - t0
 # %%
 holds = np.array([[all(results[i, j].checks[c] for c in FEEDBACK_CHECKS) for j in range(len(beta_grid))]
                   for i in range(len(L_grid))])
-throws_won = [[int(sum(results[i, j].checks[c] for c in FEEDBACK_CHECKS)) for j in range(len(beta_grid))]
+checks_held = [[int(sum(results[i, j].checks[c] for c in FEEDBACK_CHECKS)) for j in range(len(beta_grid))]
               for i in range(len(L_grid))]
 gain_grid = W.WhyGrid(
     axes=(W.Axis("L", L_grid, "the base gain L of the bottle's feedback is not given", ours=L_ours),
           W.Axis("beta", beta_grid, "the decay rate beta of Eq. (11) for the bottle is not given", ours=beta_ours)),
     holds=holds, n=E, title="bottle gains L x beta",
-    rule="the claim holds at a grid point when both feedback checks of O1 hold there (feedback < neural ODE "
-         "per throw over the 9 test throws, and over the seeds); the neural ODE vs drag checks do not depend "
-         "on L or beta",
-    numbers={"mean_gap_cm": gap_cm, "feedback_checks_holding": throws_won,
+    rule=f"the claim holds at a grid point when both feedback checks of O1 hold there (feedback < neural ODE "
+         f"per throw over the {x_test.shape[0]} test throws, and over the seeds); the neural ODE vs drag checks "
+         "do not depend on L or beta",
+    numbers={"mean_gap_cm": gap_cm, "feedback_checks_holding": checks_held,
              "verdict": [[results[i, j].verdict for j in range(len(beta_grid))] for i in range(len(L_grid))],
              "checks": [[results[i, j].checks for j in range(len(beta_grid))] for i in range(len(L_grid))]})
 print(f"{len(results)} points in {grid_seconds:.0f} s; holds:\n{holds}")
