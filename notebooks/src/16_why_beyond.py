@@ -179,8 +179,7 @@ print(f"B2 (scoreboard): {b2_profile.verdict} {b2_profile.checks}; holds:\n{hold
 # claims with a per-seed headline).
 
 # %% tags=["hide-input"]
-fig, axs = F.new_figure(1, 1)
-ax = axs[0, 0]
+fig, ax = F.new_figure(1, 1)
 xs = np.arange(len(objectives))
 ax.bar(xs, [mean_err[k] for k in objectives], color=["C2" if h else "0.6" for h in objective_grid.holds])
 ax.axhline(np.mean(stored["hand"]), color=F.plotting.COLORS["feedback"], ls="--", label="hand-tuned")
@@ -192,8 +191,7 @@ ax.legend(fontsize=7)
 fig_b1 = F.save_figure(fig, out, "why_b1")
 
 # %% tags=["hide-input"]
-fig, axs = F.new_figure(1, 1)
-ax = axs[0, 0]
+fig, ax = F.new_figure(1, 1)
 im = ax.imshow(holds.astype(float), cmap="RdYlGn", vmin=0, vmax=1, aspect="auto")
 for i in range(holds.shape[0]):
     for j in range(holds.shape[1]):
