@@ -161,6 +161,8 @@ if len(left_out) >= 2:  # some claim shows no spread: leave them out one by one
     axes.append(W.Axis("left_out", left_out, "whether a claim whose headline has no seed axis must show a "
                        "spread", ours="none"))
 holds = np.array([[r.verdict == "reproduced" for r in row] for row in b2_res])
+
+# %%
 b2_grid = W.WhyGrid(
     axes=tuple(axes), holds=holds if len(axes) == 2 else holds[:, 0], n=len(headlines),
     title="B2: several seeds x claims without a spread",
