@@ -271,6 +271,9 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                  "s8_L": _WHY_AXIS_POS, "s9_beta_steps": _WHY_AXIS_POS, "s9_beta_max": _POS,
                  "s9_noise": _WHY_AXIS_POS, "noise_draws": _N1, "t_switch": _POS, "before": _SPIRAL3,
                  "after": _SPIRAL3, "steady_window": _POS, "s10_band": _WHY_AXIS_POS, "s10_settle": _WHY_AXIS_POS},
+    "why_bottle": {"L_grid": _SWEEP0, "beta_grid": _SWEEP0},
+    "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
+                   "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
 """Per notebook: parameter -> its check, ``check(name, value)`` (:mod:`fnnlib.checks`); every parameter of
 every ``parameters`` cell but the injected ``profile``, ``out_dir``, ``data_dir`` and ``upstream_dirs``."""
@@ -449,6 +452,23 @@ def _aggregate(p: Mapping[str, Any]) -> None:
     """An aggregate of a why grid: no settings of its own (its points' records carry them)."""
 
 
+def _why_grid(p: Mapping[str, Any], *names: str) -> None:
+    """A why grid's axes: at least 2 values each (a grid passes through the profile's point and leaves it)."""
+    for name in names:
+        _need(len(p[name]) >= 2, f"{name} must list at least 2 values (a grid axis), got {p[name]}")
+
+
+def _why_bottle(p: Mapping[str, Any]) -> None:
+    _why_grid(p, "L_grid", "beta_grid")
+    _need(min(p["L_grid"]) > 0, f"L_grid must list gains > 0 (L = 0 is the open loop, judged anyway), got {p['L_grid']}")
+
+
+def _why_beyond(p: Mapping[str, Any]) -> None:
+    _why_grid(p, "objectives", "min_seeds_grid")
+    _need(all(float(k).is_integer() for k in p["min_seeds_grid"]),
+          f"min_seeds_grid must list whole numbers of seeds, got {p['min_seeds_grid']}")
+
+
 RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType({
     "spiral": _spiral, "theory": _theory, "ablations": _ablations, "observers": _observers,
     "neural_feedback": _neural_feedback, "bottle": _bottle, "quadrotor_learning": _quadrotor_learning,
@@ -456,6 +476,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "quick_start": _quick_start, "why_feedback_point": _why_feedback_point, "why_feedback": _horizon,
     "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
     "why_sec3": _why_sec3,
+    "why_bottle": _why_bottle, "why_beyond": _why_beyond,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

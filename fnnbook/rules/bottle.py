@@ -5,6 +5,7 @@ Errors are 0.5 s position errors, one row per test throw (one column per seed).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -34,12 +35,33 @@ def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> ClaimResult:
     fb, nn, dr = _throws(feedback, "feedback"), _throws(neural_ode, "neural_ode"), _throws(drag, "drag")
     if fb.shape != nn.shape or dr.shape[0] != fb.shape[0]:
         raise ValueError(f"O1: shapes {fb.shape}, {nn.shape}, {dr.shape} do not pair throw by throw")
-    checks = {"feedback<neural_ode per throw": beats(fb.mean(1), nn.mean(1)),
-              "neural_ode<drag per throw": beats(nn.mean(1), dr.mean(1))}
-    S = fb.shape[1]
+    return o1_means(per_throw={"feedback": fb.mean(1), "neural_ode": nn.mean(1), "drag": dr.mean(1)},
+                    per_seed={"feedback": fb.mean(0), "neural_ode": nn.mean(0)})
+
+
+def o1_means(*, per_throw: Mapping[str, Any], per_seed: Mapping[str, Any]) -> ClaimResult:
+    """O1 (Fig. 6) from the marginals its checks read: :func:`o1` on the (throws, seeds) errors is this on
+    their means, so a stored result (``per_throw_m``, ``per_seed_m`` of the bottle task) can be judged again.
+
+    ``per_throw``: ``feedback``, ``neural_ode``, ``drag`` -> one error per test throw (averaged over seeds);
+    ``per_seed``: ``feedback``, ``neural_ode`` -> one error per seed (averaged over throws; the drag model
+    has no seed: its mean over throws pairs with every seed).
+    """
+    for name in ("feedback", "neural_ode", "drag"):
+        if name not in per_throw:
+            raise ValueError(f"O1: per_throw needs {name!r} errors, got {sorted(per_throw)}")
+    fb, nn, dr = (_throws(per_throw[k], k)[:, 0] for k in ("feedback", "neural_ode", "drag"))
+    if not fb.shape == nn.shape == dr.shape:
+        raise ValueError(f"O1: per-throw shapes {fb.shape}, {nn.shape}, {dr.shape} do not pair throw by throw")
+    fb_s, nn_s = (np.asarray(per_seed.get(k, ()), dtype=float).reshape(-1) for k in ("feedback", "neural_ode"))
+    if fb_s.size < 1 or fb_s.shape != nn_s.shape or not np.isfinite(np.r_[fb_s, nn_s]).all():
+        raise ValueError(f"O1: per_seed needs finite 'feedback' and 'neural_ode' errors, one per seed, as many "
+                         f"of each; got {fb_s.shape} and {nn_s.shape}")
+    checks = {"feedback<neural_ode per throw": beats(fb, nn), "neural_ode<drag per throw": beats(nn, dr)}
+    S = fb_s.size
     if S > 1:
-        checks |= {"feedback<neural_ode over seeds": beats(fb.mean(0), nn.mean(0)),
-                   "neural_ode<drag over seeds": beats(nn.mean(0), np.full(S, dr.mean()))}
+        checks |= {"feedback<neural_ode over seeds": beats(fb_s, nn_s),
+                   "neural_ode<drag over seeds": beats(nn_s, np.full(S, dr.mean()))}
     n = fb.shape[0]
     return ClaimResult(
         "O1",

@@ -53,3 +53,22 @@ def test_o2() -> None:
                                           "acc_rmse_neural_ode": [1.0] * 5})) == "partly"
     assert verdict("O2", bottle.o2(acc_rmse_feedback=1.5, acc_rmse_neural_ode=1.0, error_feedback=0.3,
                                    travel=1.0)) == "not reproduced"
+
+
+def test_o1_means_is_o1_on_the_marginals() -> None:
+    """O1 from the stored marginals (per-throw means over seeds, per-seed means over throws) is O1 itself."""
+    nn = 0.05 + 0.01 * RNG.random((9, 5))
+    for fb in (nn - 0.004 + 0.002 * RNG.random((9, 5)), nn + 0.001 * RNG.standard_normal((9, 5))):
+        full = bottle.o1(feedback=fb, neural_ode=nn, drag=DRAG)
+        means = bottle.o1_means(per_throw={"feedback": fb.mean(1), "neural_ode": nn.mean(1), "drag": DRAG},
+                                per_seed={"feedback": fb.mean(0), "neural_ode": nn.mean(0)})
+        assert means.checks == full.checks and means.rule == full.rule
+
+
+def test_o1_means_refuses_bad_marginals() -> None:
+    with pytest.raises(ValueError, match="per_seed"):
+        bottle.o1_means(per_throw={"feedback": DRAG, "neural_ode": DRAG, "drag": DRAG},
+                        per_seed={"feedback": [0.1, 0.2], "neural_ode": [0.1]})
+    with pytest.raises(ValueError, match="drag"):
+        bottle.o1_means(per_throw={"feedback": DRAG, "neural_ode": DRAG}, per_seed={"feedback": [0.1],
+                                                                                   "neural_ode": [0.1]})
