@@ -42,6 +42,10 @@ CALLS = {
     "d4": lambda: sec4.d4(**d4_numbers()),
     "o1": lambda: bottle.o1(feedback=np.full(9, 0.03) + 0.001 * np.arange(9), neural_ode=np.full(9, 0.05),
                             drag=np.full(9, 0.10)),
+    "o1_means": lambda: bottle.o1_means(per_throw={"feedback": np.full(9, 0.03) + 0.001 * np.arange(9),
+                                                   "neural_ode": np.full(9, 0.05), "drag": np.full(9, 0.10)},
+                                        per_seed={"feedback": np.full(5, 0.03) + 0.001 * np.arange(5),
+                                                  "neural_ode": np.full(5, 0.05)}),
     "o2": lambda: bottle.o2(acc_rmse_feedback=0.5, acc_rmse_neural_ode=1.0, error_feedback=0.03, travel=1.0),
     "q1_convergence": lambda: quadrotor.q1_convergence(np.outer(np.exp(-np.linspace(0, 10, 51)), np.ones(5)) + 0.01),
     "q2_prediction": lambda: quadrotor.q2_prediction([{"p": 0.02, "v": 0.03, "Theta": 0.05, "omega": 0.08 + k / 1e3}
