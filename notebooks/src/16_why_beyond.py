@@ -116,7 +116,7 @@ objective_grid = W.WhyGrid(
     axes=(W.Axis("objective", objectives, "what the gains are tuned to minimise (the paper tunes them by hand)",
                  ours="judged"),),
     holds=np.array([b1_at[k].verdict == "reproduced" for k in objectives]), n=len(stored["hand"]),
-    title="bottle: the tuning objective",
+    title="bottle: the tuning objective", unit="test throw",
     rule="the claim holds at a grid point when B1's rule holds on the bottle setting there: the tuned gains "
          "win (paired over the test throws) over the hand-tuned gains and over the open loop",
     numbers={"horizon_N": [HORIZON[k] for k in objectives], "mean_tuned_error_m": [mean_err[k] for k in objectives],
@@ -165,7 +165,7 @@ holds = np.array([[r.verdict == "reproduced" for r in row] for row in b2_res])
 # %%
 b2_grid = W.WhyGrid(
     axes=tuple(axes), holds=holds if len(axes) == 2 else holds[:, 0], n=len(headlines),
-    title="B2: several seeds x claims without a spread",
+    title="B2: several seeds x claims without a spread", unit="claim",
     rule="the claim holds at a grid point when B2's rule holds there over the judged claims kept (one unit "
          "per claim): every headline per seed (n >= 2, with its spread) and every per-seed headline on "
          ">= min_seeds seeds",
