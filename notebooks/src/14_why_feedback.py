@@ -90,6 +90,12 @@ def ensemble(stem, kind, build):
 f_ours, seeds = ensemble("neural_ode", "NeuralODE", F.NeuralODEEnsemble.from_members)
 h_ours, _ = ensemble("neural_feedback", "NeuralFeedback", feedback_ensemble)
 dr_ours, _ = ensemble("neural_ode_dr", "NeuralODE", F.NeuralODEEnsemble.from_members)
+
+# %% [markdown]
+# They are judged by D1, D2 and D4's rules on the evaluation built from this notebook's parameters; D3 takes the
+# paper profile's loss numbers; every check must be the paper profile's own.
+
+# %%
 setup = evaluation_setup(globals())
 ours, ours_numbers = judge(f_ours, h_ours, setup, len(seeds), loss=None, factor=d2_factor, ratio_max=d3_ratio,
                            flat=d3_flat, f_dr=dr_ours, d1_factor=d1_factor)
@@ -118,7 +124,14 @@ AXES = {  # change key -> (parameter, the profile's value, what the paper says, 
     "refresh_every": ("refresh_every", lambda r: r["refresh_every"], 1,
                       "the rollout refresh (Alg. 1 reruns the feedback at every iteration; ours every 10)"),
 }
-# the neural_feedback task's recipe (its checkpoints record the iterations and the refresh)
+TITLES = {"optimizer": "optimizer", "lr_times": "learning rate", "iterations_times": "iterations",
+          "refresh_every": "rollout refresh"}  # each grid's name in the summary line
+
+# %% [markdown]
+# The profile's recipe is the neural_feedback task's (its checkpoints record the iterations and the refresh);
+# each grid point must change exactly one setting of it.
+
+# %%
 profile_recipe = {"optimizer": fb_optimizer, "lr": fb_lr, "iterations": fb_iterations, "refresh_every": refresh_every}
 meta = F.load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")[0][2]
 if (meta["iterations"], meta["refresh_every"]) != (fb_iterations, refresh_every):
@@ -127,6 +140,10 @@ if (meta["iterations"], meta["refresh_every"]) != (fb_iterations, refresh_every)
 for p in points:  # every point changes one setting of the profile's recipe, and only that one
     if len(p["change"]) != 1 or sum(p["recipe"][k] != v for k, v in profile_recipe.items()) != 1:
         raise ValueError(f"a grid point must change exactly one setting of {profile_recipe}: {p['recipe']}")
+
+# %% [markdown]
+# What each point measured, per claim: its rule's verdict and the per-seed numbers the figures show (D4: the S8
+# levels won per seed).
 
 # %%
 def levels_won(s8):
@@ -148,6 +165,21 @@ def measured(results, numbers):
 profile_m = measured(ours, ours_numbers)
 point_m = [measured(p["claims"], p["numbers"]) for p in points]
 
+# %% [markdown]
+# The claims' rules, as each grid states them: D2 and D3 over the seeds, D4 in its strict reading.
+
+# %%
+RULES = {"D2": f"the frozen neural ODE with the feedback is within {d2_factor:g}x the nominal model's relative RMSE "
+               "in >= S-1 of S seeds (sec4.d2)",
+         "D3": f"the last 10 % of the loss < {d3_ratio:g}x the first 10 % and flat (< {d3_flat:.0%} change) in >= S-1 "
+               "of S seeds (sec4.d3)",
+         "D4": "the feedback beats the neural ODE in rate RMSE and N-step error at every S8 level and every held-out "
+               "level (sec4.d4, strict reading)"}
+
+# %% [markdown]
+# One grid per claim and changed setting: the profile point and the points that change that setting, sorted by
+# the setting's value; n is the fewest seeds at a point.
+
 # %%
 def axis_grid(key, cid):
     """The 1-D grid of claim ``cid`` along one changed setting (the profile point included)."""
@@ -160,15 +192,13 @@ def axis_grid(key, cid):
     nums = {k: [at[v][k].tolist() for v in values] for k in keys}
     n = min(len(at[v][keys[0]]) for v in values)
     axis = W.Axis(name, tuple(values), silence, paper=stated, ours=value_of(profile_recipe))
-    return W.WhyGrid((axis,), holds, n, RULES[cid], numbers=nums, title=f"{name}")
+    return W.WhyGrid((axis,), holds, n, RULES[cid], numbers=nums, title=TITLES[key], unit="seed")
 
 
-RULES = {"D2": f"the frozen neural ODE with the feedback is within {d2_factor:g}x the nominal model's relative RMSE "
-               "in >= S-1 of S seeds (sec4.d2)",
-         "D3": f"the last 10 % of the loss < {d3_ratio:g}x the first 10 % and flat (< {d3_flat:.0%} change) in >= S-1 "
-               "of S seeds (sec4.d3)",
-         "D4": "the feedback beats the neural ODE in rate RMSE and N-step error at every S8 level and every held-out "
-               "level (sec4.d4, strict reading)"}
+# %% [markdown]
+# The grids of D2, D3 and D4 along every setting some point changes, and their one-line summaries.
+
+# %%
 changed = [k for k in AXES if any(k in p["change"] for p in points)]
 grids = {cid: [axis_grid(k, cid) for k in changed] for cid in ("D2", "D3", "D4")}
 for cid, gs in grids.items():
@@ -184,24 +214,31 @@ for cid, gs in grids.items():
 # n = 1, so "in >= S-1 of S seeds" reads "in the run" and a win is "lower".
 
 # %%
-def authors_checks():
-    """D1, D2, D4 with the authors' networks, or None (with a printed line) without the data directory."""
+def authors_networks():
+    """The authors' f, h and domain-randomized f, or None (with a printed line) without the data directory."""
     if data_dir is None or not (Path(data_dir) / "release").is_dir():
         print(f"the authors' networks are not checked: no release folder in data_dir = {data_dir!r}")
         return None
-    f = release.load_release_spiral_ode(data_dir, authors_ode)
-    h = release.load_release_spiral_feedback(data_dir, authors_feedback)
-    f_dr = release.load_release_spiral_ode(data_dir, authors_dr_ode)
+    return (release.load_release_spiral_ode(data_dir, authors_ode),
+            release.load_release_spiral_feedback(data_dir, authors_feedback),
+            release.load_release_spiral_ode(data_dir, authors_dr_ode))
+
+
+def authors_checks(f, h, f_dr):
+    """D1, D2, D4 with the authors' networks on the release's spiral, beside ours; and their numbers."""
     theirs, numbers = judge(f, h, evaluation_setup(globals(), release.release_spiral), 1, loss=None,
                             factor=d2_factor, ratio_max=d3_ratio, flat=d3_flat, f_dr=f_dr, d1_factor=d1_factor)
-    nets = {"D1": f"{authors_dr_ode} vs {authors_ode}", "D2": f"{authors_ode} + {authors_feedback}",
-            "D4": f"{authors_ode} + {authors_feedback}"}
-    checks = {cid: W.AuthorsCheck(verdict=theirs[cid].verdict, ours=ours[cid].verdict, checks=theirs[cid].checks,
-                                  networks=nets[cid], n=1) for cid in nets}
-    return checks, numbers
+    return {cid: W.AuthorsCheck(verdict=theirs[cid].verdict, ours=ours[cid].verdict, checks=theirs[cid].checks,
+                                networks=NETS[cid], n=1) for cid in NETS}, numbers
 
 
-authors = authors_checks()
+# %% [markdown]
+# Each check names the networks it judged; without the release no authors' check is made.
+
+# %%
+NETS = {"D1": f"{authors_dr_ode} vs {authors_ode}", "D2": f"{authors_ode} + {authors_feedback}",
+        "D4": f"{authors_ode} + {authors_feedback}"}
+authors = None if (nets := authors_networks()) is None else authors_checks(*nets)
 if authors is not None:
     for cid, a in authors[0].items():
         print(f"{cid}: authors' networks {a.verdict:15s} ours {a.ours:15s} {dict(a.checks)}")
@@ -214,8 +251,8 @@ if authors is not None:
 # the authors' networks as a star.
 
 # %%
-def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
-    fig, ax = F.new_figure()
+def plot_points(ax, cid, key):
+    """Claim ``cid``'s number ``key`` per seed at each point of its grids, one column a point; the labels."""
     labels = []
     for g in grids[cid]:
         axis = g.axes[0]
@@ -224,6 +261,16 @@ def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
             color = F.plotting.COLORS["feedback"]
             ax.plot(np.full(vals.size, len(labels)), vals, "o", color=color, mfc=color if g.holds[i] else "none")
             labels.append(f"{axis.name} = {v}" + (" (profile)" if v == axis.ours else ""))
+    return labels
+
+
+# %% [markdown]
+# A claim's figure: its points, the authors' star and the rule's threshold.
+
+# %%
+def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
+    fig, ax = F.new_figure()
+    labels = plot_points(ax, cid, key)
     if theirs is not None:
         ax.plot([len(labels)], [theirs], "*", ms=12, color=F.plotting.COLORS["neural_ode"])
         labels.append("authors' networks (n = 1)")
@@ -257,8 +304,17 @@ NOTES = {
     "D3": "D3 reads the loss curve of Alg. 1; the release keeps no loss curve of the feedback evaluated here.",
     "D4": "D4's strict reading counts the zero-residual S8 level; its as-worded reading leaves it out.",
 }
+
+# %% [markdown]
+# The whys, written to `whys.json`, with the causes `fnnbook.why` finds. D1 has no grid: without the release it
+# has no run behind a why, and is left out (the book's row says so).
+
+# %%
 whys = []
 for cid in ("D1", "D2", "D3", "D4"):
+    if cid not in grids and authors is None:
+        print(f"{cid}: no why written (no grid varies what it depends on, and the authors' networks are not checked)")
+        continue
     c = paper.claim(cid)
     whys.append(W.Why(cid, c.verdict, grids=tuple(grids.get(cid, ())),
                       authors=None if authors is None else authors[0].get(cid),

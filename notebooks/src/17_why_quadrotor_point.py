@@ -36,11 +36,19 @@ import numpy as np
 import fnnlib as F
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
+from fnnbook.quadrotor_eval import at_gains, flight_numbers
 from fnnlib.data import release
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 t_start = time.perf_counter()
+
+# %% [markdown]
+# ## The flight test's settings, as it flew them
+# Read from the run record of `quadrotor_mpc`: its settings, its metrics, its costs and, per cost, the gain of
+# AdapNN it chose on validation flights.
+
+# %% tags=["hide-input"]
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
@@ -77,28 +85,35 @@ print(f"u_max = {u_max:g} N; the test vehicle needs {need['hover']:.2f} N per mo
 # ## The flights
 # The five models without an adaptive gain fly once per unit and cost; AdapNN once per value of
 # `Gamma_adapnn_grid`, AdapFNN once per value of `Gamma_grid` (the other models do not depend on them).
+# First AdapFNN's flights per $\Gamma$, with the share of each flight's steps inside Theorem 2's bound.
 
 # %% tags=["hide-input"]
-def numbers(runs):
-    """Per model: the mean per-axis tracking RMSE, the first-step acceleration RMSE (Fig. S8), whether diverged."""
-    return {"rmse": [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs],
-            "acc": [M.acc_pred_rmse(r) for r in runs], "diverged": [bool(r.diverged) for r in runs]}
+def fly_adapfnn(nets, nn_mlps, pu, cost):
+    """AdapFNN flown over the units once per Gamma of `Gamma_grid`, with the share of its steps inside Theorem 2's
+    bound (after the transient)."""
+    transient = int(round(ran["transient_s"] / ran["Ts"]))
+    rec = {}
+    for G in Gamma_grid:
+        runs = M.paired_units(nets, nn_mlps, **pu, model_settings={**kw, "Gamma": G}, adapnn_gamma=chosen[cost],
+                              only=["AdapFNN"])["AdapFNN"]
+        rec[str(G)] = flight_numbers(runs) | {
+            "theorem2_inside": [M.theorem2_check(r, ran["L"], transient)["inside_fraction"] for r in runs]}
+    return rec
 
 
+# %% [markdown]
+# One set of networks under one cost: the models in `names` once per unit, AdapNN once per gain of its grid,
+# then AdapFNN per $\Gamma$ (above).
+
+# %% tags=["hide-input"]
 def fly_set(nets, nn_mlps, mpc, cost, names):
     """``names`` flown over the units; AdapNN per gain of its grid, AdapFNN per Gamma (with Theorem 2's check)."""
     pu = dict(tests=setup.unit_tests, mpc=mpc)
     base = M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=chosen[cost], only=names)
-    rec = {n: numbers(r) for n, r in base.items()}
-    rec["AdapNN"] = {str(g): numbers(M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=g,
-                                                    only=["AdapNN"])["AdapNN"]) for g in Gamma_adapnn_grid}
-    transient = int(round(ran["transient_s"] / ran["Ts"]))
-    rec["AdapFNN"] = {}
-    for G in Gamma_grid:
-        runs = M.paired_units(nets, nn_mlps, **pu, model_settings={**kw, "Gamma": G}, adapnn_gamma=chosen[cost],
-                              only=["AdapFNN"])["AdapFNN"]
-        rec["AdapFNN"][str(G)] = numbers(runs) | {
-            "theorem2_inside": [M.theorem2_check(r, ran["L"], transient)["inside_fraction"] for r in runs]}
+    rec = {n: flight_numbers(r) for n, r in base.items()}
+    rec["AdapNN"] = {str(g): flight_numbers(M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=g,
+                                                           only=["AdapNN"])["AdapNN"]) for g in Gamma_adapnn_grid}
+    rec["AdapFNN"] = fly_adapfnn(nets, nn_mlps, pu, cost)
     return rec
 
 
@@ -108,8 +123,7 @@ ours = {c: fly_set(members, mlps, mpcs[c], c, ["Nomi", "Neural", "MLP", "FB", "F
 units = [f"network {s}, MLP {m}, disturbance {k + 1}" for k, ((s, _), (m, _)) in enumerate(zip(members, mlps))]
 if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to the last digit of the record
     for c in costs:
-        same = {n: ours[c][n]["rmse"] if n not in ("AdapNN", "AdapFNN") else
-                ours[c][n][str(chosen[c] if n == "AdapNN" else ran["Gamma"])]["rmse"] for n in ours[c]}
+        same = {n: at_gains(ours[c], n, chosen[c], ran["Gamma"])["rmse"] for n in ours[c]}
         for n, v in same.items():
             if not np.allclose(v, q_mpc["paired_mean_axis_rmse_m"][c][n], rtol=1e-9, atol=0):
                 raise ValueError(f"{c}, {n}: RMSE {v} here, {q_mpc['paired_mean_axis_rmse_m'][c][n]} in quadrotor_mpc")
@@ -122,19 +136,31 @@ if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to t
 # two MLPs). Nomi and FB carry no network: their flights are ours above, flight for flight.
 
 # %% tags=["hide-input"]
-rel = Path(data_dir) / "release" if data_dir else None
-authors = None
-if rel is None or not rel.is_dir():
-    print(f"authors' networks: not evaluated (no release under data_dir = {data_dir!r})")
-elif u_max not in authors_u_max:
-    print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")
-else:
+def authors_networks():
+    """The release's first S residual runs and MLP k mod 2 for unit k; None (a line says why) where not flown."""
+    rel = Path(data_dir) / "release" if data_dir else None
+    if rel is None or not rel.is_dir():
+        print(f"authors' networks: not evaluated (no release under data_dir = {data_dir!r})")
+        return None
+    if u_max not in authors_u_max:
+        print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")
+        return None
     S = len(setup.unit_tests)  # the release's first S runs (all five for the paper profile's five units)
     if S > len(release.RESIDUAL_RUNS):
         raise ValueError(f"{S} units, the release has {len(release.RESIDUAL_RUNS)} residual runs")
     theirs = [(r, release.load_release_residual(data_dir, r).double()) for r in release.RESIDUAL_RUNS[:S]]
     mlp_run = [release.MLP_RUNS[k % len(release.MLP_RUNS)] for k in range(S)]
-    their_mlps = [(r, release.load_release_mlp(data_dir, r).double()) for r in mlp_run]
+    return theirs, [(r, release.load_release_mlp(data_dir, r).double()) for r in mlp_run]
+
+
+# %% [markdown]
+# Their residual networks fly in place of ours as Neural, MLP and FNN (and as AdapNN and AdapFNN, over the
+# gains of both grids), on the same units, costs and MPCs.
+
+# %% tags=["hide-input"]
+authors = None
+if (their := authors_networks()) is not None:
+    theirs, their_mlps = their
     compile_s += M.warm_up(*[n for _, n in theirs + their_mlps]) if ran["backend"] == "numba" else 0.0
     authors = {c: {"Nomi": ours[c]["Nomi"], "FB": ours[c]["FB"]} | fly_set(theirs, their_mlps, mpcs[c], c,
                                                                           ["Neural", "MLP", "FNN"]) for c in costs}

@@ -33,9 +33,16 @@ from pathlib import Path
 import numpy as np
 
 import fnnlib as F
+from fnnbook.quadrotor_eval import at_gains
 from fnnbook.rules import quadrotor as rules
 from fnnbook.why import Axis, AuthorsCheck, Why, WhyGrid, write_whys
 
+# %% [markdown]
+# ## The grid's points
+# One record per thrust bound (`point.json` of each `why_quadrotor_point` folder), sorted by the bound; every
+# point flew the same costs, gain grids and units.
+
+# %% tags=["hide-input"]
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
@@ -62,12 +69,16 @@ print(f"{len(points)} thrust bounds {bounds} N x {len(costs)} costs; AdapNN gain
 # %% tags=["hide-input"]
 def setting(rec, c, g, G, units):
     """The claims' results at one setting of one record (ours or the authors')."""
-    pick = lambda key: {n: (rec[c][n][str(g)] if n == "AdapNN" else rec[c][n][str(G)] if n == "AdapFNN"  # noqa: E731
-                            else rec[c][n])[key] for n in (*rules.SIX, "AdapFNN")}
-    return rules.rules_at_setting(pick("rmse"), pick("acc"), rec[c]["AdapFNN"][str(G)]["theorem2_inside"],
+    pick = lambda key: {n: at_gains(rec[c], n, g, G)[key] for n in (*rules.SIX, "AdapFNN")}  # noqa: E731
+    return rules.rules_at_setting(pick("rmse"), pick("acc"), at_gains(rec[c], "AdapFNN", g, G)["theorem2_inside"],
                                   units=units, label=c)
 
 
+# %% [markdown]
+# Every point's results, then per claim and cost the grid of where they read *reproduced*: along AdapNN's gain
+# (AdapFNN at the profile's $\Gamma$) for Q3 and Q4, along $\Gamma$ (AdapNN at its chosen gain) for Q5.
+
+# %% tags=["hide-input"]
 profile_G = first["profile_Gamma"]
 res = {(p["u_max"], c, g, G): setting(p["ours"], c, g, G, p["units"])
        for p in points for c in costs for g in Ga_grid for G in G_grid}
@@ -121,12 +132,18 @@ def gain_axis(q, c):
                 ours=first["profile_Gamma_adapnn"][c])
 
 
+# %% [markdown]
+# Each grid names its cost (its `title`: "as written", "as flown") and the claim's rule; a unit is one trained
+# network with its MLP and its drawn disturbance. Beside `holds` it keeps the failing checks, the mean RMSEs at
+# the profile's gains and AdapFNN / FNN per $\Gamma$.
+
+# %% tags=["hide-input"]
 RULE = {"Q3": "FNN paired-beats each of the other five and Neural beats Nomi and MLP (q3_tracking reads reproduced)",
         "Q4": "FNN's first-step acceleration error paired-beats each of the other five (q4_prediction reads reproduced)",
         "Q5": "AdapFNN within 25 % of FNN in >= S - 1 of S units and its mean RMSE >= FNN's (q5_adaptive, strict "
               "reading, reads reproduced)"}
 grids = {q: tuple(WhyGrid(axes=(U, gain_axis(q, c)), holds=holds[q][c], n=S, rule=f"{COST_TEXT[c]}: {RULE[q]}",
-                          title=f"{q}, {COST_TEXT[c]}",
+                          title=c.replace("_", " "), unit="unit",
                           numbers={"failing_checks_at_profile_gains": failing[q][c],
                                    "mean_rmse_at_profile_gains": means[c], "adapfnn_over_fnn": ratio[c],
                                    "thrust_needed_peak_N": need, "bound_too_small": [u < need for u in bounds]})
@@ -139,17 +156,26 @@ grids = {q: tuple(WhyGrid(axes=(U, gain_axis(q, c)), holds=holds[q][c], n=S, rul
 # same rule on our networks at the same setting (the profile's verdict).
 
 # %% tags=["hide-input"]
+def joined(rec, units, q):
+    """Claim ``q``'s verdict and checks over both costs at the profile's gains (`joined_verdict`)."""
+    return rules.joined_verdict([setting(rec, c, first["profile_Gamma_adapnn"][c], profile_G, units)[q]
+                                 for c in costs])
+
+
 judged = next((p for p in points if p["u_max"] == first["u_max_judged"]), None)
+
+# %% [markdown]
+# Their verdict beside ours, per claim, with the checks that fail with their networks.
+
+# %% tags=["hide-input"]
 authors = {}
 if judged is None or judged["authors"] is None:
     print("authors' networks: not evaluated (no release in data_dir, or the profile's bound not on the grid)")
 else:
     a = judged["authors"]
     for q in ("Q3", "Q4", "Q5"):
-        at = lambda rec, units: [setting(rec, c, first["profile_Gamma_adapnn"][c], profile_G, units)[q]  # noqa: E731
-                                 for c in costs]
-        verdict, checks = rules.joined_verdict(at(a, a["units"]))
-        ours_verdict, _ = rules.joined_verdict(at(judged["ours"], judged["units"]))
+        verdict, checks = joined(a, a["units"], q)
+        ours_verdict, _ = joined(judged["ours"], judged["units"], q)
         authors[q] = AuthorsCheck(verdict=verdict, ours=ours_verdict, checks=checks, n=S,
                                   networks=f"the {S} residual runs of learning_NODE (epoch 50) and the 2 MLPs of "
                                            "learning_MLP (epoch 500), MLP k mod 2 for unit k")
@@ -163,22 +189,31 @@ else:
 # the star is the paper profile's point.
 
 # %% tags=["hide-input"]
+def grid_panel(ax, q, g):
+    """One grid of claim ``q`` (thrust bound x gain) as cells that hold or fail, the bound needed, the profile."""
+    u, gain = g.axes
+    ax.imshow(g.holds.T.astype(float), origin="lower", cmap="Greens", vmin=0, vmax=1.5, aspect="auto")
+    ax.set(xticks=range(len(u.values)), xticklabels=[f"{v:g}" for v in u.values], yticks=range(len(gain.values)),
+           yticklabels=[f"{v:g}" for v in gain.values], xlabel="thrust bound u_max [N]", ylabel=gain.name,
+           title=f"{q}, Eq. (28) {g.title}: holds at {int(g.holds.sum())}/{g.holds.size}")
+    ax.title.set_fontsize(8)
+    for (i, j), h in np.ndenumerate(g.holds):
+        ax.text(i, j - 0.3, "holds" if h else "fails", ha="center", va="center", fontsize=7, color="0.3")
+    short = sum(v < need for v in u.values)
+    if short:
+        ax.axvline(short - 0.5, color="k", ls="--", lw=1, label=f"needs {need:.2f} N at the peak")
+    ax.plot(u.values.index(u.ours), gain.values.index(gain.ours), "k*", ms=12, label="paper profile")
+    ax.legend(fontsize=6, loc="upper left")
+
+
+# %% [markdown]
+# A claim's figure: its grid under each cost side by side.
+
+# %% tags=["hide-input"]
 def grid_figure(q):
     fig, axes = F.new_figure(1, len(costs))
     for ax, g in zip(np.ravel(axes), grids[q]):
-        u, gain = g.axes
-        ax.imshow(g.holds.T.astype(float), origin="lower", cmap="Greens", vmin=0, vmax=1.5, aspect="auto")
-        ax.set(xticks=range(len(u.values)), xticklabels=[f"{v:g}" for v in u.values], yticks=range(len(gain.values)),
-               yticklabels=[f"{v:g}" for v in gain.values], xlabel="thrust bound u_max [N]", ylabel=gain.name,
-               title=f"{g.title.split(',')[0]}, {g.title.split('(28) ')[1]}: holds at {int(g.holds.sum())}/{g.holds.size}")
-        ax.title.set_fontsize(8)
-        for (i, j), h in np.ndenumerate(g.holds):
-            ax.text(i, j - 0.3, "holds" if h else "fails", ha="center", va="center", fontsize=7, color="0.3")
-        short = sum(v < need for v in u.values)
-        if short:
-            ax.axvline(short - 0.5, color="k", ls="--", lw=1, label=f"needs {need:.2f} N at the peak")
-        ax.plot(u.values.index(u.ours), gain.values.index(gain.ours), "k*", ms=12, label="paper profile")
-        ax.legend(fontsize=6, loc="upper left")
+        grid_panel(ax, q, g)
     return F.save_figure(fig, out, f"why_{q.lower()}")
 
 
@@ -192,9 +227,7 @@ figures = {q: grid_figure(q) for q in grids}
 # %% tags=["hide-input"]
 def mean_of(rec, c, n):
     """The mean RMSE over the units at the profile's gains (AdapNN at its chosen gain, AdapFNN at Gamma)."""
-    v = rec[c][n]
-    gain = {"AdapNN": first["profile_Gamma_adapnn"][c], "AdapFNN": profile_G}.get(n)
-    return float(np.mean((v if gain is None else v[str(gain)])["rmse"]))
+    return float(np.mean(at_gains(rec[c], n, first["profile_Gamma_adapnn"][c], profile_G)["rmse"]))
 
 
 def compare(names):
@@ -204,6 +237,11 @@ def compare(names):
                      for who, rec in recs.items() for c in costs)
 
 
+# %% [markdown]
+# Each why's note: the models the claim compares at the profile's point, what the thrust bound does and, where
+# the authors' networks flew, how they were paired with the units.
+
+# %% tags=["hide-input"]
 THRUST = (f"Bounds below the {need:.2f} N per motor the test vehicle needs at the reference's peak (the paper's "
           f"own {first['paper_u_max']:g} N among them) cannot follow the Lissajous curve: FNN's mean RMSE, "
           + ", ".join(f"{c}: {mean_of(first['ours'], c, 'FNN'):.3f} m at {bounds[0]:g} N against "
@@ -213,6 +251,11 @@ AUTH = (" The authors' AdapNN adapts at the gain chosen on validation with our n
 notes = {"Q3": f"Neural against MLP at the profile's point: {compare(['Neural', 'MLP'])}.",
          "Q4": f"AdapNN's gain chosen on validation flights: {first['profile_Gamma_adapnn']}.",
          "Q5": f"FNN against AdapFNN at the profile's point: {compare(['FNN', 'AdapFNN'])}."}
+
+# %% [markdown]
+# The whys, written to `whys.json`, with the causes `fnnbook.why` finds.
+
+# %% tags=["hide-input"]
 whys = []
 for q in ("Q3", "Q4", "Q5"):
     c = profile_result.claim(q)

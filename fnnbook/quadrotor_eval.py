@@ -1,0 +1,41 @@
+r"""The flight records of the why grid of Q3-Q5 (Sec. 5.2.2, App. A.5.4, A.9; Eqs. (28)-(30)).
+
+The ``why_quadrotor_point`` notebook flies the paper profile's units at one thrust bound and records, per cost,
+what each model's flights give (:func:`flight_numbers`); the two adaptive models are flown once per gain, so
+their entries are keyed by the gain. The ``why_quadrotor`` notebook reads the record back at chosen gains
+(:func:`at_gains`) and applies the claims' rules (:mod:`fnnbook.rules.quadrotor`).
+
+One cost's record: ``{model: numbers}`` for the models without an adaptive gain, ``{"AdapNN": {str(gain):
+numbers}, "AdapFNN": {str(Gamma): numbers}}`` for AdapNN's gain (App. A.5.4) and AdapFNN's :math:`\Gamma` of
+Eq. (30); ``numbers`` holds one list entry per unit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import fnnlib.mpc as M
+
+__all__ = ["ADAPTIVE", "at_gains", "flight_numbers"]
+
+#: the models flown once per value of their adaptive gain: AdapNN's (App. A.5.4), AdapFNN's Gamma (Eq. (30))
+ADAPTIVE = ("AdapNN", "AdapFNN")
+
+
+def flight_numbers(runs: Sequence[M.FlightResult]) -> dict[str, list]:
+    """Per flight (one a unit): the mean per-axis tracking RMSE (:func:`fnnlib.mpc.tracking_rmse`), the first-step
+    acceleration prediction RMSE (Fig. S8, :func:`fnnlib.mpc.acc_pred_rmse`) and whether the flight diverged."""
+    return {"rmse": [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs],
+            "acc": [M.acc_pred_rmse(r) for r in runs], "diverged": [bool(r.diverged) for r in runs]}
+
+
+def at_gains(record: Mapping[str, Any], name: str, adapnn_gamma: float, Gamma: float) -> dict[str, list]:
+    """The numbers of model ``name`` in one cost's ``record``: AdapNN's at its gain ``adapnn_gamma``, AdapFNN's at
+    ``Gamma`` (Eq. (30)), every other model's as flown (it has no adaptive gain)."""
+    gain = dict(zip(ADAPTIVE, (adapnn_gamma, Gamma))).get(name)
+    if gain is None:
+        return record[name]
+    if str(gain) not in record[name]:
+        raise KeyError(f"{name} was not flown at the gain {gain:g}: flown at {sorted(record[name])}")
+    return record[name][str(gain)]
