@@ -9,6 +9,11 @@ then report it failed; either way the task's outputs are replaced only by a
 whole successful run (staging folder + rename).  Ctrl-C cancels every task,
 stops the kernels of the running ones and closes the local cluster.
 
+Ready tasks go first by their longest remaining path (:func:`longest_remaining`, as Dask priorities): a
+task's own estimated seconds plus those of the longest chain of tasks that wait on it, the estimate being
+the task's last measured time (``_status.json``) or 1 s, so the long chains start first and the short tasks
+fill the workers around them.
+
 Workers of a cluster given by address need the same checkout and venv at
 the same path, and the same output root (a shared file system).
 """
@@ -16,12 +21,13 @@ the same path, and the same output root (a shared file system).
 from __future__ import annotations
 
 import contextlib
+import graphlib
 import importlib.util
 import logging
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import dask
 import psutil
@@ -31,18 +37,21 @@ from tqdm import tqdm
 
 from fnnbook.execution import execute_task, ignoring_interrupts
 from fnnbook.kernel import cpu_count, kill_kernels
-from fnnbook.layout import logs_dir, mark_killed, staging_dir
+from fnnbook.layout import logs_dir, mark_killed, measured_seconds, staging_dir
 from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line)
 from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
-__all__ = ["TASK_MEMORY", "default_workers", "local_cluster", "run_on_dask"]
+__all__ = ["TASK_MEMORY", "UNMEASURED_SECONDS", "default_workers", "local_cluster", "longest_remaining", "priorities",
+           "run_on_dask"]
 
 _HAS_BOKEH = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
 
 #: memory one task may take (the largest, quadrotor_learning, peaks near 1.2 GiB)
 TASK_MEMORY = 2 * 1024**3
+#: the estimated seconds of a task never measured
+UNMEASURED_SECONDS = 1.0
 
 
 def default_workers() -> int:
@@ -60,7 +69,10 @@ def local_cluster(workers: int) -> Iterator[Client]:
     cannot submit code to the workers.
     """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+    # worker-saturation 1: a worker holds only the task it runs, the ready ones wait at the scheduler in
+    # priority order (a free worker takes the longest path next, not what was queued on it early)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                protocol="tls://", security=Security.temporary(),
                                dashboard_address="127.0.0.1:0",  # any free port
@@ -73,10 +85,39 @@ def local_cluster(workers: int) -> Iterator[Client]:
             cluster.close()
 
 
+def longest_remaining(upstream: Mapping[str, Sequence[str]], seconds: Mapping[str, float]) -> dict[str, float]:
+    """Each task's longest remaining path: its seconds plus the longest remaining path among its dependants.
+
+    ``upstream`` maps each task to its upstream tasks (those outside the mapping are done and ignored);
+    ``seconds`` is each task's estimated duration. The critical-path rule of list scheduling: the task that
+    starts the longest chain of work still ahead goes first.
+    """
+    downstream: dict[str, list[str]] = {t: [] for t in upstream}
+    for task, ups in upstream.items():
+        for u in ups:
+            if u in downstream:
+                downstream[u].append(task)
+    order = graphlib.TopologicalSorter({t: [u for u in ups if u in upstream] for t, ups in upstream.items()})
+    path: dict[str, float] = {}
+    for task in reversed(list(order.static_order())):  # dependants first
+        path[task] = seconds[task] + max((path[d] for d in downstream[task]), default=0.0)
+    return path
+
+
+def priorities(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision]) -> dict[str, float]:
+    """The Dask priority of each task that runs: its :func:`longest_remaining` path in estimated seconds."""
+    runs = [n for n in plan.order if verdict[n].action is Action.RUN]
+    last = measured_seconds(spec, plan.profile)
+    return longest_remaining({n: spec.tasks[n].upstream for n in runs},
+                             {n: last.get(n, UNMEASURED_SECONDS) for n in runs})
+
+
 def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
                 scheduler: str | None, threads: int, echo: Callable[[str], None],
-                progress_bar: bool) -> dict[str, TaskOutcome]:
+                progress_bar: bool, on_workers: Callable[[int], None] = lambda _: None) -> dict[str, TaskOutcome]:
     """Run the plan's tasks decided to run on Dask; return every task's outcome.
+
+    ``on_workers`` is told how many workers the cluster has, once it is up.
 
     Raises
     ------
@@ -94,6 +135,7 @@ def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision],
         ctx = local_cluster(workers)
     with ctx as client:
         n_workers = len(client.scheduler_info().get("workers", {}))
+        on_workers(max(1, n_workers))
         where = f"Dask scheduler {scheduler}" if scheduler else "a local Dask cluster"
         echo(f"running on {where}: {n_workers} worker(s), {threads} torch thread(s) per task")
         link = client.dashboard_link if (scheduler or _HAS_BOKEH) else None
@@ -109,13 +151,15 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decis
     futures: dict[str, Future] = {}
     stamp = f"{os.getpid()}-{time.time_ns()}"
     for name in plan.order:
-        out = spec.output_dir(plan.profile, name)
         if verdict[name].action is not Action.RUN:
-            outcomes[name] = verdict[name].outcome(name, out)
-        else:
-            deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
-            futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
-                                          key=f"{name}-{stamp}", pure=False)
+            outcomes[name] = verdict[name].outcome(name, spec.output_dir(plan.profile, name))
+    priority = priorities(spec, plan, verdict)
+    # longest path first is also an upstream-first order (a task's path exceeds its dependants'; ties keep the
+    # plan's order): the first tasks submitted take the free workers, so they must be the long paths' heads
+    for name in sorted(priority, key=lambda t: (-priority[t], index[t])):
+        deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
+        futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
+                                      key=f"{name}-{stamp}", pure=False, priority=priority[name])
     for name, o in outcomes.items():
         echo(progress_line(index[name], n, o))
     bar = tqdm(total=n, initial=len(outcomes), desc="tasks", unit="task", disable=not progress_bar,
