@@ -6,13 +6,15 @@ overlap and a task starts only when its upstream tasks are done; papermill
 runs inside the worker.  A worker process that dies mid-task makes the
 scheduler retry the task once on another worker (``allowed-failures: 1``),
 then report it failed; either way the task's outputs are replaced only by a
-whole successful run (staging folder + rename).  Ctrl-C cancels every task,
-stops the kernels of the running ones and closes the local cluster.
+whole successful run (staging folder + rename).
 
 Ready tasks go first by their longest remaining path (:func:`longest_remaining`, as Dask priorities): a
 task's own estimated seconds plus those of the longest chain of tasks that wait on it, the estimate being
 the task's last measured time (``_status.json``) or 1 s, so the long chains start first and the short tasks
 fill the workers around them.
+
+Ctrl-C is the run's alone: the local cluster's workers ignore it, the run cancels the tasks and stops their
+kernels, those still starting too (:func:`fnnbook.kernel.stop_kernels`), and then closes the cluster.
 
 Workers of a cluster given by address need the same checkout and venv at
 the same path, and the same output root (a shared file system).
@@ -35,19 +37,22 @@ from distributed import Client, Future, LocalCluster, wait
 from distributed.security import Security
 from tqdm import tqdm
 
-from fnnbook.execution import execute_task, ignoring_interrupts
-from fnnbook.kernel import cpu_count, kill_kernels
+from fnnbook.execution import deferring_interrupts, execute_task, ignoring_interrupts
+from fnnbook.kernel import cpu_count, stop_kernels
 from fnnbook.layout import logs_dir, mark_killed, measured_seconds, staging_dir
 from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line)
 from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
-__all__ = ["TASK_MEMORY", "UNMEASURED_SECONDS", "default_workers", "local_cluster", "longest_remaining", "priorities",
-           "run_on_dask"]
+__all__ = ["TASK_MEMORY", "UNMEASURED_SECONDS", "WORKERS_IGNORE_CTRL_C", "default_workers", "local_cluster",
+           "longest_remaining", "priorities", "run_on_dask"]
 
 _HAS_BOKEH = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
 
+#: run by each worker process as it starts (a Dask preload, as script text): the terminal's Ctrl-C reaches
+#: the whole process group, workers included; they ignore it, and the run stops their tasks, then closes them
+WORKERS_IGNORE_CTRL_C = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
 #: memory one task may take (the largest, quadrotor_learning, peaks near 1.2 GiB)
 TASK_MEMORY = 2 * 1024**3
 #: the estimated seconds of a task never measured
@@ -67,22 +72,32 @@ def local_cluster(workers: int) -> Iterator[Client]:
     Closed to other local clients: scheduler, workers and this client speak TLS with a temporary self-signed
     certificate that only this run holds (``Security.temporary()``), so a ``Client`` from another process
     cannot submit code to the workers.
+
+    Ctrl-C is the run's alone (:data:`WORKERS_IGNORE_CTRL_C`): a worker that closed itself on Ctrl-C would
+    miss the run's order to stop its kernels, be killed by its nanny 4 s later and leave a kernel that was
+    still starting as an orphan, or be restarted by its nanny meanwhile. The run cancels the tasks, stops
+    their kernels, then closes the cluster. A Ctrl-C while the cluster starts takes effect once it is up.
     """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
     # worker-saturation 1: a worker holds only the task it runs, the ready ones wait at the scheduler in
     # priority order (a free worker takes the longest path next, not what was queued on it early)
     with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                           "distributed.scheduler.worker-saturation": 1.0}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               protocol="tls://", security=Security.temporary(),
-                               dashboard_address="127.0.0.1:0",  # any free port
-                               worker_dashboard_address=None, memory_limit=0)
-        client = Client(cluster)
+        cluster = client = None
         try:
+            with deferring_interrupts():  # a Ctrl-C meanwhile arrives once both are up: inside this try
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                       protocol="tls://", security=Security.temporary(),
+                                       dashboard_address="127.0.0.1:0",  # any free port
+                                       worker_dashboard_address=None, memory_limit=0,
+                                       preload=[WORKERS_IGNORE_CTRL_C])
+                client = Client(cluster)
             yield client
         finally:
-            client.close()
-            cluster.close()
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
 
 
 def longest_remaining(upstream: Mapping[str, Sequence[str]], seconds: Mapping[str, float]) -> dict[str, float]:
@@ -229,6 +244,6 @@ def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, p
     with contextlib.suppress(Exception):
         client.cancel(list(futures.values()), force=True)
     with contextlib.suppress(Exception):
-        client.run(kill_kernels)
+        client.run(stop_kernels)  # awaited on each worker: its kernels end, those still starting too
     for name in pending.values():
         mark_killed(logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")

@@ -6,12 +6,15 @@ scheduler and two workers with the ``dask`` command line) on 127.0.0.1.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -22,7 +25,9 @@ import yaml
 
 from fnnbook import PipelineSpec, load_spec, run
 from fnnbook.cli import main
+from fnnbook.execution import deferring_interrupts
 from fnnbook.executor import longest_remaining, run_on_dask
+from fnnbook.kernel import stop_kernels, task_kernel
 from fnnbook.layout import RUN_KEY, STATUS_FILE, read_status, staging_of, write_status
 from fnnbook.outcome import RunReport, Status, TaskOutcome
 from fnnbook.runner import check, decide
@@ -294,6 +299,48 @@ def test_runs_on_a_running_cluster(make_pipeline: MakePipeline, tmp_path: Path,
     assert all(p.poll() is not None for p in procs)
 
 
+def _processes_in(folder: Path) -> list[str]:
+    """Command lines of the processes whose working directory is inside ``folder``."""
+    found = []
+    for p in psutil.process_iter():
+        with contextlib.suppress(psutil.Error):
+            if Path(p.cwd()).is_relative_to(folder):
+                found.append(" ".join(p.cmdline()))
+    return found
+
+
+def test_a_kernel_still_starting_at_the_stop_is_killed_as_it_appears() -> None:
+    """A Ctrl-C can come while papermill starts a task's kernel: no child process yet. The stop outwaits the
+    task and kills the kernel as it appears, so it cannot outlive its worker (and hold the run's terminal)."""
+    registered, codes = threading.Event(), []
+
+    def task() -> None:
+        with task_kernel():
+            registered.set()
+            time.sleep(0.3)  # the stop comes meanwhile; then the stand-in kernel appears
+            proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", "ipykernel"])
+            codes.append(proc.wait(timeout=30))
+
+    thread = threading.Thread(target=task)
+    thread.start()
+    registered.wait(10)
+    assert asyncio.run(stop_kernels(patience=30)) == 1
+    thread.join(10)
+    assert codes == [-signal.SIGKILL]
+    assert asyncio.run(stop_kernels(patience=30)) == 0  # no task running: nothing to outwait
+
+
+def test_a_ctrl_c_while_deferred_arrives_when_the_block_ends() -> None:
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with deferring_interrupts():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+            reached.append("the block ran to its end")
+    assert reached
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     write_notebook(tmp_path / "notebooks" / "timed.ipynb", TIMED_PARAMS, TIMED_BODY)
     timed = {**leaf_task(nap=120.0), "notebook": "notebooks/timed.ipynb"}
@@ -309,15 +356,17 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
     deadline = time.time() + 90
     while time.time() < deadline and not all((started / t).exists() for t in ("leaf", "other")):
         time.sleep(0.2)
-    time.sleep(3)  # past the marks, the kernels napping (a Ctrl-C while papermill still starts a kernel can hang the shutdown past 60 s)
+    time.sleep(0.5)  # past the marks, the kernels napping (test_a_kernel_still_starting_at_the_stop_is_killed: before)
     family = psutil.Process(proc.pid).children(recursive=True)
     assert len(family) >= 4  # two workers (with their nanny/spawn helpers) and two kernels
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole foreground process group
-    out, _ = proc.communicate(timeout=60)
+    out, _ = proc.communicate(timeout=60)  # until the run and all that holds its output (a kernel too) are gone
     assert proc.returncode == 130, out
     assert "interrupted" in out
     assert "Task exception was never retrieved" not in out
+    assert "Traceback" not in out, out  # no worker took the Ctrl-C itself (its KeyboardInterrupt)
     gone, alive = psutil.wait_procs(family, timeout=15)
     assert not alive, [p.cmdline() for p in alive]
+    assert not _processes_in(tmp_path), "a process of the run (a kernel: cwd is the pipeline's root) outlived it"
     assert not (tmp_path / "outputs" / "smoke" / "leaf").exists()
     assert "\n--- FAILED" in (logs / "leaf.log").read_text()  # by the task itself or, if it was gone, the runner
