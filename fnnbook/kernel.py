@@ -73,7 +73,7 @@ _TASKS_LOCK = threading.Lock()
 
 @contextlib.contextmanager
 def task_kernel() -> Iterator[None]:
-    """Count one task's kernel as this process's while the block starts, runs and ends it (see :func:`stop_kernels`)."""
+    """Count one task's kernel as this process's while the block starts, runs and ends it (:func:`stop_kernels`)."""
     token = object()
     with _TASKS_LOCK:
         _TASKS.add(token)
