@@ -18,7 +18,7 @@ from typing import IO, TYPE_CHECKING
 import papermill
 
 from fnnbook.fingerprint import product_files, stored
-from fnnbook.kernel import KERNEL, TASK_THREADS, kernel_arguments, kernel_config, kill_kernels
+from fnnbook.kernel import KERNEL, TASK_THREADS, kernel_arguments, kernel_config, kill_kernels, task_kernel
 from fnnbook.layout import logs_dir, mark_killed, point_to_final, recover, staging_dir, swap
 from fnnbook.outcome import Status, TaskOutcome, blocked, blocked_by
 from fnnbook.params import FINGERPRINT_FILE, INJECTED
@@ -28,7 +28,7 @@ from fnnlib.io import atomic_write, file_sha256
 if TYPE_CHECKING:
     from fnnbook.runner import Plan
 
-__all__ = ["execute", "execute_task"]
+__all__ = ["deferring_interrupts", "execute", "execute_task", "ignoring_interrupts"]
 
 
 #: a notebook's own error that is the file system's (a full disk, a read-only folder, a missing permission)
@@ -46,6 +46,25 @@ def ignoring_interrupts() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+@contextlib.contextmanager
+def deferring_interrupts() -> Iterator[None]:
+    """Hold Ctrl-C back while the block runs: one pressed meanwhile raises KeyboardInterrupt as it ends.
+
+    (In the main thread; elsewhere, where Python delivers no Ctrl-C, the block just runs.)
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed: list[int] = []
+    before = signal.signal(signal.SIGINT, lambda signum, _frame: pressed.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+    if pressed:
+        raise KeyboardInterrupt
 
 
 def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
@@ -75,7 +94,7 @@ def execute(spec: PipelineSpec, plan: Plan, name: str, progress_bar: bool,
                  f"torch threads: {threads}\n"
                  f"parameters: {json.dumps(params, sort_keys=True)}\n\n--- kernel output ---\n")
         fh.flush()
-        with tempfile.TemporaryDirectory(prefix="fnn-kernel-") as sockets:
+        with tempfile.TemporaryDirectory(prefix="fnn-kernel-") as sockets, task_kernel():
             papermill.execute_notebook(
                 str(task.notebook), str(executed), parameters=params, kernel_name=KERNEL,
                 cwd=str(spec.root), progress_bar=progress_bar, stdout_file=fh, stderr_file=fh,

@@ -6,8 +6,15 @@ overlap and a task starts only when its upstream tasks are done; papermill
 runs inside the worker.  A worker process that dies mid-task makes the
 scheduler retry the task once on another worker (``allowed-failures: 1``),
 then report it failed; either way the task's outputs are replaced only by a
-whole successful run (staging folder + rename).  Ctrl-C cancels every task,
-stops the kernels of the running ones and closes the local cluster.
+whole successful run (staging folder + rename).
+
+Ready tasks go first by their longest remaining path (:func:`longest_remaining`, as Dask priorities): a
+task's own estimated seconds plus those of the longest chain of tasks that wait on it, the estimate being
+the task's last measured time (``_status.json``) or 1 s, so the long chains start first and the short tasks
+fill the workers around them.
+
+Ctrl-C is the run's alone: the local cluster's workers ignore it, the run cancels the tasks and stops their
+kernels, those still starting too (:func:`fnnbook.kernel.stop_kernels`), and then closes the cluster.
 
 Workers of a cluster given by address need the same checkout and venv at
 the same path, and the same output root (a shared file system).
@@ -16,12 +23,13 @@ the same path, and the same output root (a shared file system).
 from __future__ import annotations
 
 import contextlib
+import graphlib
 import importlib.util
 import logging
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import dask
 import psutil
@@ -29,20 +37,26 @@ from distributed import Client, Future, LocalCluster, wait
 from distributed.security import Security
 from tqdm import tqdm
 
-from fnnbook.execution import execute_task, ignoring_interrupts
-from fnnbook.kernel import cpu_count, kill_kernels
-from fnnbook.layout import logs_dir, mark_killed, staging_dir
+from fnnbook.execution import deferring_interrupts, execute_task, ignoring_interrupts
+from fnnbook.kernel import cpu_count, stop_kernels
+from fnnbook.layout import logs_dir, mark_killed, measured_seconds, staging_dir
 from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line)
 from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
-__all__ = ["TASK_MEMORY", "default_workers", "local_cluster", "run_on_dask"]
+__all__ = ["TASK_MEMORY", "UNMEASURED_SECONDS", "WORKERS_IGNORE_CTRL_C", "default_workers", "local_cluster",
+           "longest_remaining", "priorities", "run_on_dask"]
 
 _HAS_BOKEH = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
 
+#: run by each worker process as it starts (a Dask preload, as script text): the terminal's Ctrl-C reaches
+#: the whole process group, workers included; they ignore it, and the run stops their tasks, then closes them
+WORKERS_IGNORE_CTRL_C = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
 #: memory one task may take (the largest, quadrotor_learning, peaks near 1.2 GiB)
 TASK_MEMORY = 2 * 1024**3
+#: the estimated seconds of a task never measured
+UNMEASURED_SECONDS = 1.0
 
 
 def default_workers() -> int:
@@ -58,25 +72,67 @@ def local_cluster(workers: int) -> Iterator[Client]:
     Closed to other local clients: scheduler, workers and this client speak TLS with a temporary self-signed
     certificate that only this run holds (``Security.temporary()``), so a ``Client`` from another process
     cannot submit code to the workers.
+
+    Ctrl-C is the run's alone (:data:`WORKERS_IGNORE_CTRL_C`): a worker that closed itself on Ctrl-C would
+    miss the run's order to stop its kernels, be killed by its nanny 4 s later and leave a kernel that was
+    still starting as an orphan, or be restarted by its nanny meanwhile. The run cancels the tasks, stops
+    their kernels, then closes the cluster. A Ctrl-C while the cluster starts takes effect once it is up.
     """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               protocol="tls://", security=Security.temporary(),
-                               dashboard_address="127.0.0.1:0",  # any free port
-                               worker_dashboard_address=None, memory_limit=0)
-        client = Client(cluster)
+    # worker-saturation 1: a worker holds only the task it runs, the ready ones wait at the scheduler in
+    # priority order (a free worker takes the longest path next, not what was queued on it early)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        cluster = client = None
         try:
+            with deferring_interrupts():  # a Ctrl-C meanwhile arrives once both are up: inside this try
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                       protocol="tls://", security=Security.temporary(),
+                                       dashboard_address="127.0.0.1:0",  # any free port
+                                       worker_dashboard_address=None, memory_limit=0,
+                                       preload=[WORKERS_IGNORE_CTRL_C])
+                client = Client(cluster)
             yield client
         finally:
-            client.close()
-            cluster.close()
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def longest_remaining(upstream: Mapping[str, Sequence[str]], seconds: Mapping[str, float]) -> dict[str, float]:
+    """Each task's longest remaining path: its seconds plus the longest remaining path among its dependants.
+
+    ``upstream`` maps each task to its upstream tasks (those outside the mapping are done and ignored);
+    ``seconds`` is each task's estimated duration. The critical-path rule of list scheduling: the task that
+    starts the longest chain of work still ahead goes first.
+    """
+    downstream: dict[str, list[str]] = {t: [] for t in upstream}
+    for task, ups in upstream.items():
+        for u in ups:
+            if u in downstream:
+                downstream[u].append(task)
+    order = graphlib.TopologicalSorter({t: [u for u in ups if u in upstream] for t, ups in upstream.items()})
+    path: dict[str, float] = {}
+    for task in reversed(list(order.static_order())):  # dependants first
+        path[task] = seconds[task] + max((path[d] for d in downstream[task]), default=0.0)
+    return path
+
+
+def priorities(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision]) -> dict[str, float]:
+    """The Dask priority of each task that runs: its :func:`longest_remaining` path in estimated seconds."""
+    runs = [n for n in plan.order if verdict[n].action is Action.RUN]
+    last = measured_seconds(spec, plan.profile)
+    return longest_remaining({n: spec.tasks[n].upstream for n in runs},
+                             {n: last.get(n, UNMEASURED_SECONDS) for n in runs})
 
 
 def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
                 scheduler: str | None, threads: int, echo: Callable[[str], None],
-                progress_bar: bool) -> dict[str, TaskOutcome]:
+                progress_bar: bool, on_workers: Callable[[int], None] = lambda _: None) -> dict[str, TaskOutcome]:
     """Run the plan's tasks decided to run on Dask; return every task's outcome.
+
+    ``on_workers`` is told how many workers the cluster has, once it is up.
 
     Raises
     ------
@@ -94,6 +150,7 @@ def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision],
         ctx = local_cluster(workers)
     with ctx as client:
         n_workers = len(client.scheduler_info().get("workers", {}))
+        on_workers(max(1, n_workers))
         where = f"Dask scheduler {scheduler}" if scheduler else "a local Dask cluster"
         echo(f"running on {where}: {n_workers} worker(s), {threads} torch thread(s) per task")
         link = client.dashboard_link if (scheduler or _HAS_BOKEH) else None
@@ -109,13 +166,15 @@ def _submit_and_wait(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decis
     futures: dict[str, Future] = {}
     stamp = f"{os.getpid()}-{time.time_ns()}"
     for name in plan.order:
-        out = spec.output_dir(plan.profile, name)
         if verdict[name].action is not Action.RUN:
-            outcomes[name] = verdict[name].outcome(name, out)
-        else:
-            deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
-            futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
-                                          key=f"{name}-{stamp}", pure=False)
+            outcomes[name] = verdict[name].outcome(name, spec.output_dir(plan.profile, name))
+    priority = priorities(spec, plan, verdict)
+    # longest path first is also an upstream-first order (a task's path exceeds its dependants'; ties keep the
+    # plan's order): the first tasks submitted take the free workers, so they must be the long paths' heads
+    for name in sorted(priority, key=lambda t: (-priority[t], index[t])):
+        deps = [futures[u] for u in spec.tasks[name].upstream if u in futures]
+        futures[name] = client.submit(execute_task, spec, plan, name, threads, *deps,
+                                      key=f"{name}-{stamp}", pure=False, priority=priority[name])
     for name, o in outcomes.items():
         echo(progress_line(index[name], n, o))
     bar = tqdm(total=n, initial=len(outcomes), desc="tasks", unit="task", disable=not progress_bar,
@@ -185,6 +244,6 @@ def _cancel(client: Client, futures: Mapping[str, Future], spec: PipelineSpec, p
     with contextlib.suppress(Exception):
         client.cancel(list(futures.values()), force=True)
     with contextlib.suppress(Exception):
-        client.run(kill_kernels)
+        client.run(stop_kernels)  # awaited on each worker: its kernels end, those still starting too
     for name in pending.values():
         mark_killed(logs_dir(spec, plan.profile) / f"{name}.log", "interrupted (Ctrl-C)")

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
+import threading
+import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import psutil
 
 __all__ = ["KERNEL", "TASK_THREADS", "cpu_count", "kernel_arguments", "kernel_config", "kill_kernels",
-           "task_threads"]
+           "stop_kernels", "task_kernel", "task_threads"]
 
 KERNEL = "python3"
 #: torch intra-op threads in each notebook's kernel when run in-process with one core (importing fnnlib
@@ -62,14 +66,61 @@ def kernel_arguments(threads: int) -> list[str]:
 
 
 
+#: the tasks of this process whose kernel is starting, running or shutting down (:func:`task_kernel`)
+_TASKS: set[object] = set()
+_TASKS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def task_kernel() -> Iterator[None]:
+    """Count one task's kernel as this process's while the block starts, runs and ends it (:func:`stop_kernels`)."""
+    token = object()
+    with _TASKS_LOCK:
+        _TASKS.add(token)
+    try:
+        yield
+    finally:
+        with _TASKS_LOCK:
+            _TASKS.discard(token)
+
+
 def kill_kernels() -> int:
     """End this process's notebook kernels (its ipykernel child processes); return how many."""
-    kernels = [p for p in psutil.Process().children(recursive=True) if _is_kernel(p)]
-    for proc in kernels:
-        with contextlib.suppress(psutil.Error):
-            proc.kill()
+    kernels = _kill(_kernels())
     psutil.wait_procs(kernels, timeout=5)
     return len(kernels)
+
+
+async def stop_kernels(patience: float = 30.0) -> int:
+    """End this process's kernels, and every one that starts until the tasks running now have ended.
+
+    Cancelling a run's tasks on a Dask worker (awaited there). A kernel still starting when the stop comes
+    is no child process yet: it is killed as it appears, so no task's kernel outlives the task, whose
+    worker may be killed next (an orphaned kernel would keep running, and hold the run's terminal).
+    ``patience`` (seconds) bounds the wait for the tasks to end. Returns how many kernels were killed.
+    """
+    with _TASKS_LOCK:
+        doomed = set(_TASKS)
+    killed = len(_kill(_kernels()))
+    deadline = time.monotonic() + patience
+    while time.monotonic() < deadline:
+        with _TASKS_LOCK:
+            if not doomed & _TASKS:
+                break
+        await asyncio.sleep(0.05)
+        killed += len(_kill(_kernels()))
+    return killed
+
+
+def _kernels() -> list[psutil.Process]:
+    return [p for p in psutil.Process().children(recursive=True) if _is_kernel(p)]
+
+
+def _kill(procs: list[psutil.Process]) -> list[psutil.Process]:
+    for proc in procs:
+        with contextlib.suppress(psutil.Error):
+            proc.kill()
+    return procs
 
 
 def _is_kernel(proc: psutil.Process) -> bool:

@@ -7,7 +7,8 @@
     .locks/<task>.lock      held by the one run that may write <task>/ and its log (``.holder``: who)
     _logs/<task>.log        log of the last attempt (kernel output, error)
     _logs/<task>.ipynb      the executed notebook of a failed attempt
-    _status.json            how each task of the last run fared (read by the book)
+    _status.json            how each task of the last run fared (read by the book), its last measured
+                            seconds, and under "_run" the last run's workers, wall time and utilisation
 
 One writer per output: a run holds the writer lock of every task it runs and a reader's share of every task
 it only reads (taken in name order, so two runs never wait on each other in a circle) from its decisions to
@@ -32,16 +33,19 @@ from typing import Any
 
 from filelock import FileLock
 
-from fnnbook.outcome import RunReport
+from fnnbook.outcome import RunReport, Status
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write
 
-__all__ = ["STATUS_FILE", "clear_stale", "holding", "staging_of", "logs_dir", "mark_killed", "point_to_final", "read_status",
+__all__ = ["RUN_KEY", "STATUS_FILE", "clear_stale", "holding", "staging_of", "logs_dir", "mark_killed", "measured_seconds", "point_to_final",
+           "read_status",
            "recover", "staging_dir", "swap", "write_status"]
 
 LOCKS = ".locks"
 
 STATUS_FILE = "_status.json"
+#: the entry of ``_status.json`` that describes the last run as a whole, not a task
+RUN_KEY = "_run"
 _END_MARKERS = ("\n--- ok after ", "\n--- FAILED")
 
 
@@ -233,19 +237,45 @@ def mark_killed(log: Path, why: str) -> None:
 
 
 def write_status(spec: PipelineSpec, report: RunReport) -> Path:
-    """Record each task's last outcome in ``<output_root>/<profile>/_status.json`` (the book reads it)."""
+    """Record each task's last outcome in ``<output_root>/<profile>/_status.json`` (the book reads it).
+
+    A task that ran ok records its seconds (the scheduler's estimate next time, :func:`measured_seconds`); one
+    that did not keeps its last measured seconds. A run in which a task ran records itself under
+    :data:`RUN_KEY`: workers, wall seconds, task seconds and the utilisation (:attr:`RunReport.utilisation`).
+    """
     path = spec.output_root / report.profile / STATUS_FILE
-    mine = {o.task: {"status": str(o.status), "message": o.message} for o in report.outcomes}
     path.parent.mkdir(parents=True, exist_ok=True)
     with FileLock(path.with_name(f".{STATUS_FILE}.lock")):  # runs of disjoint tasks share this file
         status = read_status(spec, report.profile)
-        status.update(mine)
+        for o in report.outcomes:
+            entry = {"status": str(o.status), "message": o.message}
+            if o.status == Status.OK:  # the measured time; a task that did not run keeps its last one
+                entry["seconds"] = round(o.seconds, 2)
+            elif (last := _seconds(status, o.task)) is not None:
+                entry["seconds"] = last
+            status[o.task] = entry
+        if report.utilisation is not None:
+            status[RUN_KEY] = {"workers": report.workers, "wall_seconds": round(report.wall, 2),
+                               "task_seconds": round(report.busy, 2),
+                               "utilisation": round(report.utilisation, 4)}
         with atomic_write(path, "w") as fh:
             fh.write(json.dumps(status, indent=2, sort_keys=True) + "\n")
     return path
 
 
-def read_status(spec: PipelineSpec, profile: str) -> dict[str, dict[str, str]]:
+def measured_seconds(spec: PipelineSpec, profile: str) -> dict[str, float]:
+    """Task -> the seconds its last successful run took, from ``_status.json`` (tasks never measured: absent)."""
+    status = read_status(spec, profile)
+    return {task: seconds for task in status if task != RUN_KEY and (seconds := _seconds(status, task)) is not None}
+
+
+def _seconds(status: dict[str, Any], task: str) -> float | None:
+    entry = status.get(task)
+    seconds = entry.get("seconds") if isinstance(entry, dict) else None
+    return float(seconds) if isinstance(seconds, (int, float)) and not isinstance(seconds, bool) else None
+
+
+def read_status(spec: PipelineSpec, profile: str) -> dict[str, dict[str, Any]]:
     """The ``_status.json`` of a profile ({} if none)."""
     try:
         status = json.loads((spec.output_root / profile / STATUS_FILE).read_text(encoding="utf-8"))

@@ -15,7 +15,7 @@ from typing import Protocol
 from fnnbook.spec import Task
 
 __all__ = ["Action", "Decision", "Interrupted", "RunReport", "Status", "TaskOutcome", "blocked", "blocked_by", "interrupted", "progress_line",
-           "summary"]
+           "summary", "utilisation_line"]
 
 
 class Status(str, enum.Enum):
@@ -104,10 +104,24 @@ class TaskOutcome:
 
 @dataclass(frozen=True)
 class RunReport:
-    """The outcomes of one run, in execution order."""
+    """The outcomes of one run, in execution order; ``workers`` ran them in ``wall`` seconds."""
 
     profile: str
     outcomes: tuple[TaskOutcome, ...]
+    workers: int = 1
+    wall: float = 0.0
+
+    @property
+    def busy(self) -> float:
+        """Seconds of task time: the sum over the tasks that ran (ok or failed)."""
+        return sum(o.seconds for o in self.outcomes if o.status in (Status.OK, Status.FAILED))
+
+    @property
+    def utilisation(self) -> float | None:
+        """``busy / (workers * wall)``: the share of the workers' time spent in tasks (None if nothing ran)."""
+        if self.busy <= 0 or self.wall <= 0:
+            return None
+        return self.busy / (self.workers * self.wall)
 
     @property
     def ok(self) -> bool:
@@ -160,6 +174,14 @@ def progress_line(index: int, total: int, o: TaskOutcome) -> str:
                             else f"FAILED (see log {o.log})\n    {o.message}"),
             Status.NOT_RUN: f"not run ({o.message})"}[o.status]
     return f"[{index}/{total}] {o.task} ... {text}"
+
+
+def utilisation_line(report: RunReport) -> str | None:
+    """``utilisation 83% (task time 50.0 s / (2 workers x 30.0 s wall))``; None if no task ran."""
+    if (u := report.utilisation) is None:
+        return None
+    return (f"utilisation {100 * u:.0f}% (task time {report.busy:.1f} s / ({report.workers} worker(s) x "
+            f"{report.wall:.1f} s wall))")
 
 
 def summary(report: RunReport) -> str:

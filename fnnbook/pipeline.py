@@ -4,12 +4,13 @@ In-process (``workers=1``) the tasks run one after another with papermill's
 progress bar; otherwise :mod:`fnnbook.executor` submits them to a Dask
 cluster. Either way each task runs through :mod:`fnnbook.runner` (staging
 folder, fingerprint record, atomic swap) and the run ends with the same
-summary and ``_status.json``.
+summary and ``_status.json``, and the run's utilisation: task seconds / (workers x wall seconds).
 """
 
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from fnnbook.executor import run_on_dask
@@ -17,7 +18,7 @@ from fnnbook.execution import execute, ignoring_interrupts
 from fnnbook.kernel import task_threads
 from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_of, write_status
 from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
-                             progress_line, summary)
+                             progress_line, summary, utilisation_line)
 from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -113,27 +114,30 @@ def run(
 def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
              scheduler: str | None, threads: int, echo: Callable[[str], None], progress_bar: bool) -> RunReport:
     """Run the tasks decided to run (here or on Dask), record and summarise the outcomes."""
+    start, used = time.perf_counter(), [1]  # wall clock; the workers the run had (a cluster reports its own)
     try:
         if (scheduler is not None or workers > 1) and any(v.action is Action.RUN for v in verdict.values()):
             outcomes = run_on_dask(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
-                                   echo=echo, progress_bar=progress_bar)
+                                   echo=echo, progress_bar=progress_bar, on_workers=used.append)
         else:
             outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
     except Interrupted as stop:
         with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
-            _finish(spec, plan, stop.outcomes, echo)
+            _finish(spec, plan, stop.outcomes, echo, used[-1], time.perf_counter() - start)
         raise KeyboardInterrupt from None
-    return _finish(spec, plan, outcomes, echo)
+    return _finish(spec, plan, outcomes, echo, used[-1], time.perf_counter() - start)
 
 
-def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome],
-            echo: Callable[[str], None]) -> RunReport:
-    """Record the outcomes in ``_status.json`` (one clear line if that fails), echo the summary."""
-    report = RunReport(plan.profile, tuple(outcomes[n] for n in plan.order if n in outcomes))
+def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome], echo: Callable[[str], None],
+            workers: int, wall: float) -> RunReport:
+    """Record the outcomes in ``_status.json`` (one clear line if that fails), echo the utilisation and summary."""
+    report = RunReport(plan.profile, tuple(outcomes[n] for n in plan.order if n in outcomes), workers, wall)
     try:
         write_status(spec, report)
     except OSError as exc:
         echo(f"note: could not record the outcomes in {STATUS_FILE} ({exc.strerror or exc})")
+    if (line := utilisation_line(report)) is not None:
+        echo(line)
     echo(summary(report))
     return report
 

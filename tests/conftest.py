@@ -133,18 +133,23 @@ def _depth(task: str, upstream: dict[str, list[str]]) -> int:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Run the tests that need the smoke pipeline first, tasks without upstream tasks first.
+    """Run the tests that need the smoke pipeline first, the heads of the longest chains of tasks first.
 
-    The task tests (test_notebooks.py) come first, then nbval, then every other test,
-    then the book in the browser (it needs every task). xdist hands the first tests
-    out one at a time to alternate workers, so the workers run independent tasks side
-    by side; a worker that needs a task another one is running waits for its lock.
+    The task tests (test_notebooks.py) come first, then nbval, then the book in the browser (it needs every
+    task; its tests form one xdist group, so one worker builds the book while the other goes on), then every
+    other test. With ``--dist loadgroup`` (pyproject.toml) xdist hands each worker a test as it runs low, in
+    this order, so the workers run independent tasks side by side; a worker that needs a task another one is
+    running waits for its lock. Tasks are ordered by their longest chain of dependants (the executor's own
+    rule, each task counted as one), then upstream first.
     """
     import yaml  # noqa: PLC0415
 
+    from fnnbook.executor import longest_remaining  # noqa: PLC0415
+
     upstream = {name: list(t.get("upstream", [])) for name, t in
                 yaml.safe_load(PIPELINE.read_text(encoding="utf-8"))["tasks"].items()}
-    order = sorted(upstream, key=lambda t: _depth(t, upstream))
+    height = longest_remaining(upstream, dict.fromkeys(upstream, 1.0))
+    order = sorted(upstream, key=lambda t: (-height[t], _depth(t, upstream)))
 
     def key(item: pytest.Item) -> tuple[int, int]:
         path = item.path.as_posix()
@@ -153,7 +158,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if path.endswith("tests/test_notebooks.py"):
             return 0, rank
         if "smoke_outputs" not in getattr(item, "fixturenames", ()):
-            return 2, 0
-        return (3, 0) if "test_browser" in path else (1, rank)
+            return 3, 0
+        return (2, 0) if "test_browser" in path else (1, rank)
 
     items.sort(key=key)  # stable: the order within a stage is kept

@@ -6,12 +6,15 @@ scheduler and two workers with the ``dask`` command line) on 127.0.0.1.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -22,17 +25,24 @@ import yaml
 
 from fnnbook import PipelineSpec, load_spec, run
 from fnnbook.cli import main
+from fnnbook.execution import deferring_interrupts
+from fnnbook.executor import longest_remaining, run_on_dask
+from fnnbook.kernel import stop_kernels, task_kernel
+from fnnbook.layout import RUN_KEY, STATUS_FILE, read_status, staging_of, write_status
+from fnnbook.outcome import RunReport, Status, TaskOutcome
+from fnnbook.runner import check, decide
 
 from .nbfactory import CHILD_BODY, CHILD_PARAMS, LEAF_BODY, LEAF_PARAMS, MakePipeline, child_task, leaf_task, write_notebook
 
 # A leaf that records when it ran (wall clock) and sleeps `nap` seconds in between. With `meet_within` > 0 it
 # also waits (that long at most) until another timed task of the run has started: two tasks that run at the
-# same time always overlap, however slowly a loaded machine starts their kernels.
+# same time always overlap, however slowly a loaded machine starts their kernels. The tasks meet in
+# <output_root>/<profile>/started (out_dir is the run's staging folder <profile>/.staging/<run>/<task>).
 TIMED_PARAMS = LEAF_PARAMS + "nap = 0.0\nmeet_within = 0.0\n"
 TIMED_BODY = """\
 import json, pathlib, time
 start = time.time()
-meet = pathlib.Path(out_dir).parent.parent / "started"
+meet = pathlib.Path(out_dir).parents[2] / "started"
 meet.mkdir(exist_ok=True)
 (meet / pathlib.Path(out_dir).name).write_text("x")
 while time.time() - start < meet_within and len(list(meet.iterdir())) < 2:
@@ -97,6 +107,17 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     assert report.ok, lines
     assert {o.status for o in report.outcomes} == {"ok"}
     assert lines[0].startswith("running on a local Dask cluster: 2 worker(s), ")
+    # the utilisation: the task seconds over 2 workers' wall time, printed and recorded
+    assert report.workers == 2 and report.wall > 0
+    assert report.busy == pytest.approx(sum(o.seconds for o in report.outcomes))
+    assert report.utilisation == pytest.approx(report.busy / (2 * report.wall))
+    assert 0 < report.utilisation <= 1
+    assert lines[-2] == f"utilisation {100 * report.utilisation:.0f}% (task time {report.busy:.1f} s / " \
+                        f"(2 worker(s) x {report.wall:.1f} s wall))"
+    status = read_status(spec, "smoke")
+    assert status[RUN_KEY]["workers"] == 2
+    assert status[RUN_KEY]["utilisation"] == pytest.approx(report.utilisation, abs=1e-4)
+    assert status["leaf"]["seconds"] == pytest.approx(report.outcome("leaf").seconds, abs=0.01)
 
     leaf, child = _times(spec, "leaf"), _times(spec, "child")
     assert child[0] >= leaf[1]  # after its upstream task
@@ -119,6 +140,8 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     for name in ("a", "b"):
         (met / name).write_text("x")
     assert run(serial, "smoke", ["leaf"], workers=1, progress_bar=False, echo=lambda _: None).ok
+    start, end = json.loads((serial.output_dir("smoke", "leaf") / "times.json").read_text())
+    assert end - start < 30.0  # it found the meeting place full and did not wait out its 60 s
     for task in ("leaf",):
         assert (serial.output_dir("smoke", task) / "results.json").read_bytes() == (
             spec.output_dir("smoke", task) / "results.json").read_bytes()
@@ -126,6 +149,58 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     # nothing changed: everything skipped (no cluster work)
     report = run(spec, "smoke", workers=2, progress_bar=False, echo=lambda _: None)
     assert {o.status for o in report.outcomes} == {"skipped"}
+    assert read_status(spec, "smoke")["leaf"]["seconds"] == status["leaf"]["seconds"]  # kept: the next estimate
+
+
+def test_longest_remaining_path_puts_the_long_chain_first() -> None:
+    # the paper's shape: a three-task chain beside short independent tasks, and a join
+    upstream = {"spiral": [], "bottle": [], "q_learn": [], "q_mpc": ["q_learn"],
+                "tuned": ["q_mpc", "spiral", "up_to_date"]}  # up_to_date does not run: not in the graph
+    seconds = {"spiral": 100.0, "bottle": 150.0, "q_learn": 200.0, "q_mpc": 250.0, "tuned": 40.0}
+    path = longest_remaining(upstream, seconds)
+    assert path == {"tuned": 40.0, "q_mpc": 290.0, "q_learn": 490.0, "spiral": 140.0, "bottle": 150.0}
+    assert sorted(path, key=path.get, reverse=True)[:2] == ["q_learn", "q_mpc"]
+    # the estimate alone does not decide: a short task heading a long chain beats a longer lone task
+    assert longest_remaining({"a": [], "b": ["a"], "lone": []}, {"a": 1.0, "b": 9.0, "lone": 5.0}) == {
+        "b": 9.0, "a": 10.0, "lone": 5.0}
+
+
+def test_one_worker_takes_the_long_chain_first(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    # submitted in plan order (other, leaf, child); the last run's seconds make leaf -> child the long path
+    tasks = _tasks(tmp_path)
+    tasks = {t: tasks[t] for t in ("other", "leaf", "child")}
+    tasks["leaf"]["parameters"]["smoke"]["nap"] = 0.0
+    spec = load_spec(make_pipeline(tasks, parts=[{"title": "P", "tasks": ["other", "leaf", "child"]}]))
+    (spec.output_root / "smoke").mkdir(parents=True)
+    (spec.output_root / "smoke" / STATUS_FILE).write_text(json.dumps(
+        {"other": {"status": "ok", "message": "", "seconds": 5.0}, "leaf": {"status": "ok", "message": "", "seconds": 3.0},
+         "child": {"status": "ok", "message": "", "seconds": 3.0}}))
+    plan = check(spec, "smoke")
+    assert plan.order == ("other", "leaf", "child")
+    with staging_of(spec, "smoke", plan.run):
+        outcomes = run_on_dask(spec, plan, decide(spec, plan), workers=1, scheduler=None, threads=1,
+                               echo=lambda _: None, progress_bar=False)
+    assert {o.status for o in outcomes.values()} == {Status.OK}
+    started = sorted(("other", "leaf", "child"), key=lambda t: _times(spec, t)[0])
+    assert started == ["leaf", "other", "child"]  # 6 s of chain ahead of leaf, then other's 5 s, then child's 3 s
+
+
+def test_utilisation_is_task_time_over_workers_times_wall(make_pipeline: MakePipeline, tmp_path: Path) -> None:
+    def outcome(task: str, status: Status, seconds: float) -> TaskOutcome:
+        return TaskOutcome(task, status, seconds, tmp_path / task)
+
+    ran = (outcome("a", Status.OK, 30.0), outcome("b", Status.FAILED, 10.0), outcome("c", Status.SKIPPED, 0.0))
+    report = RunReport("smoke", ran, workers=2, wall=25.0)
+    assert report.busy == 40.0 and report.utilisation == pytest.approx(0.8)
+    assert RunReport("smoke", ran[2:], workers=2, wall=1.0).utilisation is None  # nothing ran
+    spec = load_spec(make_pipeline())
+    write_status(spec, report)
+    status = read_status(spec, "smoke")
+    assert status[RUN_KEY] == {"workers": 2, "wall_seconds": 25.0, "task_seconds": 40.0, "utilisation": 0.8}
+    assert status["a"]["seconds"] == 30.0 and "seconds" not in status["b"]  # a failed run is no estimate
+    write_status(spec, RunReport("smoke", (outcome("a", Status.SKIPPED, 0.0),), workers=1, wall=0.5))
+    assert read_status(spec, "smoke")["a"] == {"status": "skipped", "message": "", "seconds": 30.0}
+    assert read_status(spec, "smoke")[RUN_KEY]["workers"] == 2  # a run where nothing ran leaves the last one
 
 
 def test_a_failing_task_is_isolated(make_pipeline: MakePipeline, tmp_path: Path) -> None:
@@ -191,6 +266,8 @@ def test_runs_on_a_running_cluster(make_pipeline: MakePipeline, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
     tasks = _tasks(tmp_path)
     del tasks["pt"], tasks["agg"]
+    for name in ("leaf", "other"):
+        tasks[name]["parameters"]["smoke"]["nap"] = 0.0  # nothing here times them
     pipeline = make_pipeline(tasks, parts=[{"title": "P", "tasks": ["leaf", "other", "child"]}])
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
@@ -222,6 +299,48 @@ def test_runs_on_a_running_cluster(make_pipeline: MakePipeline, tmp_path: Path,
     assert all(p.poll() is not None for p in procs)
 
 
+def _processes_in(folder: Path) -> list[str]:
+    """Command lines of the processes whose working directory is inside ``folder``."""
+    found = []
+    for p in psutil.process_iter():
+        with contextlib.suppress(psutil.Error):
+            if Path(p.cwd()).is_relative_to(folder):
+                found.append(" ".join(p.cmdline()))
+    return found
+
+
+def test_a_kernel_still_starting_at_the_stop_is_killed_as_it_appears() -> None:
+    """A Ctrl-C can come while papermill starts a task's kernel: no child process yet. The stop outwaits the
+    task and kills the kernel as it appears, so it cannot outlive its worker (and hold the run's terminal)."""
+    registered, codes = threading.Event(), []
+
+    def task() -> None:
+        with task_kernel():
+            registered.set()
+            time.sleep(0.3)  # the stop comes meanwhile; then the stand-in kernel appears
+            proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", "ipykernel"])
+            codes.append(proc.wait(timeout=30))
+
+    thread = threading.Thread(target=task)
+    thread.start()
+    registered.wait(10)
+    assert asyncio.run(stop_kernels(patience=30)) == 1
+    thread.join(10)
+    assert codes == [-signal.SIGKILL]
+    assert asyncio.run(stop_kernels(patience=30)) == 0  # no task running: nothing to outwait
+
+
+def test_a_ctrl_c_while_deferred_arrives_when_the_block_ends() -> None:
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with deferring_interrupts():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+            reached.append("the block ran to its end")
+    assert reached
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     write_notebook(tmp_path / "notebooks" / "timed.ipynb", TIMED_PARAMS, TIMED_BODY)
     timed = {**leaf_task(nap=120.0), "notebook": "notebooks/timed.ipynb"}
@@ -233,20 +352,21 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
                              str(pipeline), "--no-progress", "--workers", "2"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     logs = tmp_path / "outputs" / "smoke" / "_logs"
+    started = tmp_path / "outputs" / "smoke" / "started"  # each kernel marks its start there, then naps
     deadline = time.time() + 90
-    while time.time() < deadline and not all(
-            "--- kernel output ---" in (logs / f"{t}.log").read_text() if (logs / f"{t}.log").exists() else False
-            for t in ("leaf", "other")):
-        time.sleep(0.5)
-    time.sleep(3)  # the kernels are up and napping
+    while time.time() < deadline and not all((started / t).exists() for t in ("leaf", "other")):
+        time.sleep(0.2)
+    time.sleep(0.5)  # past the marks, the kernels napping (test_a_kernel_still_starting_at_the_stop_is_killed: before)
     family = psutil.Process(proc.pid).children(recursive=True)
     assert len(family) >= 4  # two workers (with their nanny/spawn helpers) and two kernels
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole foreground process group
-    out, _ = proc.communicate(timeout=60)
+    out, _ = proc.communicate(timeout=60)  # until the run and all that holds its output (a kernel too) are gone
     assert proc.returncode == 130, out
     assert "interrupted" in out
     assert "Task exception was never retrieved" not in out
+    assert "Traceback" not in out, out  # no worker took the Ctrl-C itself (its KeyboardInterrupt)
     gone, alive = psutil.wait_procs(family, timeout=15)
     assert not alive, [p.cmdline() for p in alive]
+    assert not _processes_in(tmp_path), "a process of the run (a kernel: cwd is the pipeline's root) outlived it"
     assert not (tmp_path / "outputs" / "smoke" / "leaf").exists()
     assert "\n--- FAILED" in (logs / "leaf.log").read_text()  # by the task itself or, if it was gone, the runner

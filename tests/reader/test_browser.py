@@ -25,6 +25,8 @@ from fnnbook.scoreboard import read_claims
 from reader.browser import missing_browser, read_book
 
 SMOKE = "smoke"
+#: one xdist worker builds the book and reads it; the other runs other tests meanwhile (``--dist loadgroup``)
+pytestmark = pytest.mark.xdist_group("book")
 #: what solver, kernel or library chatter looks like in an executed cell's output
 NOISE = re.compile(r"ERROR in osqp|Problem data validation|\bWarning\b|Traceback \(most recent call last\)")
 
