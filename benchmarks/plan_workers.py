@@ -8,6 +8,7 @@ bound max(critical path, total / K), and the utilisation total / (K x makespan).
 kernel start-up) are in the measured task times only as far as each task's own kernel start is.
 
     .venv/bin/python benchmarks/plan_workers.py outputs/paper [--workers 1 2 3 4 8]
+    .venv/bin/python benchmarks/plan_workers.py outputs/why    # the why tasks (the paper tasks it skipped are done)
 """
 
 from __future__ import annotations
@@ -18,9 +19,8 @@ import json
 import re
 from pathlib import Path
 
-import yaml
-
 from fnnbook.executor import longest_remaining
+from fnnbook.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 _OK = re.compile(r"--- ok after ([0-9.]+) s ---")
@@ -35,6 +35,8 @@ def measured(profile_dir: Path, tasks: list[str]) -> dict[str, float]:
     seconds: dict[str, float] = {}
     for task in tasks:
         entry = status.get(task)
+        if isinstance(entry, dict) and entry.get("status") == "skipped":
+            continue  # up to date before the run (the why profile's paper tasks): not part of its work
         if isinstance(entry, dict) and isinstance(entry.get("seconds"), (int, float)):
             seconds[task] = float(entry["seconds"])
         elif (log := profile_dir / "_logs" / f"{task}.log").is_file() and (
@@ -70,8 +72,10 @@ def main() -> None:
     parser.add_argument("--pipeline", type=Path, default=ROOT / "pipeline.yaml")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 3, 4, 6, 8])
     args = parser.parse_args()
-    every = {n: list(t.get("upstream", [])) for n, t in
-             yaml.safe_load(args.pipeline.read_text(encoding="utf-8"))["tasks"].items()}
+    spec = load_spec(args.pipeline)
+    profile = args.profile_dir.name  # the tasks this profile runs (a why run: its own, after the paper's)
+    names = spec.closure(spec.declares(profile)) if profile in spec.profiles else list(spec.tasks)
+    every = {n: list(spec.tasks[n].upstream) for n in names}  # grids as their points
     seconds = measured(args.profile_dir, list(every))
     if missing := sorted(set(every) - set(seconds)):
         print(f"no measured time (left out): {', '.join(missing)}")
