@@ -18,7 +18,9 @@ from __future__ import annotations
 import fnmatch
 import os
 import shutil
+import signal
 import subprocess
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,6 +108,18 @@ def bare_copy(dest: Path) -> Path:
         (dest / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / rel, dest / rel)
     return dest
+
+
+@pytest.fixture(autouse=True)
+def _sigint_as_found() -> Iterator[None]:
+    """A test leaves Ctrl-C's handler as it found it: a process left ignoring SIGINT hands that on to every
+    child, and a later test's ``fnn-pipeline run`` would then not stop on Ctrl-C."""
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    if after is not before:
+        signal.signal(signal.SIGINT, before)
+        pytest.fail(f"the test left SIGINT's handler changed: {before!r} -> {after!r}")
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,5 @@
-"""Every pipeline task, executed in the smoke profile: one test per task of pipeline.yaml.
+"""Every pipeline task, executed in the smoke profile: one test per task of pipeline.yaml (a grid's points one by
+one).
 
 The tasks share one output root for the run (the ``smoke_outputs`` fixture of
 ``tests/conftest.py``), so a task and its upstream tasks run once; later tests,
@@ -10,16 +11,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
 
 from conftest import SMOKE, SmokeOutputs
 
+from fnnbook import load_spec
 from fnnbook.runner import product_files
+from fnnbook.why import WHYS_FILENAME, read_whys
 from fnnlib.results import RESULTS_FILENAME, STATUSES, read_results
 
 PIPELINE = Path(__file__).resolve().parents[1] / "pipeline.yaml"
 PROFILE = SMOKE
-TASKS = list(yaml.safe_load(PIPELINE.read_text(encoding="utf-8"))["tasks"])
+TASKS = load_spec(PIPELINE).declares(PROFILE)  # a grid's points by name
 
 
 @pytest.mark.notebook
@@ -37,6 +39,11 @@ def test_task_runs_in_smoke_profile(smoke_outputs: SmokeOutputs, task: str) -> N
     _, missing = product_files(spec_task.products, out)  # a glob product (neural_ode_seed*.pt) matches >= 1 file
     assert not missing, f"{task} did not leave {missing}"
     assert (out / f"{task}.ipynb").is_file()
+    if spec_task.explains:  # a why task: one why per claim it explains (D1's needs the authors' networks)
+        whys = read_whys(out / WHYS_FILENAME)  # also checks the stored causes are the ones its runs give
+        assert set(whys) <= set(spec_task.explains) and len(whys) >= len(spec_task.explains) - 1, (task, set(whys))
+    if RESULTS_FILENAME not in spec_task.products:  # a why task or a grid point writes no claims
+        return
 
     results = read_results(out / RESULTS_FILENAME)  # also checks every verdict is a valid one
     assert results.task == task and results.profile == PROFILE

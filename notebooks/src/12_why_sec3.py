@@ -439,9 +439,11 @@ for w in whys:  # the verdict is the counted reading's
     same = "" if on_grid is None else (" (agrees)" if on_grid == (w.verdict == "reproduced") else " (DIFFERS)")
     print(f"{w.claim}: at the profile's point the rule {where}; the profile's verdict: {w.verdict}{same}")
 
-# %%
+# %% tags=["nbval-check-output"]
 for w in whys:
     print(f"{w.claim} ({w.verdict}): {w.summary}")
     for c in w.causes:
         print(f"   ({c.letter}) {c.name}: {c.evidence}")
+
+# %%
 print(f"grids: {time.perf_counter() - started:.1f} s wall, {time.process_time() - started_cpu:.1f} s CPU")

@@ -95,7 +95,7 @@ print(f"{len(seeds)} feedbacks: {hist.seconds:.1f} s ({hist.ms_per_iteration:.1f
 # %% [markdown]
 # ## The rules of D2, D3 and D4 at this point
 
-# %%
+# %% tags=["nbval-check-output"]
 results, numbers = judge(f_ens, h_ens, setup, len(seeds), loss=hist.member_loss, factor=d2_factor,
                          ratio_max=d3_ratio, flat=d3_flat)
 for c in results.values():

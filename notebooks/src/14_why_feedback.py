@@ -320,6 +320,10 @@ for cid in ("D1", "D2", "D3", "D4"):
                       authors=None if authors is None else authors[0].get(cid),
                       readings=c.reading_verdicts(), figure=figs.get(cid), note=NOTES[cid]))
 W.write_whys(out, whys)
+
+# %% tags=["nbval-check-output"]
 for w in whys:
     print(f"{w.claim} ({w.verdict}): causes {[c.letter for c in w.causes]}; Why: {w.summary}")
+
+# %%
 print(f"task time (after kernel start): {time.perf_counter() - task_start:.1f} s")

@@ -63,7 +63,7 @@ chosen = {c: q_mpc["adapnn_gamma"][c]["chosen"] for c in costs}  # AdapNN's gain
 # builder the flight test uses). The profile's own gains must be grid values, so that the grid passes through
 # the profile's point.
 
-# %% tags=["hide-input"]
+# %% tags=["hide-input", "nbval-check-output"]
 members, mlps = ([(seed, net.double()) for seed, net, _ in
                   F.load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
                                           run=upstream_parameters(up["quadrotor_learning"]))]

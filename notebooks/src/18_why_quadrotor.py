@@ -262,6 +262,8 @@ for q in ("Q3", "Q4", "Q5"):
     whys.append(Why(q, c.verdict, grids=grids[q], authors=authors.get(q), readings=c.reading_verdicts(),
                     figure=figures[q], note=f"{notes[q]} {THRUST}{AUTH}"))
 write_whys(out, whys)
+
+# %% tags=["nbval-check-output"]
 for w in whys:
     print(f"{w.claim} ({w.verdict}): {w.summary}")
     for cause in w.causes:
