@@ -30,11 +30,13 @@ def for_rerun(executed: Path, dst_dir: Path) -> Path:
     nb = nbformat.read(executed, as_version=4)
     out_dir = nb.metadata.get("papermill", {}).get("parameters", {}).get("out_dir")
     injected = [c for c in nb.cells if "injected-parameters" in c.metadata.get("tags", [])]
-    if not out_dir or len(injected) != 1 or out_dir not in injected[0].source:
+    quoted = [q + out_dir + q for q in ('"', "'")]  # the whole string: an upstream folder may start with it
+    if not out_dir or len(injected) != 1 or not any(q in injected[0].source for q in quoted):
         raise ValueError(f"{executed}: no injected out_dir to redirect")
     new_out = dst_dir / "out"
     new_out.mkdir(parents=True, exist_ok=True)
-    injected[0].source = injected[0].source.replace(out_dir, str(new_out))
+    for q in quoted:
+        injected[0].source = injected[0].source.replace(q, q[0] + str(new_out) + q[0])
     copy = dst_dir / executed.name
     nbformat.write(nb, copy)
     return copy
