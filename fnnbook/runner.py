@@ -27,6 +27,7 @@ from fnnbook.params import FINGERPRINT_FILE, check_task_parameters, read_paramet
 from fnnbook.preflight import check_grid_upstream, check_task_values
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
+from fnnlib.data.release import release_files
 
 __all__ = ["FINGERPRINT_FILE", "KERNEL", "STATUS_FILE", "TASK_THREADS", "Action", "Decision", "Plan",
            "RunReport", "Status", "TaskOutcome", "check", "cpu_count", "decide", "execute", "execute_task",
@@ -149,6 +150,7 @@ def check(
         parameters[name] = params
         if task.notebook not in code:
             code[task.notebook] = imported_modules(notebook_code(task.notebook), roots)
+        _check_release(spec, task, params)
         reads = None
         if "data_dir" in params and spec.data_dir is not None and spec.data_dir.is_dir():
             if task.data not in data:
@@ -160,6 +162,22 @@ def check(
     return Plan(profile=profile, order=tuple(order), selected=tuple(selected), parameters=parameters,
                 fingerprints=fingerprints, missing_data=missing_data, run=run, inputs=inputs)
 
+
+
+def _check_release(spec: PipelineSpec, task: Task, params: Mapping[str, Any]) -> None:
+    """A release file the task reads that is there with another SHA-256 than the published one: an error now, not
+    inside the notebook (a missing file is no error: the task then judges our networks only)."""
+    if "data_dir" not in params or spec.data_dir is None:
+        return
+    for entry in task.data:
+        if not (entry == "release" or entry.startswith("release/")):
+            continue
+        under = entry.removeprefix("release").lstrip("/")
+        changed = [k for k, v in release_files(spec.data_dir, under).items() if v == "changed"]
+        if changed:
+            raise PipelineError(f"task {task.name!r}: {spec.data_dir / 'release' / changed[0]} fails its SHA-256 "
+                                f"check ({len(changed)} file(s) so): it is not the authors' published file; fetch "
+                                "it again (fnn-pipeline data fetch --release) or remove it")
 
 
 def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, Decision]:
