@@ -23,7 +23,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from fnnbook.book import assemble_book, build_book
+from fnnbook.book import make_book
 from fnnbook.data import BOTTLE_SOURCES, fetch_bottle, fetch_release
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
@@ -193,14 +193,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "book":
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
-            assemble_book(spec, args.profile, book_dir)
+            start = time.perf_counter()
+            html = make_book(spec, args.profile, book_dir, echo=lambda line: print(line, flush=True))
             not_run = {t: s["message"] for t, s in read_status(spec, args.profile).items()
                        if s.get("status") in (Status.FAILED, Status.NOT_RUN)}
             for task, why in not_run.items():
                 print(f"note: {task} is shown as not run or from an older run ({why})")
-            start = time.perf_counter()
-            html = build_book(book_dir)
-            print(f"book built in {time.perf_counter() - start:.1f} s: {html / 'index.html'}")
+            print(f"book of profile {args.profile} (output root {spec.output_root}) built in "
+                  f"{time.perf_counter() - start:.1f} s: {html / 'index.html'}")
             return 0
     except (PipelineError, DataError) as exc:
         print(f"error: {exc}", file=sys.stderr)

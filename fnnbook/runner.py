@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from fnnbook.execution import execute, execute_task
-from fnnbook.fingerprint import (data_inputs, environment, fingerprint, imported_modules, inputs_of, is_up_to_date,
-                                 notebook_code, package_roots, product_files, stale_reason)
+from fnnbook.fingerprint import (NO_EARLIER_RUN, data_inputs, environment, fingerprint, imported_modules, inputs_of, is_up_to_date,
+                                 notebook_code, package_roots, product_files, stale_reason, stored)
 from fnnbook.kernel import KERNEL, TASK_THREADS, cpu_count, kill_kernels, task_threads
 from fnnbook.layout import STATUS_FILE, logs_dir, mark_killed, read_status, staging_dir, write_status
 from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, summary
@@ -200,6 +200,8 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
             ran = [u for u in task.upstream if verdict[u].action is Action.RUN]
             if force and name in plan.selected:
                 why: str | None = "forced"
+            elif not stored(spec, plan.profile, name):
+                why = NO_EARLIER_RUN
             elif ran:
                 why = f"upstream: {', '.join(ran[:3])}{' and more' if len(ran) > 3 else ''} reruns"
             else:
