@@ -135,7 +135,7 @@ class MeasuredFeedback:
         else:
             C_lin = C
         self._A, self._allow = A, allow_unstable
-        self.L, self.C = check_output_gain(L_in, C_lin, self.Ts or 1e-12, A=A, allow_unstable=True)
+        self.L, self.C = check_output_gain(L_in, C_lin, 1.0, allow_unstable=True)  # shapes here; stability per step
         self.p, self.n = self.C.shape
         self._checked: dict[float, Tensor] = {}
         if self.Ts is not None:
