@@ -186,14 +186,8 @@ class _OutputModel(AugmentedObserver):
         or None, ``ms`` (B, T, p) or None, ``hs`` (B, T-1) the step of each interval (``Ts`` everywhere
         without ``t``), ``x0s`` (B, n) or None. ``limit``: refuse measurements larger in magnitude.
         """
-        meas = check_measurements(y, self.n, C=self.C_x, u=u, mask=mask, f=self.f)
+        meas = check_measurements(y, self.n, C=self.C_x, u=u, mask=mask, f=self.f)  # refuses a record with no sample
         lead, T = meas.y.shape[:-2], meas.y.shape[-2]
-        if meas.mask is not None:
-            present = meas.mask.flatten(-2).any(-1)  # (...,) whether a record has one present output at all
-            if not bool(present.all()):
-                idx = tuple(int(i) for i in (~present).nonzero()[0]) if present.ndim else ()
-                raise ValueError(f"y has no present sample at all{f' (record {idx})' if idx else ''}: every value is "
-                                 "NaN or masked out, so there is nothing to estimate from; drop that record")
         if limit is not None:
             big = float(meas.y.abs().max()) if meas.y.numel() else 0.0
             if big > limit:

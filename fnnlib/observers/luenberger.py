@@ -175,6 +175,7 @@ class LuenbergerObserver(_OutputModel):
             return self.constant_gain_loop(K, x, u, mask, t=t, x0=x0)
         x = as_trajectory(x, self.n)
         dt = observer_steps(t, self.Ts, x)
+        self.start_prior(x, x0)  # x0 checked before the model runs
         if not isinstance(dt, Tensor):
             return self.constant_gain_estimate(*self.inputs(x, u), self.L, u, x0=x0)
         h = steps_per_record(dt, tuple(x.shape[:-2]))
