@@ -269,3 +269,21 @@ def test_times_with_a_step_are_refused():
         rollout_corrected(PLANT, x[0], x[0], TS, 2, u[0], t=_uniform_times(1)[0])
     with pytest.raises(TypeError, match="floating-point"):
         F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=torch.arange(T))
+
+
+def test_linear_feedback_with_times():
+    """LinearFeedback: uniform times equal Ts; random times follow x_hat_{k+1} = x_hat_k + Delta_k f_hat_k and the
+    cascade's own times; a gain stable at Ts but not at the longest interval is refused (Eq. (25))."""
+    x, u = _records(2)
+    obs = F.LinearFeedback(PLANT, 3.0, TS2, 2)
+    tu = _uniform_times(2)
+    for a, b in zip(obs.observe(x, u), obs.observe(x, u, t=tu)):
+        torch.testing.assert_close(b, a, **TOL)
+    torch.testing.assert_close(obs.predict(x, 4, u, t=tu), obs.predict(x, 4, u), **TOL)
+    t = _random_times(2)
+    est = obs.observe(x, u, t=t)
+    torch.testing.assert_close(est.x_hat[:, 1:], est.x_hat[:, :-1] + t.diff(dim=-1)[..., None] * est.f_hat[:, :-1],
+                               **TOL)
+    torch.testing.assert_close(obs.predict(x, 3, u, t=t), F.cascade_predict(PLANT, x, None, 3, 3.0, t=t, u=u), **TOL)
+    with pytest.raises(F.feedback.gains.GainError):
+        F.LinearFeedback(PLANT, 25.0, TS, 2).observe(x, u, t=t * 2)  # rho(I - Delta L) > 1 at the longest interval
