@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from fnnbook.book import make_book
-from fnnbook.data import BOTTLE_SOURCES, fetch_bottle, fetch_release
+from fnnbook.data import BOTTLE_SOURCES, fetch_bottle, fetch_release, fetch_tanks
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
 from fnnbook.outcome import Status
@@ -100,6 +100,9 @@ def _parser() -> argparse.ArgumentParser:
     p_fetch.add_argument("--release", action="store_true",
                          help="also the authors' trained networks (what `make why` evaluates beside ours) into "
                               "DATA_DIR/release/, from the official release at its pinned commit")
+    p_fetch.add_argument("--tanks", action="store_true",
+                         help="also the cascaded tanks benchmark's data file into DATA_DIR/cascaded_tanks/, "
+                              "extracted from its official archive (SHA-256 pinned)")
     p_fetch.add_argument("--optional", action="store_true",
                          help="when no source serves the files (no network), say so in one line and exit 0")
     return parser
@@ -182,6 +185,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     raise
                 print(f"note: going on without the bottle throws (the bottle task and claims O1-O2 will read "
                       f"'not run: data missing'): {exc}", flush=True)
+            if args.tanks:
+                try:
+                    fetch_tanks(spec.data_dir)
+                except DataError as exc:
+                    if not args.optional:
+                        raise
+                    print(f"note: going on without the cascaded tanks data (its chapter and claims will read "
+                          f"'not run: data missing'): {exc}", flush=True)
             if args.release:
                 try:
                     fetch_release(spec.data_dir)
