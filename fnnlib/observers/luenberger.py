@@ -198,7 +198,9 @@ class LuenbergerObserver(_OutputModel):
         group = np.concatenate([[0], np.cumsum(np.diff(uniq) > rtol * uniq[1:])])  # runs of near-equal intervals
         reps = [uniq[group == g] for g in range(int(group[-1]) + 1)]
         at_Ts = np.array([bool(np.any(np.abs(hg - self.Ts) <= rtol * self.Ts)) for hg in reps])
-        Phis = np.stack([self._linearised(self.J, float(hg[0])).numpy() for hg in reps])
+        eye = np.eye(self.n + self.q)
+        Acl = (self.Phi.numpy() - eye) / self.Ts  # Phi(h) = I + h (A_c + [[J, 0], [0, 0]]), linear in h
+        Phis = eye + np.array([float(hg[0]) for hg in reps])[:, None, None] * Acl
         gains = np.empty((len(reps), self.n + self.q, self.p))
         todo = np.flatnonzero(~at_Ts)
         L = _ackermann(Phis[todo], self.C.numpy(), self.poles) if self.p == 1 and todo.size else None
