@@ -163,8 +163,9 @@ def test_luenberger_poles_hold_per_sample():
     for k, h in enumerate([0.02, 0.11, 0.02, 0.02]):
         Phi = obs_C._linearised(A, h).numpy()
         L = Phi @ K[0, k]  # the predictor gain of that interval
+        # single-output placement leaves a non-normal Phi - L C whose poles move ~1e-7 under a 1e-16 change of Phi
         np.testing.assert_allclose(np.sort(np.linalg.eigvals(Phi - L @ obs_C.C.numpy()).real), [0.7, 0.75, 0.8],
-                                   atol=1e-9)
+                                   atol=1e-6)
 
 
 def test_rollout_and_prediction_step_along_the_record_times():
