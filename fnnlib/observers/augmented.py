@@ -36,7 +36,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from fnnlib._scan import linear_recurrence
+from fnnlib._scan import linear_recurrence, varying_recurrence
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.layer import eval_field, shift_inputs
@@ -124,8 +124,8 @@ def varying_gain_filter(A: Tensor, B: Tensor, C: Tensor, M: Tensor, u: Tensor, y
 
     :math:`\hat z_{k|k} = \hat z_{k|k-1} + M_k(y_k - C\hat z_{k|k-1})`,
     :math:`\hat z_{k+1|k} = A_k \hat z_{k|k} + B_k u_k`, from :math:`\hat z_{0|-1} = [y_0; 0]` (or ``z0``): the
-    recursion of :func:`constant_gain_filter` with a plant per interval. One loop over time, batched over
-    the leading axes.
+    recursion of :func:`constant_gain_filter` with a plant per interval, solved by the doubling scan of
+    :func:`~fnnlib._scan.varying_recurrence` (log2 T batched passes, every leading axis at once).
 
     Parameters
     ----------
@@ -145,18 +145,16 @@ def varying_gain_filter(A: Tensor, B: Tensor, C: Tensor, M: Tensor, u: Tensor, y
     T, m = y.shape[-2], A.shape[-1]
     if z0 is None:
         z0 = torch.cat([y[..., 0, :], torch.zeros(*y.shape[:-2], m - y.shape[-1], dtype=F64)], -1)
-    lead = torch.broadcast_shapes(y.shape[:-2], A.shape[:-3], z0.shape[:-1])
-    A, B = A.expand(*lead, *A.shape[-3:]), B.expand(*lead, *B.shape[-3:])
+    lead = torch.broadcast_shapes(y.shape[:-2], A.shape[:-3], z0.shape[:-1], M.shape[:-3] if M.ndim > 2 else ())
     M = M.expand(*lead, T, *M.shape[-2:]) if M.ndim > 2 else M.expand(*lead, T, *M.shape)
     y, u = y.expand(*lead, *y.shape[-2:]), u.expand(*lead, *u.shape[-2:])
-    prior = z0.expand(*lead, m)
-    out = []
-    for k in range(T):
-        z = prior + ((y[..., k, :] - prior @ C.T)[..., None, :] @ M[..., k, :, :].mT)[..., 0, :]
-        out.append(z)
-        if k < T - 1:  # z_{k+1|k} = A_k z_{k|k} + B_k u_k
-            prior = (A[..., k, :, :] @ z[..., None])[..., 0] + (B[..., k, :, :] @ u[..., k, :, None])[..., 0]
-    return torch.stack(out, -2)
+    eye = torch.eye(m, dtype=F64)
+    # z_{k+1|k} = A_k (I - M_k C) z_{k|k-1} + A_k M_k y_k + B_k u_k: one scan with a transition per step
+    Mk = M[..., :-1, :, :]
+    trans = A @ (eye - Mk @ C)
+    b = (A @ (Mk @ y[..., :-1, :, None]))[..., 0] + (B @ u[..., :-1, :, None])[..., 0]
+    prior = varying_recurrence(trans, b, z0.expand(*lead, m))
+    return prior + ((y - prior @ C.T)[..., None, :] @ M.mT)[..., 0, :]  # z_{k|k} = z_{k|k-1} + M_k (y_k - C z_{k|k-1})
 
 
 def constant_gain_filter(A: Tensor, B: Tensor, C: Tensor, L: Tensor, u: Tensor, y: Tensor,

@@ -479,7 +479,12 @@ class ExtendedKalmanObserver(_KalmanBase):
             X = torch.as_tensor(x, dtype=dtype).expand(n, n).clone().requires_grad_(True)
             out = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(n, -1))
             (J,) = torch.autograd.grad(out.diagonal().sum(), X)  # J[i, j] = d f_i / d x_j
-        F = (self.A if Ts == self.Ts else augmented_step(self.A, self.B, self.Ts, torch.tensor(Ts))[0]).numpy().copy()
+        if Ts == self.Ts:
+            F = self.A.numpy().copy()
+        else:  # A(h) = I + h A_c (the exact hold of the augmented plant, fnnlib.observers.augmented)
+            if getattr(self, "_Ac", None) is None:
+                self._Ac = ((self.A - torch.eye(self.A.shape[0], dtype=self.A.dtype)) / self.Ts).numpy()
+            F = np.eye(self._Ac.shape[0]) + Ts * self._Ac
         F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts E], [0, I]]
         Ed = d if self.E is None else self.E.numpy() @ d
         x_next = x + Ts * (out[0].detach().double().numpy() + Ed)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}, u_k) + E d)
