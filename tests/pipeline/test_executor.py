@@ -107,6 +107,7 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     assert report.ok, lines
     assert {o.status for o in report.outcomes} == {"ok"}
     assert lines[0].startswith("running on a local Dask cluster: 2 worker(s), ")
+    assert lines[1].startswith("dashboard: http://127.0.0.1:"), lines[1]  # bokeh is in the lock: a live dashboard
     # the utilisation: the task seconds over 2 workers' wall time, printed and recorded
     assert report.workers == 2 and report.wall > 0
     assert report.busy == pytest.approx(sum(o.seconds for o in report.outcomes))
