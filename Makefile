@@ -25,14 +25,14 @@ PY := $(VENV)/bin/python
 main: venv
 	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
-	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) && exit $$status
+	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) --data-dir $(DATA_DIR) && exit $$status
 
 # The why profile (after or without `make main`: it reuses the paper profile's outputs and runs what they
 # lack), then the paper book, whose scoreboard rows then carry each claim's why.
 why: venv
 	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --release --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile why --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
-	$(VENV)/bin/fnn-pipeline book --profile paper && exit $$status
+	$(VENV)/bin/fnn-pipeline book --profile paper --data-dir $(DATA_DIR) && exit $$status
 
 venv: $(VENV)/.installed
 
@@ -47,7 +47,7 @@ pipeline: venv
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS)
 
 book: venv
-	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
+	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) --data-dir $(DATA_DIR)
 
 # Download the published throws (Sec. 5.1) and the cascaded tanks benchmark into DATA_DIR and check their SHA-256 (an error without network).
 data: venv
