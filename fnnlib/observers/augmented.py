@@ -88,12 +88,20 @@ def augmented_step(A: Tensor, B: Tensor, Ts: float, h: Tensor) -> tuple[Tensor, 
 
 def steps_per_record(dt: Tensor, lead: tuple[int, ...]) -> Tensor:
     """The intervals ``dt`` (..., T-1) of :func:`~fnnlib.feedback.sampling.check_times` expanded to the records' leading axes."""
-    return dt.to(F64).expand(*lead, dt.shape[-1])
+    try:
+        return dt.to(F64).expand(*lead, dt.shape[-1])
+    except RuntimeError:
+        raise ValueError(f"the sample times t have leading axes {tuple(dt.shape[:-1])} but the records have "
+                         f"{tuple(lead)}: give one grid (T,) or one per record") from None
 
 
 def observer_steps(t: Tensor | None, Ts: float, y: Tensor, *, name: str = "y") -> Steps:
     """The observer's nominal ``Ts`` without ``t``; with it, the checked intervals (..., T-1) of ``y``'s sample times."""
-    return Ts if t is None else check_times(t, None, y, name=name)
+    if t is None:
+        return Ts
+    dt = check_times(t, None, y, name=name)
+    steps_per_record(dt, tuple(y.shape[:-2]))  # no more time grids than records
+    return dt
 
 
 def check_x0(x0, n: int, lead: tuple[int, ...], dtype: torch.dtype) -> Tensor | None:
