@@ -73,7 +73,8 @@ class LinearFeedback:
         return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), step)
 
     def steps(self, x: Tensor, t: Tensor | None):
-        """``Ts``, or the intervals (..., T-1) of the times ``t`` of ``x``, the gain checked at the longest (Eq. (25))."""
+        """``Ts``, or the intervals (..., T-1) of the times ``t`` of ``x``, the gain checked at the longest (Eq.
+        (25))."""
         if t is None:
             return self.Ts
         dt = observer_steps(t, self.Ts, x, name="x")

@@ -187,7 +187,8 @@ class LuenbergerObserver(_OutputModel):
         return self.constant_gain_estimate(*self.inputs(x, u), L_k, u, dt=dt, x0=x0)
 
     def interval_gains(self, hs: np.ndarray, *, rtol: float = 1e-10) -> np.ndarray:
-        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval of ``hs`` (B, T-1).
+        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval
+        of ``hs`` (B, T-1).
 
         One placement per distinct interval; sample k uses the interval after it (the last sample the one before).
         Intervals within ``rtol`` of each other share one placement (a grid's rounding, ~1e-15, would
