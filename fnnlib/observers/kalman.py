@@ -74,6 +74,8 @@ def as_covariance(M: float | Tensor | list, m: int, *, name: str, definite: bool
     """A covariance (m, m) float64 from a scalar (times I), a vector (diagonal) or a matrix; checked PSD (or PD)."""
     try:
         M = gain_matrix(M, m)
+    except TypeError:
+        raise TypeError(f"{name} must be a number, a vector or a matrix of numbers, got {M!r}") from None
     except ValueError:
         raise ValueError(f"{name} must be a scalar, a vector of length {m} or an ({m}, {m}) matrix; "
                          f"got shape {tuple(torch.as_tensor(M).shape)}") from None
