@@ -76,7 +76,9 @@ def augmented_matrices(n: int, Ts: float) -> tuple[Tensor, Tensor, Tensor]:
 
 
 def augmented_step(A: Tensor, B: Tensor, Ts: float, h: Tensor) -> tuple[Tensor, Tensor]:
-    r"""The augmented plant ``A``, ``B`` of step ``Ts`` rediscretised at the steps ``h`` (...,): (..., m, m), (..., m, p).
+    r"""The augmented plant ``A``, ``B`` of step ``Ts`` rediscretised at the steps ``h`` (...,).
+
+    Returns :math:`A(\Delta)` (..., m, m) and :math:`B(\Delta)` (..., m, p).
 
     The plant is :math:`A(\Delta) = I + \Delta A_c`, :math:`B(\Delta) = \Delta B_c` (module docstring: the exact
     zero-order hold, :math:`A_c` nilpotent), so :math:`A_c = (A - I)/T_s`, :math:`B_c = B/T_s`.
@@ -87,17 +89,28 @@ def augmented_step(A: Tensor, B: Tensor, Ts: float, h: Tensor) -> tuple[Tensor, 
 
 
 def steps_per_record(dt: Tensor, lead: tuple[int, ...]) -> Tensor:
-    """The intervals ``dt`` (..., T-1) of :func:`~fnnlib.feedback.sampling.check_times` expanded to the records' leading axes."""
-    return dt.to(F64).expand(*lead, dt.shape[-1])
+    """The intervals ``dt`` (..., T-1) of :func:`~fnnlib.feedback.sampling.check_times` expanded to the records'
+    leading axes."""
+    try:
+        return dt.to(F64).expand(*lead, dt.shape[-1])
+    except RuntimeError:
+        raise ValueError(f"the sample times t have leading axes {tuple(dt.shape[:-1])} but the records have "
+                         f"{tuple(lead)}: give one grid (T,) or one per record") from None
 
 
 def observer_steps(t: Tensor | None, Ts: float, y: Tensor, *, name: str = "y") -> Steps:
-    """The observer's nominal ``Ts`` without ``t``; with it, the checked intervals (..., T-1) of ``y``'s sample times."""
-    return Ts if t is None else check_times(t, None, y, name=name)
+    """The observer's nominal ``Ts`` without ``t``; with it, the checked intervals (..., T-1) of ``y``'s sample
+    times."""
+    if t is None:
+        return Ts
+    dt = check_times(t, None, y, name=name)
+    steps_per_record(dt, tuple(y.shape[:-2]))  # no more time grids than records
+    return dt
 
 
 def check_x0(x0, n: int, lead: tuple[int, ...], dtype: torch.dtype) -> Tensor | None:
-    """A first state estimate ``x0``: (n,) or (..., n) broadcasting against the records' leading axes ``lead``, finite."""
+    """A first state estimate ``x0``: (n,) or (..., n) broadcasting against the records' leading axes ``lead``,
+    finite."""
     if x0 is None:
         return None
     try:
@@ -300,7 +313,8 @@ class AugmentedObserver:
         return x, u
 
     def start_prior(self, x: Tensor, x0) -> Tensor | None:
-        """The prior :math:`\\hat z_{0|-1} = [x_0; 0]` (..., 2n) from a checked first estimate ``x0``, or None (then :math:`[y_0; 0]`)."""
+        """The prior :math:`\\hat z_{0|-1} = [x_0; 0]` (..., 2n) from a checked first estimate ``x0``, or None (then
+        :math:`[y_0; 0]`)."""
         x0 = check_x0(x0, self.n, tuple(x.shape[:-2]), F64)
         return None if x0 is None else torch.cat([x0, torch.zeros_like(x0)], -1)
 

@@ -71,7 +71,10 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
     m = A.shape[0]
     if A.shape != (m, m) or C.shape[1] != m:
         raise ValueError(f"A must be square and C have as many columns; got A {A.shape}, C {C.shape}")
-    p = np.asarray(poles, dtype=complex).ravel()
+    try:
+        p = np.asarray(poles, dtype=complex).ravel()
+    except (TypeError, ValueError):
+        raise TypeError(f"poles must be numbers (real or complex), got {poles!r}") from None
     if p.size != m:
         raise ValueError(f"need {m} poles for a {m}-state observer, got {p.size}: {p.tolist()}")
     if not np.all(np.isfinite(p)):
@@ -154,7 +157,10 @@ class LuenbergerObserver(_OutputModel):
         if poles is not None:
             self.L = place_observer_gain(self.Phi, self.C, poles, allow_unstable=allow_unstable)
         else:
-            self.L = torch.as_tensor(L, dtype=torch.float64)
+            try:
+                self.L = torch.as_tensor(L, dtype=torch.float64)
+            except (TypeError, ValueError, RuntimeError):
+                raise TypeError(f"observer gain L must be a matrix of numbers, got {L!r}") from None
             if self.L.shape != (self.n + self.q, self.p):
                 raise ValueError(f"observer gain L must have shape {(self.n + self.q, self.p)}, got {tuple(self.L.shape)}")
             rho = float(np.abs(self.error_poles()).max())
@@ -187,7 +193,8 @@ class LuenbergerObserver(_OutputModel):
         return self.constant_gain_estimate(*self.inputs(x, u), L_k, u, dt=dt, x0=x0)
 
     def interval_gains(self, hs: np.ndarray, *, rtol: float = 1e-10) -> np.ndarray:
-        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval of ``hs`` (B, T-1).
+        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval
+        of ``hs`` (B, T-1).
 
         One placement per distinct interval; sample k uses the interval after it (the last sample the one before).
         Intervals within ``rtol`` of each other share one placement (a grid's rounding, ~1e-15, would

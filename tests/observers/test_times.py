@@ -268,6 +268,14 @@ def test_times_with_a_step_are_refused():
     x, u = _records(1)
     with pytest.raises(TypeError, match="not both"):
         rollout_corrected(PLANT, x[0], x[0], TS, 2, u[0], t=_uniform_times(1)[0])
+    with pytest.raises(ValueError, match="one grid"):  # more time grids than records
+        F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=_uniform_times(3))
+    with pytest.raises(ValueError, match="one grid"):
+        F.LuenbergerObserver(PLANT, TS, 2, [0.5, 0.6, 0.7, 0.8]).observe(x[0], u[0], t=_uniform_times(3))
+    with pytest.raises(ValueError, match="one grid"):
+        _neural().observe(x[0], t=_uniform_times(3))
+    with pytest.raises(ValueError, match="one grid"):
+        F.LinearFeedback(PLANT, 3.0, TS, 2).observe(x[0], u[0], t=_uniform_times(3))
     with pytest.raises(TypeError, match="floating-point"):
         F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=torch.arange(T))
 
