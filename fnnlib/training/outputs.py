@@ -22,7 +22,6 @@ the cascade uses; uneven times are taken as ``t``.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -36,7 +35,7 @@ from fnnlib.feedback.layer import eval_field
 from fnnlib.feedback.measured import MeasuredFeedback
 from fnnlib.feedback.measurement import Measurements, check_measurements
 from fnnlib.feedback.sampling import Steps, check_times, row_steps
-from fnnlib.models.neural_ode import mlp
+from fnnlib.models.neural_ode import init_parameters, mlp
 from fnnlib.training.neural_ode import OPTIMIZERS, Recipe
 
 STARTS = ("feedback", "free", "encoder")
@@ -177,7 +176,7 @@ def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, 
     elif r.start == "encoder":
         encoder = mlp(r.burn * (2 * meas.p + (0 if meas.u is None else meas.u.shape[-1])), n, r.encoder_hidden, "tanh")
         encoder = encoder.to(dtype)
-        _init(encoder, gen)
+        init_parameters(encoder, gen)
         params += list(encoder.parameters())
     else:  # free: consecutive windows, each with its own start state
         n_starts = T - W + 1
@@ -224,17 +223,6 @@ def _state_dim(model: nn.Module, C, recipe: OutputRecipe) -> int:
     if recipe.L is not None:
         return len(recipe.L)
     raise ValueError("cannot tell the state dimension: give a model with .n, a matrix C or the recipe's L")
-
-
-def _init(module: nn.Module, gen: torch.Generator) -> None:
-    """Initialise linear layers from ``gen`` (no global random state): uniform(+-1/sqrt(fan_in)), as torch does."""
-    with torch.no_grad():
-        for m in module.modules():
-            if isinstance(m, nn.Linear):
-                bound = 1.0 / math.sqrt(m.in_features)
-                m.weight.copy_((torch.rand(m.weight.shape, generator=gen, dtype=m.weight.dtype) * 2 - 1) * bound)
-                if m.bias is not None:
-                    m.bias.copy_((torch.rand(m.bias.shape, generator=gen, dtype=m.bias.dtype) * 2 - 1) * bound)
 
 
 def _seg_meas(meas: Measurements, rec: Tensor, idx: Tensor) -> Measurements:
