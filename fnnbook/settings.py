@@ -226,6 +226,7 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                      "fb_iterations": _N1, "fb_lr": _POS, "fb_optimizer": _OPTIMIZER, "refresh_every": _N1,
                      "d1_factor": _POS, "d2_factor": _POS, "d3_ratio": _POS, "d3_flat": _POS,
                      "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS,
+                     "dr_n_samples": _N2, "dr_Ts": _POS, "d4_beta": _SWEEP0,
                      "authors_ode": _choice(*SPIRAL_ODE_NAMES), "authors_dr_ode": _choice(*SPIRAL_ODE_NAMES),
                      "authors_feedback": _choice(*SPIRAL_FEEDBACK_NAMES)},
     "bottle": {"data": _choice("real", "synthetic"), "seeds": _SEEDS2, **_ODE_FIT, **_SPIRAL_FB,
