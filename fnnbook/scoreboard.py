@@ -67,6 +67,9 @@ class Claim:
         The paper's sentence that reading rests on (quoted from the paper).
     strict : str
         The name of the strict reading, shown beside the counted one, never counted ("" when none).
+    units : str
+        What the claim's units share, where they are not independent experiments (one ensemble trained on
+        shared mini-batches, a network shared by several units); shown beside n ("" when nothing is shared).
     """
 
     id: str
@@ -80,6 +83,7 @@ class Claim:
     words: str = ""
     words_sentence: str = ""
     strict: str = ""
+    units: str = ""
 
 
 @dataclass(frozen=True)
@@ -101,7 +105,7 @@ class ScoreRow:
 
 #: fields every claim of the registry must give (non-empty); ``settings`` and ``notebook`` are optional
 CLAIM_FIELDS = ("id", "statement", "section", "figure", "task")
-_OPTIONAL_FIELDS = ("settings", "notebook", "words", "strict")
+_OPTIONAL_FIELDS = ("settings", "notebook", "words", "strict", "units")
 
 
 def _text(value: Any, where: str, name: str) -> str:
@@ -133,7 +137,8 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
                  notebook=_text(entry["notebook"], where, "notebook") if "notebook" in entry else "",
                  words="" if words is None else _text(words["reading"], where, "words.reading"),
                  words_sentence="" if words is None else _text(words["sentence"], where, "words.sentence"),
-                 strict=_text(entry["strict"], where, "strict") if "strict" in entry else "")
+                 strict=_text(entry["strict"], where, "strict") if "strict" in entry else "",
+                 units=_text(entry["units"], where, "units") if "units" in entry else "")
 
 
 def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
@@ -142,7 +147,8 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
     The file holds ``groups:``, a list (possibly empty) of ``{name, settings, claims}``; each claim gives ``id``,
     ``statement``, ``section``, ``figure`` and ``task`` (all non-empty), optionally ``settings`` and
     ``notebook``; a claim with several readings names ``words`` (``reading``: the reading the paper's words
-    support, counted; ``sentence``: the paper's words it rests on) and ``strict`` (the strict reading's name).
+    support, counted; ``sentence``: the paper's words it rests on) and ``strict`` (the strict reading's name);
+    ``units`` says what the claim's units share, where they are not independent.
 
     Parameters
     ----------

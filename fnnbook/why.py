@@ -245,7 +245,9 @@ class AuthorsCheck:
     networks : str
         Which of the release's networks (file names in its README).
     n : int
-        Independent units behind the verdict (the release has one network per kind, five quadrotor runs).
+        Units behind the verdict (the release has one network per kind, five quadrotor runs).
+    shared : str
+        What those units share, where they are not independent (e.g. 5 units flying 2 MLPs); "" when nothing.
     """
 
     verdict: str
@@ -253,6 +255,7 @@ class AuthorsCheck:
     checks: Mapping[str, bool]
     networks: str
     n: int = 1
+    shared: str = ""
 
     def __post_init__(self) -> None:
         for v in (self.verdict, self.ours):
@@ -267,12 +270,12 @@ class AuthorsCheck:
 
     def to_json(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "ours": self.ours, "checks": dict(self.checks),
-                "networks": self.networks, "n": int(self.n)}
+                "networks": self.networks, "n": int(self.n), "shared": self.shared}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> AuthorsCheck:
         return cls(verdict=data["verdict"], ours=data["ours"], checks=data["checks"], networks=data["networks"],
-                   n=int(data.get("n", 1)))
+                   n=int(data.get("n", 1)), shared=data.get("shared", ""))
 
 
 @dataclass(frozen=True)
@@ -398,7 +401,8 @@ def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> st
     lines = [f"{g.title + ': ' if named and g.title else ''}{_grid_line(g)} "
              f"({g.n} {_plural(g.unit, g.n)} per point)" for g in grids]
     if authors is not None:
-        lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours})")
+        shared = f"; n = {authors.n}, {authors.shared}" if authors.shared else ""
+        lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours}{shared})")
     return "; ".join(lines)
 
 

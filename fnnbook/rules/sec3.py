@@ -66,19 +66,22 @@ def s2(*, nominal_rel: Value, test_rel_neural_ode: Value, rate_neural_ode: Value
     change rate and the ``N``-step error (cascade of Sec. 3.3 against the Euler rollout).
 
     The degradation is the test's premise, fixed by the test spiral the paper picks (its parameters far from
-    the nominal ones), not something a run could refute: a guarantee (test error above ``degrade_factor`` x the
-    nominal one, paired over seeds); the checks are the feedback's two paired wins."""
+    the nominal ones): on the paper's settings no plausible run fails it, so it decides nothing. It is shown as a
+    number (``premise_test_over_nominal``: the test relative error over ``degrade_factor`` x the nominal one, per
+    seed, and whether it exceeds 1 in every seed), never a check, and not a guarantee either (a barely trained
+    network, as in a smoke run, need not degrade). The checks are the feedback's two paired wins."""
     scaled = degrade_factor * per_seed(nominal_rel)
     return ClaimResult(
         "S2",
         checks={"feedback_rate_better": beats(rate_feedback, rate_neural_ode),
                 f"feedback_N{N}_better": beats(err_N_feedback, err_N_neural_ode)},
-        guarantees={"premise: the test spiral degrades the neural ODE (fixed by the chosen test spiral)":
-                    bool((per_seed(test_rel_neural_ode) > scaled).all())},
+        guarantees={},
+        numbers={"premise_test_over_nominal": (per_seed(test_rel_neural_ode) / scaled).tolist(),
+                 "premise_holds_every_seed": bool((per_seed(test_rel_neural_ode) > scaled).all())},
         reading="'significantly different' test model and 'better approximated accuracy ... smaller multi-step "
                 "error' (Fig. 4d-f) read as a degradation by a factor and paired wins of the feedback",
         rule=f"feedback beats the neural ODE in change-rate RMSE and in mean {N}-step error; the premise (test "
-             f"relative rate error > {degrade_factor:g}x the nominal one in every seed) is a guarantee"
+             f"relative rate error > {degrade_factor:g}x the nominal one) is shown, not judged"
              + seeds_note(rate_feedback))
 
 

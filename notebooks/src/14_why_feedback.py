@@ -281,7 +281,7 @@ def axis_grid(key, cid):
 # weights. Their spread is that of the initialisation alone, not of independent experiments.
 
 # %%
-UNIT = "seed (one ensemble: shared mini-batches, one test trajectory)"
+UNIT = "seed (one ensemble)"
 
 
 # %% [markdown]

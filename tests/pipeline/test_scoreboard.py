@@ -257,3 +257,13 @@ def test_better_than_claimed_is_a_verdict_of_its_own(claims_file: Path) -> None:
     assert rows[0].verdict == BETTER
     page = render_scoreboard(rows, profile="paper", pages={})
     assert "1 better than claimed" in page and "`better than claimed`" in page
+
+
+def test_a_row_says_what_its_units_share(tmp_path: Path) -> None:
+    path = tmp_path / "claims.yaml"
+    path.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        units: one ensemble, shared batches", 1))
+    claims = read_claims(path)
+    assert claims[0].units == "one ensemble, shared batches"
+    s1 = ClaimResult("S1", checks={"a": True}, rule="r", n=5)
+    page = render_scoreboard(score_rows(claims, _results("spiral", s1)), profile="paper", pages={})
+    assert "**Units:** n = 5. one ensemble, shared batches" in _row_lines(page, "S1")[1]
