@@ -19,18 +19,18 @@ PY := $(VENV)/bin/python
 
 .PHONY: main why test venv pipeline book lock data notebooks
 
-# The throws are fetched when missing (one attempt per source; without network one line says so and the
-# bottle task does not run). The book is built even when a task failed or did not run (e.g. its data are
-# missing); make then exits with the pipeline's status.
+# The throws and the cascaded tanks data are fetched when missing (one attempt per source; without network
+# one line each says so and the bottle and cascaded tanks tasks do not run). The book is built even when a
+# task failed or did not run (e.g. its data are missing); make then exits with the pipeline's status.
 main: venv
-	$(VENV)/bin/fnn-pipeline data fetch --optional --data-dir $(DATA_DIR)
+	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
 	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) && exit $$status
 
 # The why profile (after or without `make main`: it reuses the paper profile's outputs and runs what they
 # lack), then the paper book, whose scoreboard rows then carry each claim's why.
 why: venv
-	$(VENV)/bin/fnn-pipeline data fetch --optional --release --data-dir $(DATA_DIR)
+	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --release --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile why --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
 	$(VENV)/bin/fnn-pipeline book --profile paper && exit $$status
 
@@ -49,9 +49,9 @@ pipeline: venv
 book: venv
 	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
 
-# Download the published throws (Sec. 5.1) into DATA_DIR and check their SHA-256 (an error without network).
+# Download the published throws (Sec. 5.1) and the cascaded tanks benchmark into DATA_DIR and check their SHA-256 (an error without network).
 data: venv
-	$(VENV)/bin/fnn-pipeline data fetch --data-dir $(DATA_DIR)
+	$(VENV)/bin/fnn-pipeline data fetch --tanks --data-dir $(DATA_DIR)
 
 # -n auto: one pytest-xdist worker per core; the smoke pipeline still runs once (tests/conftest.py)
 test: venv

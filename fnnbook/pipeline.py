@@ -19,6 +19,7 @@ from fnnbook.kernel import task_threads
 from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_of, write_status
 from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line, summary, utilisation_line)
+from fnnbook.fingerprint import NO_EARLIER_RUN
 from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -106,9 +107,17 @@ def run(
                     raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
                 verdict = decide(spec, plan, force=force)  # again, now that no other run writes these
                 if {n for n, d in verdict.items() if d.action is Action.RUN} <= writes:
+                    for line in rerun_lines(verdict):
+                        echo(line)
                     return _execute(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
                                     echo=echo, progress_bar=progress_bar)
             # another run changed an output meanwhile: lock what must run now, and look again
+
+
+def rerun_lines(verdict: Mapping[str, Decision]) -> list[str]:
+    """One line per task that reruns over an earlier output, naming the input that changed (its trigger)."""
+    return [f"{name} reruns: {d.reason}" for name, d in verdict.items()
+            if d.action is Action.RUN and d.reason and d.reason != NO_EARLIER_RUN]
 
 
 def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,

@@ -31,6 +31,7 @@ from fnnlib import spiral_presets as SP
 from fnnlib.checks import MissingDataError
 from fnnlib.data.bottle import BOTTLE_FILES, TS as BOTTLE_TS
 from fnnlib.data.release import SPIRAL_FEEDBACK_NAMES, SPIRAL_ODE_NAMES
+from fnnlib.data.tanks import TANKS_FILE, TANKS_SHA256
 from fnnlib.feedback import GainWarning
 from fnnlib.models import ACTIVATIONS
 from fnnlib.systems.quadrotor import TEST_TRUTH, TRAINING_TRUTH
@@ -273,6 +274,8 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                  "s9_noise": _WHY_AXIS_POS, "noise_draws": _N1, "t_switch": _POS, "before": _SPIRAL3,
                  "after": _SPIRAL3, "steady_window": _POS, "s10_band": _WHY_AXIS_POS, "s10_settle": _WHY_AXIS_POS},
     "why_bottle": {"L_grid": _SWEEP0, "beta_grid": _SWEEP0},
+    "cascaded_tanks": {"data": _choice("real", "synthetic"), "synthetic_samples": _N2, "synthetic_noise": _NONNEG,
+                       "seed": _SEED, "n_init": _N1, "arx_max_order": _N1},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
@@ -367,6 +370,20 @@ def _bottle(p: Mapping[str, Any]) -> None:
     n_samples = _bottle_data(p)
     C.horizon("N", p["N"], below=n_samples, below_name="the samples per throw")
     _need(p["batch_time"] <= n_samples, f"batch_time must be <= {n_samples} samples per throw, got {p['batch_time']}")
+
+
+def _cascaded_tanks(p: Mapping[str, Any]) -> None:
+    """The benchmark's file in ``data_dir`` (real data); the initial samples fit the record and the ARX orders."""
+    samples = 1024
+    if p["data"] == "real":
+        C.data_files(Path(p.get("data_dir") or ".") / "cascaded_tanks", {TANKS_FILE: TANKS_SHA256},
+                     how_to_get="Get the benchmark's file with `fnn-pipeline data fetch --tanks` (see data/README.md).")
+    else:
+        samples = p["synthetic_samples"]
+    _need(p["arx_max_order"] + 1 <= p["n_init"] < samples // 2,
+          f"n_init (the measured samples a simulation starts from) must be in {p['arx_max_order'] + 1}.."
+          f"{samples // 2 - 1} (above arx_max_order = {p['arx_max_order']}, below half a record of {samples}), "
+          f"got {p['n_init']}")
 
 
 def _quadrotor_learning(p: Mapping[str, Any]) -> None:
@@ -477,7 +494,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "quick_start": _quick_start, "why_feedback_point": _why_feedback_point, "why_feedback": _horizon,
     "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
     "why_sec3": _why_sec3,
-    "why_bottle": _why_bottle, "why_beyond": _why_beyond,
+    "why_bottle": _why_bottle, "why_beyond": _why_beyond, "cascaded_tanks": _cascaded_tanks,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

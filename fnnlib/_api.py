@@ -153,3 +153,13 @@ __all__ += [  # a real plant
     "DEFAULT_TUNE_RECIPE", "DetectabilityError", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
     "check_measurements", "model_jacobian", "output_jacobian",
 ]
+
+# A real benchmark: the cascaded tanks (its records, a synthetic twin, its metric) and a linear ARX baseline.
+from fnnlib.data.tanks import TanksRecords, load_tanks, simulation_rmse, synthetic_tanks, tanks_records
+from fnnlib.models.arx import ARXModel, fit_arx, select_arx
+from fnnlib.systems.tanks import CascadedTanks
+
+__all__ += [
+    "ARXModel", "CascadedTanks", "TanksRecords", "fit_arx", "load_tanks", "select_arx", "simulation_rmse",
+    "synthetic_tanks", "tanks_records",
+]

@@ -45,3 +45,43 @@ def linear_recurrence(A: Tensor, b: Tensor, h0: Tensor, *, diagonal: bool | None
         P = P * P if diagonal else P @ P
         d *= 2
     return y
+
+
+def varying_recurrence(A: Tensor, b: Tensor, h0: Tensor, *, diagonal: bool = False) -> Tensor:
+    r"""Solve :math:`h_{k+1} = A_k h_k + b_k` for every step at once, with a transition per step.
+
+    The doubling scan of :func:`linear_recurrence` with time-varying transitions: each pass composes the
+    affine maps of adjacent windows, :math:`(A'', b'') \circ (A', b') = (A'' A', A'' b' + b'')`.
+
+    Parameters
+    ----------
+    A : Tensor, shape (..., T-1, n, n), or with ``diagonal`` (..., T-1, n)
+        The transition of each step (broadcast with ``b``).
+    b : Tensor, shape (..., T-1, n)
+        Inputs.
+    h0 : Tensor, shape (..., n)
+        Initial state.
+
+    Returns
+    -------
+    Tensor, shape (..., T, n)
+        ``h_0 .. h_{T-1}``.
+    """
+    lead = torch.broadcast_shapes(A.shape[:-1] if diagonal else A.shape[:-2], b.shape[:-1])
+    b = b.expand(*lead, b.shape[-1])
+    P = A.expand(*lead, A.shape[-1]) if diagonal else A.expand(*lead, *A.shape[-2:])
+    y = torch.cat([h0.expand(*lead[:-1], h0.shape[-1]).unsqueeze(-2), b], dim=-2)
+    # P[k] is the transition of the window ending at step k (applied to y[k-d]); pad with identity at the start
+    one = torch.ones_like(P[..., :1, :]) if diagonal else torch.eye(P.shape[-1], dtype=P.dtype).expand_as(P[..., :1, :, :])
+    P = torch.cat([one, P], dim=-2 if diagonal else -3)  # (..., T, n[, n]): row k maps y[k-1] -> y[k]
+    T = y.shape[-2]
+    d = 1
+    while d < T:
+        if diagonal:
+            y = torch.cat([y[..., :d, :], y[..., d:, :] + P[..., d:, :] * y[..., :-d, :]], dim=-2)
+            P = torch.cat([P[..., :d, :], P[..., d:, :] * P[..., :-d, :]], dim=-2)
+        else:
+            y = torch.cat([y[..., :d, :], y[..., d:, :] + (P[..., d:, :, :] @ y[..., :-d, :, None])[..., 0]], dim=-2)
+            P = torch.cat([P[..., :d, :, :], P[..., d:, :, :] @ P[..., :-d, :, :]], dim=-3)
+        d *= 2
+    return y

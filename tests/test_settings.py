@@ -32,7 +32,7 @@ def _declared(name: str) -> MappingProxyType[str, Any]:
 
 def _defaults(name: str) -> dict[str, Any]:
     params = copy.deepcopy(dict(_declared(name)))
-    synthetic = {"bottle": {"data": "synthetic"}}  # CI has no throws
+    synthetic = {"bottle": {"data": "synthetic"}, "cascaded_tanks": {"data": "synthetic"}}  # CI has no real data
     return {**params, **synthetic.get(name, {})}
 
 

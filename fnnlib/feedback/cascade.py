@@ -7,6 +7,25 @@ measurements); it keeps its own estimate :math:`\hat x^{(i)}` over time and
 outputs :math:`z^{(i+1)}_k = z^{(i)}_k + T_s \hat f^{(i)}_k`, so :math:`z^{(N)}_k`
 predicts :math:`x(t_{k+N})`. Per layer, all start times are done at once: one
 batched network call and one linear scan (:func:`~fnnlib.feedback.layer.feedback_layer`).
+
+**Gaps and partial measurements.** The paper measures the full state at every sample. Where samples are
+missing, or only :math:`y = Cx` (or :math:`h(x)`) is measured, the first layer cannot evaluate the field at a
+measurement; this library's design (our extension, not the paper's) is:
+
+* layer 0 is the feedback observer on the measurements: the gap-aware layer with ``L`` (full state with
+  gaps), or a :class:`~fnnlib.feedback.measured.MeasuredFeedback` observer with its output gain (``y = Cx``),
+  solved for all times at once (:mod:`fnnlib.feedback.gaps`); its output :math:`z^{(1)}_k` is the estimate
+  of :math:`x(t_{k+1})` from the data up to :math:`t_k`, complete (no gaps) and full-state;
+* layers 1..N-1 are the paper's full-state cascade on those estimates, with :math:`L_i = Le^{-\beta i}`.
+
+Why: an earlier design re-observed each layer's predicted *outputs* through ``C``, so the unmeasured states of
+every later layer were corrected by nothing but their own predictions and drifted; at N = 25 it was 1.6-4.7x
+worse than simply rolling the model out from the observer's estimate. With this design the layers after the
+first see the whole estimated state, and ``L = 0`` there is exactly that open-loop rollout.
+
+**Uneven times.** With sample times ``t`` instead of ``Ts``, row ``k`` of layer ``i`` steps by
+:math:`\Delta_{k+i} = t_{k+i+1} - t_{k+i}` (:mod:`fnnlib.feedback.sampling`), so depth ``N`` predicts the state
+at the record's own :math:`t_{k+N}`; Eq. (11)'s decay stays per layer.
 """
 
 from __future__ import annotations
@@ -17,45 +36,59 @@ import torch
 from torch import Tensor
 
 from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.feedback.decay import check_N, decay_factors, decayed_gains
+from fnnlib.feedback.decay import check_beta, check_N, decay_factors, decayed_gains
 from fnnlib.feedback.gains import check_gain, gain_batch, gain_compact
-from fnnlib.feedback.gaps import gap_cascade, start_state
+from fnnlib.feedback.gaps import first_layer, start_state
 from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains, shift_inputs
-from fnnlib.feedback.measured import check_output_gain
-from fnnlib.feedback.measurement import Measurements, check_measurements, output_matrix_at
+from fnnlib.feedback.measured import MeasuredFeedback
+from fnnlib.feedback.measurement import Measurements, check_measurements
+from fnnlib.feedback.sampling import Steps, check_times, longest, row_steps
 from fnnlib.feedback.types import VectorField
 
 
-def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: float, *, diagonal: bool | None = None,
-                return_all: bool = False, u: Tensor | None = None, rows: int | None = None) -> Tensor:
+def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: Steps, *, diagonal: bool | None = None,
+                return_all: bool = False, u: Tensor | None = None, rows: int | None = None,
+                first_depth: int = 0) -> Tensor:
     """The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
 
     ``x`` (..., T, n); returns :math:`z^{(N)}` of the same shape, or with
     ``return_all`` every depth stacked, (N+1, ..., T, n), depth 0 being ``x``.
     With inputs ``u`` (..., T, m), layer ``i`` evaluates ``f(t, z, u)`` with row k's input
-    ``u_{k+i}`` (:func:`~fnnlib.feedback.layer.shift_inputs`). Differentiable: gradients flow to
-    the gains in ``L_stack``, to ``f``'s parameters and to ``x``.
+    ``u_{k+i}`` (:func:`~fnnlib.feedback.layer.shift_inputs`). ``Ts`` is the step, or the intervals
+    (..., T-1) of uneven times (row k of layer i steps by :math:`\Delta_{k+i}`). ``first_depth`` is the depth
+    of ``x`` (1 when ``x`` is an observer's output): layer ``i`` then uses the inputs and steps of depth
+    ``first_depth + i``. Differentiable: gradients flow to the gains in ``L_stack``, to ``f``'s parameters
+    and to ``x``.
 
     ``rows`` (1..T) computes only the first ``rows`` start times, (..., rows, n): every layer is causal
     in time (row k of its output reads rows <= k of its input, and the inputs ``u_{k+i}`` of the full
     sequence), so these rows are those of the whole run, at ``rows / T`` of its cost. Tuning against
     targets N samples later needs only the first ``T - N`` (:func:`~fnnlib.feedback.tuning.tune_gains`).
     """
+    T = x.shape[-2]
     if rows is not None:
-        if not 1 <= int(rows) <= x.shape[-2]:
-            raise ValueError(f"rows must lie in 1..{x.shape[-2]} (the samples of x), got {rows!r}")
+        if not 1 <= int(rows) <= T:
+            raise ValueError(f"rows must lie in 1..{T} (the samples of x), got {rows!r}")
         rows = int(rows)
     z = x if rows is None else x[..., :rows, :]
     depths = [z] if return_all else None
     for i, L_i in enumerate(L_stack):
-        u_i = shift_inputs(u, i)
+        d = first_depth + i
+        u_i = shift_inputs(u, d)
         if u_i is not None and rows is not None:
             u_i = u_i[..., :rows, :]  # shifted on the whole sequence first: row k keeps u_{k+i}
-        _, f_hat = feedback_layer(eval_field(f, z, u_i), z, L_i, Ts, diagonal=diagonal)
-        z = z + Ts * f_hat  # z^{(i+1)} = z^{(i)} + Ts * f_hat^{(i)}
+        h = row_steps(Ts, d, T) if T > 1 else _single_step(Ts)
+        if isinstance(h, Tensor) and rows is not None:
+            h = h[..., :rows, :]
+        _, f_hat = feedback_layer(eval_field(f, z, u_i), z, L_i, h, diagonal=diagonal)
+        z = z + h * f_hat  # z^{(i+1)} = z^{(i)} + Ts * f_hat^{(i)}
         if depths is not None:
             depths.append(z)
     return torch.stack(depths) if depths is not None else z
+
+
+def _single_step(Ts: Steps) -> Steps:
+    return Ts if not isinstance(Ts, Tensor) else Ts[..., -1:, None]
 
 
 def _checked(x: Tensor, Ts: float, N: int) -> tuple[Tensor, float, int]:
@@ -69,96 +102,103 @@ def _checked(x: Tensor, Ts: float, N: int) -> tuple[Tensor, float, int]:
     return x, Ts, N
 
 
-def _measured(f: VectorField, x: Tensor, Ts: float, N: int, n: int | None, *, C=None, u: Tensor | None = None,
-              mask: Tensor | None = None) -> tuple[Measurements, float, int]:
-    """The checks of a cascade on measurements that may have gaps (NaN or ``mask``), inputs and a ``C``: before any work."""
+def measured(f: VectorField, x: Tensor, Ts: float | None, N: int, *, t: Tensor | None = None,
+             u: Tensor | None = None, mask: Tensor | None = None,
+             observer: MeasuredFeedback | None = None) -> tuple[Measurements, Steps, int, int]:
+    """The checks of a cascade on measurements before any work: (measurements, steps, N, n).
+
+    Gaps (NaN or ``mask``), inputs, the times ``t`` or step ``Ts``, and the observer's measurement model.
+    """
     N = check_N(N)
-    Ts = check_positive(Ts, name="Ts")
     if isinstance(x, Tensor) and x.ndim >= 2 and (x.shape[-2] == 0 or x.shape[-1] == 0):
         raise ValueError(f"x is an empty trajectory (shape {tuple(x.shape)}); give at least one sample of a "
                          "state with at least one component")
-    n = n if n is not None else (x.shape[-1] if isinstance(x, Tensor) else 0)
-    return check_measurements(x, n, C=C, u=u, mask=mask, f=f, name="x" if C is None else "y"), Ts, N
+    if observer is not None and not isinstance(observer, MeasuredFeedback):
+        raise TypeError(f"observer must be a fnnlib.MeasuredFeedback (the first layer on y = C x), got "
+                        f"{type(observer).__name__}")
+    if observer is None:
+        n = x.shape[-1] if isinstance(x, Tensor) else 0
+        meas = check_measurements(x, n, u=u, mask=mask, f=f, name="x")
+    else:
+        n = observer.n
+        meas = check_measurements(x, n, C=observer.measurement, u=u, mask=mask, f=f, name="y")
+    if Ts is None and t is None and observer is not None and observer.Ts is not None:
+        Ts = observer.Ts
+    return meas, check_times(t, Ts, meas.y, name="x" if observer is None else "y"), N, n
 
 
-def _state_dim(x: Tensor, C, L, f: VectorField, x0: Tensor | None) -> int | None:
-    """The state dimension n: the measurements' own without ``C``, else from ``L`` (n, p), ``f.n``, ``C`` or ``x0``."""
-    if C is None:
-        return x.shape[-1] if isinstance(x, Tensor) else None
-    L = torch.as_tensor(L)
-    if L.ndim == 2:
-        return int(L.shape[0])
-    if getattr(f, "n", None) is not None:
-        return int(f.n)
-    if isinstance(C, Tensor) or not callable(C):
-        return int(torch.as_tensor(C).shape[-1])
-    return int(torch.as_tensor(x0).shape[-1])
+def _first_then_cascade(f: VectorField, meas: Measurements, dt: Steps, L0: Tensor, L_rest: Sequence[Tensor], n: int,
+                        observer: MeasuredFeedback | None, *, diagonal: bool | None, return_all: bool) -> Tensor:
+    """Layer 0 on the measurements (gaps or ``y = Cx``; module docstring), then the paper's cascade on its output."""
+    x0 = start_state(meas, n, None if observer is None else observer.x0)
+    if observer is not None:
+        L0, diagonal0 = observer.gain_for(dt).to(meas.y.dtype), False
+    else:
+        diagonal0 = diagonal
+    _, depth0, z1, _ = first_layer(f, meas, L0, dt, x0, diagonal=diagonal0)
+    rest = run_cascade(f, z1, L_rest, dt, diagonal=diagonal, u=meas.u, first_depth=1, return_all=return_all)
+    if not return_all:
+        return rest
+    return torch.cat([depth0.expand_as(z1)[None], rest])
 
 
 @torch.no_grad()
-def cascade_predict(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
-                    *, return_all: bool = False, allow_unstable: bool = False, u: Tensor | None = None,
-                    C=None, mask: Tensor | None = None, x0: Tensor | None = None, A: Tensor | None = None) -> Tensor:
+def cascade_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float | Tensor, beta: float = 0.0,
+                    *, t: Tensor | None = None, u: Tensor | None = None, mask: Tensor | None = None,
+                    observer: MeasuredFeedback | None = None, return_all: bool = False,
+                    allow_unstable: bool = False) -> Tensor:
     r"""N-step prediction by the cascaded feedback network (Sec. 3.3, Eq. (11)), from every start time.
 
-    With ``L = 0`` this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
+    With ``L = 0`` (and no gap) this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
 
     Parameters
     ----------
     f : callable
-        Learned vector field ``f(t, x)``.
-    x : Tensor, shape (..., T, n)
-        Measured states, one row per sample time.
-    Ts : float
-        Sample step (also the prediction step).
+        Learned vector field ``f(t, x)`` or, with inputs, ``f(t, x, u)``.
+    x : Tensor, shape (..., T, n), or (..., T, p) with an ``observer``
+        Measured states (or outputs), one row per sample.
+    Ts : float or None
+        Sample step (also the prediction step); ``None`` with ``t``.
     N : int
         Prediction steps (layers).
     L : float, Tensor (n,) or (n, n)
-        Base feedback gain (layer 0's).
+        Base feedback gain (full state) of Eq. (11).
     beta : float
         Decay rate of Eq. (11); 0 keeps every layer at ``L``.
+    t : Tensor, shape (..., T), optional
+        Sample times instead of ``Ts`` (uneven sampling, :mod:`fnnlib.feedback.sampling`).
+    u : Tensor, shape (..., T, m), optional
+        Inputs of a controlled model ``f(t, x, u)``, one row per sample (held over the step from it).
+    mask : Tensor of bool, shape (..., T) or (..., T, p), optional
+        ``False`` where no sample was taken (a NaN in ``x`` means the same).
+    observer : MeasuredFeedback, optional
+        Partial measurements ``y = C x`` (or ``h(x)``): the first layer is this observer (its output gain, its
+        first estimate); the layers after it use ``L`` (module docstring).
     return_all : bool
         Also return every intermediate depth.
-    u : Tensor, shape (..., T, m), optional
-        Inputs of a controlled model ``f(t, x, u)``, one row per sample
-        (the input held over the step from that sample).
-    C : Tensor (p, n) or callable ``h(x)``, optional
-        Partial measurements ``y = C x``: ``x`` is then ``y`` (..., T, p), ``L`` an output gain (n, p)
-        (checked by :func:`~fnnlib.feedback.measured.check_output_gain`, with the Jacobian ``A`` when given),
-        and every layer evaluates the field at its estimate (:mod:`fnnlib.feedback.gaps`).
-    mask : Tensor of bool, shape (..., T) or (..., T, p), optional
-        ``False`` where no sample was taken (a NaN in ``x`` means the same): the layers move open loop
-        through the gap (:mod:`fnnlib.feedback.gaps`).
-    x0 : Tensor (n,), optional
-        First estimate with ``C`` (default: the least-squares state of the first sample).
-    A : Tensor (n, n), optional
-        The model's Jacobian (:func:`~fnnlib.feedback.measurement.model_jacobian`) for the checks with ``C``.
 
     Returns
     -------
     Tensor
-        Shape (..., T, n): row k predicts the state at ``t_{k+N}``; with
-        ``return_all`` shape (N+1, ..., T, n), depth 0 being ``x`` itself.
+        Shape (..., T, n): row k predicts the state at ``t_{k+N}``; with ``return_all`` shape
+        (N+1, ..., T, n), depth 0 being ``x`` itself (its gaps filled by the estimate; with an observer, the
+        estimates :math:`\hat x_k`).
     """
-    n = _state_dim(x, C, L, f, x0)
-    meas, Ts, N = _measured(f, x, Ts, N, n, C=C, u=u, mask=mask)
-    if C is None:
-        L = check_gain(L, n, Ts, allow_unstable=allow_unstable, N=N, beta=beta)  # warns on strong noise amplification
-        L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
-        if meas.mask is None:  # no gap: the paper's cascade, one scan per layer
-            return run_cascade(f, x, L_stack, Ts, return_all=return_all, u=u)
-    else:
-        C_lin = output_matrix_at(meas, start_state(meas, n, x0)[(0,) * (meas.y.ndim - 2)])
-        L, _ = check_output_gain(L, C_lin, Ts, A=A, allow_unstable=allow_unstable)
-        L_stack = [L_i.to(x.dtype) for L_i in decayed_gains(L, N, beta)]
-    return gap_cascade(f, meas, L_stack, Ts, n, x0=x0, return_all=return_all)
+    beta = check_beta(beta)
+    meas, dt, N, n = measured(f, x, Ts, N, t=t, u=u, mask=mask, observer=observer)
+    L = check_gain(L, n, longest(dt), allow_unstable=allow_unstable, N=N, beta=beta)  # warns on noise amplification
+    L_stack = [gain_compact(L_i, n, dtype=meas.y.dtype) for L_i in decayed_gains(L, N, beta)]
+    if observer is None and meas.mask is None:  # no gap: the paper's cascade, one scan per layer
+        return run_cascade(f, meas.y, L_stack, dt, return_all=return_all, u=meas.u)
+    return _first_then_cascade(f, meas, dt, L_stack[0], L_stack[1:], n, observer, diagonal=None,
+                               return_all=return_all)
 
 
 @torch.no_grad()
-def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Sequence[float] | Tensor,
-                  beta: float | Sequence[float] | Tensor = 0.0, *, allow_unstable: bool = False,
-                  u: Tensor | None = None, mask: Tensor | None = None, C=None, x0: Tensor | None = None,
-                  A: Tensor | None = None) -> Tensor:
+def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float | Sequence[float] | Tensor,
+                  beta: float | Sequence[float] | Tensor = 0.0, *, t: Tensor | None = None,
+                  u: Tensor | None = None, mask: Tensor | None = None, observer: MeasuredFeedback | None = None,
+                  allow_unstable: bool = False) -> Tensor:
     r"""The N-step cascade for a batch of (base gain, decay rate) pairs in one pass.
 
     Batch element ``g`` runs :func:`cascade_predict` with gain ``L_g`` and
@@ -171,62 +211,43 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Seque
     f : callable
         Learned vector field ``f(t, x)``.
     x : Tensor, shape (..., T, n)
-        Measurements (any leading axes: levels, noise draws).
-    Ts : float
-        Sample step (also the prediction step).
+        Measurements (any leading axes: levels, noise draws); (..., T, p) with an ``observer``.
+    Ts : float or None
+        Sample step (also the prediction step); ``None`` with ``t``.
     N : int
         Prediction steps (layers).
     L : float, Tensor (G,) or Tensor (G, n)
         Scalar or diagonal base gains.
     beta : float or Tensor (G,)
         Decay rates of Eq. (11).
-    u : Tensor, shape (..., T, m), optional
-        Inputs of a controlled model, as :func:`cascade_predict` takes them.
-    mask : Tensor of bool, shape (..., T) or (..., T, n), optional
-        Missing samples (or NaN in ``x``), as :func:`cascade_predict` takes them.
-    C, x0, A : optional
-        Partial measurements ``y = C x``, as :func:`cascade_predict` takes them: ``x`` is then ``y``
-        (..., T, p) and ``L`` output gains (n, p) or (G, n, p); each pair runs :func:`cascade_predict`
-        (its checks included), one after another.
+    t, u, mask, observer : optional
+        As :func:`cascade_predict` takes them. With an ``observer`` the first layer runs once and the gains
+        sweep the layers after it.
 
     Returns
     -------
     Tensor, shape (G, ..., T, n)
         Row ``k`` predicts the state at ``t_{k+N}``.
     """
-    if C is not None:
-        return _output_sweep(f, x, Ts, N, L, beta, allow_unstable=allow_unstable, u=u, mask=mask, C=C, x0=x0, A=A)
-    meas, Ts, N = _measured(f, x, Ts, N, None, u=u, mask=mask)
-    n = x.shape[-1]
-    L = gain_batch(L, n, Ts, allow_unstable=allow_unstable).to(x.dtype)  # (G, n) base gains
+    meas, dt, N, n = measured(f, x, Ts, N, t=t, u=u, mask=mask, observer=observer)
+    L = gain_batch(L, n, longest(dt), allow_unstable=allow_unstable).to(meas.y.dtype)  # (G, n) base gains
     decay = decay_factors(beta, N)  # (B, N)
     G, B = L.shape[0], decay.shape[0]
     if B != 1 and G != 1 and B != G:
         raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
     G = max(G, B)
     L = L.expand(G, n)
-    L_stack = [lead_gains(L * decay[:, i].to(x.dtype)[:, None], x.ndim + 1) for i in range(N)]  # Eq. (11)
-    if meas.mask is None:
-        return run_cascade(f, x.expand(G, *x.shape), L_stack, Ts, diagonal=True, u=u)
-    meas = meas._replace(y=meas.y.expand(G, *x.shape), mask=meas.mask.expand(G, *x.shape))
-    return gap_cascade(f, meas, L_stack, Ts, n, diagonal=True)
-
-
-def _output_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L, beta, **kw) -> Tensor:
-    """:func:`cascade_sweep` with ``C``: output gains ``L`` (n, p) or (G, n, p) paired with ``beta`` (B,) by
-    broadcasting, each pair through :func:`cascade_predict`; returns (G, ..., T, n)."""
-    L = torch.as_tensor(L, dtype=torch.float64)
-    if L.ndim == 2:
-        L = L[None]
-    if L.ndim != 3:
-        raise ValueError(f"with C, L must be an output gain (n, p) or a batch (G, n, p), got shape {tuple(L.shape)}")
-    beta = torch.as_tensor(beta, dtype=torch.float64).reshape(-1)
-    G, B = L.shape[0], beta.shape[0]
-    if B != 1 and G != 1 and B != G:
-        raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
-    G = max(G, B)
-    L, beta = L.expand(G, *L.shape[1:]), beta.expand(G)
-    return torch.stack([cascade_predict(f, x, Ts, N, L[g], float(beta[g]), **kw) for g in range(G)])
+    y = meas.y
+    nd = y.ndim + 1
+    L_stack = [lead_gains(L * decay[:, i].to(y.dtype)[:, None], nd) for i in range(N)]  # Eq. (11)
+    if observer is None and meas.mask is None:
+        return run_cascade(f, y.expand(G, *y.shape), L_stack, dt, diagonal=True, u=meas.u)
+    if observer is None:  # gaps: layer 0 runs per gain
+        meas = meas._replace(y=y.expand(G, *y.shape), mask=meas.mask.expand(G, *meas.mask.shape))
+        return _first_then_cascade(f, meas, dt, L_stack[0], L_stack[1:], n, None, diagonal=True, return_all=False)
+    x0 = start_state(meas, n, observer.x0)
+    _, _, z1, _ = first_layer(f, meas, observer.gain_for(dt).to(y.dtype), dt, x0, diagonal=False)
+    return run_cascade(f, z1.expand(G, *z1.shape), L_stack[1:], dt, diagonal=True, u=meas.u, first_depth=1)
 
 
 @torch.no_grad()

@@ -15,6 +15,8 @@ from torch import Tensor
 
 def check_N(N: int) -> int:
     """Return ``N`` as an int if it is an integer >= 1 (prediction steps = cascade layers), else raise."""
+    if isinstance(N, bool) or not isinstance(N, (int, float)) and not hasattr(N, "__index__"):
+        raise TypeError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
     if int(N) != N or int(N) < 1:
         raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
     return int(N)

@@ -14,9 +14,28 @@ class GainError(ValueError):
     """A feedback gain that is not positive definite or makes Eq. (25) unstable."""
 
 
+def as_gain(L: float | Tensor | list) -> float | Tensor | list:
+    """``L`` itself when it is a real number, tensor or nested list of numbers; else a clear ``TypeError``."""
+    if isinstance(L, Tensor):
+        if L.is_complex() or not (L.is_floating_point() or L.dtype in (torch.int32, torch.int64)):
+            raise TypeError(f"gain L must hold real numbers, got a tensor of dtype {L.dtype}")
+        return L
+    try:
+        torch.as_tensor(L, dtype=torch.float64)
+    except (TypeError, ValueError, RuntimeError):
+        raise TypeError(f"gain L must be a number, a vector or a matrix of numbers, got {L!r}") from None
+    if isinstance(L, (str, bytes)) or (isinstance(L, (list, tuple)) and _holds_text(L)):
+        raise TypeError(f"gain L must be a number, a vector or a matrix of numbers, got {L!r}")
+    return L
+
+
+def _holds_text(v) -> bool:
+    return any(_holds_text(e) if isinstance(e, (list, tuple)) else isinstance(e, (str, bytes)) for e in v)
+
+
 def gain_matrix(L: float | Tensor | list, n: int, *, dtype: torch.dtype = torch.float64) -> Tensor:
     """Return ``L`` as an (n, n) matrix from a scalar, a vector (n,) (diagonal) or a matrix."""
-    L = torch.as_tensor(L, dtype=dtype)
+    L = torch.as_tensor(as_gain(L), dtype=dtype)
     if L.ndim == 0:
         return L * torch.eye(n, dtype=dtype)
     if L.ndim == 1 and L.shape[0] == n:
@@ -186,7 +205,7 @@ def _lyapunov_output_variance(As: Tensor, Bs: Tensor, Cs: Tensor, Ds: Tensor) ->
 
 def implied_n(L: float | Tensor | list, n: int | None) -> int:
     """The state dimension: ``n`` if given (checked against a vector or matrix ``L``), else the one ``L`` implies."""
-    shape = tuple(torch.as_tensor(L).shape)
+    shape = tuple(torch.as_tensor(as_gain(L), dtype=torch.float64).shape)
     if n is None:
         if len(shape) == 0:
             raise ValueError("a scalar gain L does not say the state dimension: pass n (or a vector/matrix L)")
@@ -262,7 +281,7 @@ def gain_batch(L: float | Sequence[float] | Tensor, n: int, Ts: float, *, allow_
 
     ``L`` scalar: one gain ``L I``; shape (G,): G scalar gains ``L_g I``; shape (G, n): G diagonal gains.
     """
-    L = torch.as_tensor(L, dtype=torch.float64)
+    L = torch.as_tensor(as_gain(L), dtype=torch.float64)
     if L.ndim == 0:
         L = L.reshape(1)
     if L.ndim == 1:

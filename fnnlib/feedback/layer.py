@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
-from fnnlib._scan import linear_recurrence
+from fnnlib._scan import linear_recurrence, varying_recurrence
 from fnnlib._validation import as_trajectory, check_finite, check_positive
 from fnnlib.feedback.gains import gain_batch
 from fnnlib.feedback.types import Estimate, VectorField
@@ -78,7 +78,7 @@ def shift_inputs(u: Tensor | None, i: int) -> Tensor | None:
     return u.index_select(-2, idx)
 
 
-def feedback_layer(fx: Tensor, z: Tensor, L: Tensor, Ts: float, *, diagonal: bool | None = None) -> Estimate:
+def feedback_layer(fx: Tensor, z: Tensor, L: Tensor, Ts: float | Tensor, *, diagonal: bool | None = None) -> Estimate:
     r"""Eqs. (7)-(8) along an input sequence ``z`` (..., T, n) for every k at once; :math:`\hat x_0 = z_0`.
 
     Parameters
@@ -91,8 +91,9 @@ def feedback_layer(fx: Tensor, z: Tensor, L: Tensor, Ts: float, *, diagonal: boo
         The gain, already validated, in ``z``'s dtype: with ``diagonal`` its
         diagonal, of shape (n,) or (..., n) broadcasting against ``z[..., 0, :]``
         (a batch of gains); else a full (n, n) matrix.
-    Ts : float
-        Sample step.
+    Ts : float or Tensor (..., T, 1)
+        Sample step, or the step of each row (uneven times, :func:`~fnnlib.feedback.sampling.row_steps`):
+        :math:`\hat x_{k+1} = \hat x_k + \Delta_k \hat f_k`, a recursion with a transition per step.
     diagonal : bool, optional
         Whether ``L`` holds diagonals; by default a 1-D ``L`` does.
 
@@ -103,16 +104,23 @@ def feedback_layer(fx: Tensor, z: Tensor, L: Tensor, Ts: float, *, diagonal: boo
     """
     if diagonal is None:
         diagonal = L.ndim == 1
+    varying = isinstance(Ts, Tensor)
     if diagonal:
         Lz = L.unsqueeze(-2)  # the same gain at every time step
-        A = 1.0 - Ts * L  # diagonal of I - Ts L
         b = Ts * (fx + Lz * z)  # x_hat_{k+1} = (I - Ts L) x_hat_k + Ts (f(z_k) + L z_k)   (Eq. 8)
-        x_hat = linear_recurrence(A, b[..., :-1, :], z[..., 0, :], diagonal=True)
+        if varying:
+            x_hat = varying_recurrence((1.0 - Ts * Lz)[..., :-1, :], b[..., :-1, :], z[..., 0, :], diagonal=True)
+        else:
+            x_hat = linear_recurrence(1.0 - Ts * L, b[..., :-1, :], z[..., 0, :], diagonal=True)
         f_hat = fx + Lz * (z - x_hat)  # f_hat = f_neural + L (z - x_hat)   (Eq. 7)
     else:
-        A = torch.eye(L.shape[0], dtype=L.dtype) - Ts * L
+        eye = torch.eye(L.shape[0], dtype=L.dtype)
         b = Ts * (fx + z @ L.T)  # (Eq. 8), row-vector form
-        x_hat = linear_recurrence(A, b[..., :-1, :], z[..., 0, :], diagonal=False)
+        if varying:
+            A = eye - Ts[..., :-1, :, None] * L  # (..., T-1, n, n): I - Delta_k L
+            x_hat = varying_recurrence(A, b[..., :-1, :], z[..., 0, :])
+        else:
+            x_hat = linear_recurrence(eye - Ts * L, b[..., :-1, :], z[..., 0, :], diagonal=False)
         f_hat = fx + (z - x_hat) @ L.T  # (Eq. 7), row-vector form
     return Estimate(x_hat, f_hat)
 

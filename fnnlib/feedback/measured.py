@@ -23,9 +23,17 @@ from torch import Tensor
 from fnnlib._validation import check_positive
 from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.gains import GainError, spectral_radius
-from fnnlib.feedback.gaps import measure_fn, start_state, step_layer
+from fnnlib.feedback.gains import as_gain
+from fnnlib.feedback.gaps import first_layer, layer_loop, measure_fn, start_state
 from fnnlib.feedback.layer import eval_field, shift_inputs
-from fnnlib.feedback.measurement import DetectabilityError, check_detectable, check_measurements, check_output_matrix
+from fnnlib.feedback.measurement import (
+    DetectabilityError,
+    check_detectable,
+    check_measurements,
+    check_output_matrix,
+    output_jacobian,
+)
+from fnnlib.feedback.sampling import Steps, check_times, longest, row_steps
 from fnnlib.feedback.types import Estimate, VectorField
 
 F64 = torch.float64
@@ -85,7 +93,11 @@ def check_output_gain(L: Tensor, C: Tensor, Ts: float, *, A: Tensor | None = Non
 
 
 class MeasuredFeedback:
-    r"""The linear feedback of Eqs. (7)-(8) on partial measurements ``y = C x`` (module docstring).
+    r"""The linear feedback of Eqs. (7)-(8) on partial measurements ``y = C x`` or ``h(x)`` (module docstring).
+
+    A discrete Luenberger observer on the learned model, solved for all times at once
+    (:mod:`fnnlib.feedback.gaps`); also the first layer of :func:`~fnnlib.cascade_predict` with partial
+    measurements (``observer=``).
 
     Parameters
     ----------
@@ -93,51 +105,105 @@ class MeasuredFeedback:
         The learned field ``f(t, x)`` or, with inputs, ``f(t, x, u)``.
     L : Tensor, shape (n, p)
         Output-feedback gain, checked by :func:`check_output_gain` (with ``A`` when given).
-    C : Tensor, shape (p, n)
-        Measurement matrix.
-    Ts : float
-        Sample step.
+    C : Tensor (p, n) or callable ``h(x)``
+        Measurement matrix, or measurement function (batch, n) -> (batch, p), linearised at ``x0`` for the checks.
+    Ts : float, optional
+        Sample step; ``None`` when every call gives the sample times ``t``.
     A : Tensor, shape (n, n), optional
         The model's Jacobian for the detectability and stability check.
+    x0 : Tensor, shape (n,), optional
+        First estimate (default: the least-squares state of the first sample, :math:`C^+ y_0`; required with ``h``).
     allow_unstable : bool
         Skip the stability checks.
     """
 
-    def __init__(self, f: VectorField, L: Tensor, C: Tensor, Ts: float, *, A: Tensor | None = None,
-                 allow_unstable: bool = False):
-        self.f, self.Ts = f, check_positive(Ts, name="Ts")
-        self.L, self.C = check_output_gain(L, C, self.Ts, A=A, allow_unstable=allow_unstable)
+    def __init__(self, f: VectorField, L: Tensor, C, Ts: float | None = None, *, A: Tensor | None = None,
+                 x0: Tensor | None = None, allow_unstable: bool = False):
+        self.f = f
+        self.Ts = None if Ts is None else check_positive(Ts, name="Ts")
+        self.h = C if callable(C) and not isinstance(C, Tensor) else None
+        L_in = torch.as_tensor(as_gain(L), dtype=F64)
+        if L_in.ndim != 2:
+            raise ValueError(f"the output gain L must be an (n, p) matrix, got shape {tuple(L_in.shape)}")
+        n = int(L_in.shape[0])
+        self.x0 = None if x0 is None else _check_x0(x0, n)
+        if self.h is not None:
+            if self.x0 is None:
+                raise ValueError("with a measurement function h give the first estimate x0 (n,): h cannot be inverted, "
+                                 "and its Jacobian at x0 is what the gain is checked against")
+            C_lin = output_jacobian(self.h, self.x0[None])[0].double()
+        else:
+            C_lin = C
+        self._A, self._allow = A, allow_unstable
+        self.L, self.C = check_output_gain(L_in, C_lin, 1.0, allow_unstable=True)  # shapes here; stability per step
         self.p, self.n = self.C.shape
+        self._checked: dict[float, Tensor] = {}
+        if self.Ts is not None:
+            self.gain_for(self.Ts)
 
-    def _measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None):
-        """The one check of ``y``, ``u`` and ``mask`` (:func:`~fnnlib.feedback.measurement.check_measurements`)."""
-        return check_measurements(y, self.n, C=self.C, u=u, mask=mask, f=self.f)
+    @property
+    def measurement(self):
+        """What :func:`~fnnlib.feedback.measurement.check_measurements` takes: ``h`` or ``C``."""
+        return self.h if self.h is not None else self.C
 
-    def observe(self, y: Tensor, u: Tensor | None = None, *, x0: Tensor | None = None,
+    def gain_for(self, dt: Steps) -> Tensor:
+        """The gain, checked (:func:`check_output_gain`) at the longest step of ``dt`` (a float, or intervals)."""
+        h = longest(dt)
+        if h not in self._checked:
+            self._checked[h] = check_output_gain(self.L, self.C, h, A=self._A, allow_unstable=self._allow)[0]
+        return self._checked[h]
+
+    def _measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None, t: Tensor | None):
+        """The one check of ``y``, ``u``, ``mask`` and the times, before any work."""
+        meas = check_measurements(y, self.n, C=self.measurement, u=u, mask=mask, f=self.f)
+        return meas, check_times(t, None if t is not None else self.Ts, meas.y)
+
+    def observe(self, y: Tensor, u: Tensor | None = None, *, t: Tensor | None = None,
                 mask: Tensor | None = None) -> Estimate:
-        r"""``x_hat``, ``f_hat`` (..., T, n) along measurements ``y`` (..., T, p); a loop over time.
+        r"""``x_hat``, ``f_hat`` (..., T, n) along measurements ``y`` (..., T, p), all times at once.
 
         :math:`\hat x_0` = ``x0`` or, by default, the least-squares state :math:`C^+ y_0`. A NaN in ``y``
-        or a ``False`` in ``mask`` ((..., T) or (..., T, p)) is a missing sample: no correction there
-        (:mod:`fnnlib.feedback.gaps`).
+        or a ``False`` in ``mask`` ((..., T) or (..., T, p)) is a missing sample: no correction there.
+        ``t`` (..., T): the sample times, when they are uneven (each step by its own interval).
         """
-        meas = self._measurements(y, u, mask)
-        return self._observe(meas, x0)
+        meas, dt = self._measurements(y, u, mask, t)
+        est, _, _, _ = first_layer(self.f, meas, self.gain_for(dt).to(meas.y.dtype), dt,
+                                   start_state(meas, self.n, self.x0), diagonal=False)
+        return est
 
-    def _observe(self, meas, x0: Tensor | None) -> Estimate:
-        L = self.L.to(meas.y.dtype)
-        start = start_state(meas, self.n, x0)
-        est, _ = step_layer(self.f, meas.y, L, self.Ts, start, mask=meas.mask, u=meas.u,
-                            measure=measure_fn(meas, meas.y.dtype))
+    def observe_loop(self, y: Tensor, u: Tensor | None = None, *, t: Tensor | None = None,
+                     mask: Tensor | None = None) -> Estimate:
+        """The sequential reference of :meth:`observe` (a Python loop over time), for tests and benchmarks."""
+        meas, dt = self._measurements(y, u, mask, t)
+        steps = row_steps(dt, 0, meas.y.shape[-2])
+        est, _ = layer_loop(self.f, meas.y, self.gain_for(dt).to(meas.y.dtype), steps,
+                            start_state(meas, self.n, self.x0), mask=meas.mask, u=meas.u,
+                            measure=measure_fn(meas, meas.y.dtype), diagonal=False)
         return est
 
     @torch.no_grad()
-    def predict(self, y: Tensor, N: int, u: Tensor | None = None, *, x0: Tensor | None = None,
+    def predict(self, y: Tensor, N: int, u: Tensor | None = None, *, t: Tensor | None = None,
                 mask: Tensor | None = None) -> Tensor:
-        """N-step predictions of the state (..., T, n) from every sample: Euler rollouts of the model from ``x_hat``."""
+        """N-step predictions of the state (..., T, n) from every sample: row k rolls the model out (Euler, along
+        the record's own steps) from the observer's latest estimate, :math:`\hat x_{k+1}` (it has seen
+        :math:`y_k`), to :math:`t_{k+N}`. The open-loop baseline of the cascade; with ``L = 0`` after the observer
+        the cascade equals it."""
         N = check_N(N)
-        meas = self._measurements(y, u, mask)
-        z = self._observe(meas, x0).x_hat
-        for j in range(N):
-            z = z + self.Ts * eval_field(self.f, z, shift_inputs(meas.u, j))  # x_{j+1} = x_j + Ts f(x_j, u_j)
+        meas, dt = self._measurements(y, u, mask, t)
+        _, _, z, _ = first_layer(self.f, meas, self.gain_for(dt).to(meas.y.dtype), dt,
+                                 start_state(meas, self.n, self.x0), diagonal=False)
+        T = meas.y.shape[-2]
+        for j in range(1, N):
+            z = z + row_steps(dt, j, T) * eval_field(self.f, z, shift_inputs(meas.u, j))  # x_{j+1} = x_j + h f(x_j, u_j)
         return z
+
+
+def _check_x0(x0, n: int) -> Tensor:
+    """A first estimate: a finite (n,) vector."""
+    x0 = torch.as_tensor(x0)
+    if not (x0.is_floating_point() or x0.dtype in (torch.int32, torch.int64)) or x0.ndim != 1 or x0.shape[0] != n:
+        raise ValueError(f"the first estimate x0 must be a real vector of shape ({n},) (one entry per state), got "
+                         f"shape {tuple(x0.shape)}")
+    if not bool(torch.isfinite(x0).all()):
+        raise ValueError(f"the first estimate x0 holds NaN or infinite entries: {x0.tolist()}")
+    return x0.to(F64)

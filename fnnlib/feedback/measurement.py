@@ -125,6 +125,13 @@ def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None
     m = None if mask is None else _check_mask(mask, y, name)
     if bool(nan.any()):
         m = ~nan if m is None else m & ~nan
+    if m is not None:
+        present = m.flatten(-2).any(-1)  # (...,): a record with at least one present sample
+        if not bool(present.all()):
+            idx = tuple(int(i) for i in (~present).nonzero()[0]) if present.ndim else ()
+            where = f" (record {idx})" if idx else ""
+            raise ValueError(f"{name} has no present sample at all{where}: every value is NaN or masked out, so there "
+                             "is nothing to estimate from; drop that record")
     if m is not None and bool(m.all()):
         m = None  # every sample present: the gap-free path
     if m is not None:

@@ -29,10 +29,11 @@ from torch import Tensor, nn
 from torch.nn import functional as TF
 
 from fnnlib._validation import check_positive
-from fnnlib.feedback.cascade import _checked, _measured, run_cascade
-from fnnlib.feedback.gaps import gap_cascade
-from fnnlib.feedback.measured import check_output_gain
+from fnnlib.feedback.cascade import _checked, measured, run_cascade
+from fnnlib.feedback.gaps import first_layer, measure_fn, start_state
 from fnnlib.feedback.layer import check_inputs, check_model_dtype
+from fnnlib.feedback.measured import MeasuredFeedback, check_output_gain
+from fnnlib.feedback.sampling import Steps, longest
 from fnnlib.feedback.types import VectorField
 
 
@@ -126,36 +127,17 @@ def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: Cascade
                        rows=rows)
 
 
-class OutputGains(nn.Module):
-    r"""An output-feedback gain :math:`L` (n, p) and the decay rate :math:`\beta` for measurements ``y = C x``,
-    trainable: ``L`` free (start from a stabilising one, e.g. :func:`~fnnlib.place_observer_gain`),
-    :math:`\beta = \mathrm{softplus}(b)`. :func:`tune_gains` checks the result with
+class ObserverGain(nn.Module):
+    r"""The output gain :math:`L_y` (n, p) of a :class:`~fnnlib.feedback.measured.MeasuredFeedback`, trainable
+    and free (it starts from the observer's own, stabilising gain); :func:`tune_gains` checks the result with
     :func:`~fnnlib.feedback.measured.check_output_gain`."""
 
-    full = True
-
-    def __init__(self, L0: Tensor, beta0: float):
+    def __init__(self, observer: MeasuredFeedback):
         super().__init__()
-        L0 = torch.as_tensor(L0, dtype=torch.float64)
-        if L0.ndim != 2 or not bool(torch.isfinite(L0).all()):
-            raise ValueError(f"with C the initial gain L0 must be a finite (n, p) matrix, got shape {tuple(L0.shape)}")
-        beta0 = float(beta0)
-        if not (beta0 > 0 and math.isfinite(beta0)):
-            raise ValueError(f"initial decay rate beta0 must be finite and > 0 (softplus), got {beta0!r}")
-        self.n = L0.shape[0]
-        self.raw_L = nn.Parameter(L0.clone())
-        self.raw_beta = nn.Parameter(torch.tensor(_inverse_softplus(beta0), dtype=torch.float64))
+        self.raw_L = nn.Parameter(observer.L.clone())
 
-    def L(self) -> Tensor:
-        """The output gain (n, p), float64."""
+    def forward(self) -> Tensor:
         return self.raw_L
-
-    beta = CascadeGains.beta
-    values = CascadeGains.values
-
-    def L_stack(self, N: int, dtype: torch.dtype) -> list[Tensor]:
-        r"""Eq. (11): :math:`L_i = L e^{-\beta i}`, ``i = 0 .. N-1``, in ``dtype``."""
-        return [(self.L() * torch.exp(-self.beta() * i)).to(dtype) for i in range(int(N))]
 
 
 @dataclass(frozen=True)
@@ -164,7 +146,9 @@ class TuneRecipe:
 
     ``L0`` (scalar or a list of n) and ``beta0``: the initial gain and decay rate (:class:`CascadeGains`);
     ``iterations`` and ``lr``: Adam steps and learning rate; ``full``, ``L_max``: the gain's form and bound;
-    ``train_model``: also descend on the model. Checked in ``__post_init__``; replace a field with
+    ``train_model``: also descend on the model; ``tune_observer``: also descend on the output gain of the
+    first layer's observer (partial measurements; off by default: on noisy records it fits the noise of the
+    tuning record, measured by ``benchmarks/study_partial_cascade.py``). Checked in ``__post_init__``; replace a field with
     ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
     own-system chapter.
     """
@@ -176,6 +160,7 @@ class TuneRecipe:
     full: bool = False
     L_max: float | None = None
     train_model: bool = False
+    tune_observer: bool = False
 
     def __post_init__(self):
         L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
@@ -190,7 +175,7 @@ class TuneRecipe:
         check_positive(self.lr, name="TuneRecipe.lr")
         if self.L_max is not None:
             check_positive(self.L_max, name="TuneRecipe.L_max")
-        for name in ("full", "train_model"):
+        for name in ("full", "train_model", "tune_observer"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"TuneRecipe.{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -212,6 +197,12 @@ class TunedGains:
     beta: float
     loss: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    observer: MeasuredFeedback | None = None
+
+    @property
+    def L_tensor(self) -> Tensor:
+        """The tuned base gain as a float64 tensor ((n,) diagonal or (n, n)), as :func:`~fnnlib.cascade_predict` takes it."""
+        return torch.tensor(self.L, dtype=torch.float64)
 
 
 def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
@@ -219,12 +210,12 @@ def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
     return (z[..., : y.shape[-2] - N, :] - y[..., N:, :]).pow(2).sum(-1).mean()
 
 
-def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tensor | None = None,
-               beta0: float | None = None, iterations: int | None = None, lr: float | None = None,
-               u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
-               train_model: bool | None = None, recipe: TuneRecipe | None = None,
-               objective: Objective | None = None, mask: Tensor | None = None, C: Tensor | None = None,
-               A: Tensor | None = None) -> TunedGains:
+def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor | None = None,
+               L0: float | Tensor | None = None, beta0: float | None = None, iterations: int | None = None,
+               lr: float | None = None, u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
+               train_model: bool | None = None, tune_observer: bool | None = None, recipe: TuneRecipe | None = None,
+               objective: Objective | None = None, mask: Tensor | None = None,
+               observer: MeasuredFeedback | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
 
     Gradient descent (Adam, full batch) on the N-step prediction error of the cascade,
@@ -238,10 +229,12 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
     ----------
     f : callable
         The learned field ``f(t, x)`` (or ``f(t, x, u)`` with ``u``); frozen unless ``train_model``.
-    y : Tensor, shape (T, n) or (B, T, n)
+    y : Tensor, shape (T, n) or (B, T, n); (..., T, p) with an ``observer``
         Tuning measurements, in ``f``'s dtype.
     Ts, N
-        Sample step and prediction horizon (cascade depth).
+        Sample step (``None`` with ``t``) and prediction horizon (cascade depth).
+    t : Tensor, shape (..., T), optional
+        Sample times, when they are uneven (:mod:`fnnlib.feedback.sampling`).
     L0, beta0
         Initial gain (scalar or (n,)) and decay rate, see :class:`CascadeGains`.
     iterations, lr
@@ -252,55 +245,58 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
         See :class:`CascadeGains`.
     train_model : bool
         Also descend on ``f``'s parameters (an ``nn.Module``).
+    tune_observer : bool
+        With an ``observer``: also descend on its output gain (:class:`TuneRecipe`).
     recipe : TuneRecipe, optional
-        All of ``L0 .. train_model`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
+        All of ``L0 .. tune_observer`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
     objective : callable, optional
         A closed-loop cost ``objective(gains, x, u, mask)`` (:data:`Objective`) to descend instead of the
         N-step prediction error, e.g. the error of the loop the gains will serve, on training data.
     mask : Tensor of bool, shape (..., T) or (..., T, n), optional
-        Missing samples (a NaN in ``y`` means the same): the cascade runs open loop through them
+        Missing samples (a NaN in ``y`` means the same): the first layer runs open loop through them
         (:mod:`fnnlib.feedback.gaps`) and the error is scored on present targets only.
-    C : Tensor (p, n), optional
-        Partial measurements ``y = C x`` (``y`` (..., T, p)): ``L0`` is then an output gain (n, p) (a
-        stabilising start, e.g. placed), tuned freely (:class:`OutputGains`) on the N-step error of the
-        predicted outputs, and checked at the end with the model Jacobian ``A`` (raises if unstable).
-    A : Tensor (n, n), optional
-        The model's Jacobian for that check (:func:`~fnnlib.feedback.measurement.model_jacobian`).
+    observer : MeasuredFeedback, optional
+        Partial measurements ``y = C x`` (or ``h(x)``): the first layer is this observer, the tuned ``L`` and
+        ``beta`` are those of the full-state layers after it (:mod:`fnnlib.feedback.cascade`), and the error is
+        that of the predicted outputs. The result's ``observer`` is the one used (tuned with ``tune_observer``).
     """
     recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
-                     train_model=train_model)
+                     train_model=train_model, tune_observer=tune_observer)
     if objective is not None and not callable(objective):
         raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
-    L0, beta0, iterations, lr = recipe.L0, recipe.beta0, recipe.iterations, recipe.lr
-    full, L_max, train_model = recipe.full, recipe.L_max, recipe.train_model
-    L0 = L0 if isinstance(L0, (int, float)) else torch.tensor(L0, dtype=torch.float64)
-    n = None if C is None else (L0.shape[0] if isinstance(L0, Tensor) and L0.ndim == 2 else None)
-    if C is not None and n is None:
-        raise ValueError("with C give L0 as an (n, p) output gain (e.g. fnnlib.place_observer_gain)")
-    meas, Ts, N = _measured(f, y, Ts, N, n, C=C, u=u, mask=mask)
+    meas, dt, N, n = measured(f, y, Ts, N, t=t, u=u, mask=mask, observer=observer)
+    if recipe.tune_observer and observer is None:
+        raise ValueError("tune_observer=True needs an observer (the first layer on partial measurements)")
     x = meas.y
     if x.shape[-2] <= N:
         raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
-    if C is None:
-        gains = CascadeGains(x.shape[-1], Ts, L0=L0, beta0=beta0, full=full, L_max=L_max)
-    else:
-        check_output_gain(L0, meas.C, Ts, A=A)  # a stabilising start
-        gains = OutputGains(L0, beta0)
+    L0 = recipe.L0 if isinstance(recipe.L0, (int, float)) else torch.tensor(recipe.L0, dtype=torch.float64)
+    gains = CascadeGains(n, longest(dt), L0=L0, beta0=recipe.beta0, full=recipe.full, L_max=recipe.L_max)
     params = list(gains.parameters())
-    if train_model:
+    obs_gain = None
+    if observer is not None:
+        observer.gain_for(dt)  # a stabilising start (raises if not)
+        if recipe.tune_observer:
+            obs_gain = ObserverGain(observer)
+            params += list(obs_gain.parameters())
+    if recipe.train_model:
         if not isinstance(f, nn.Module):
             raise TypeError("train_model=True needs f to be an nn.Module")
         params += [p for p in f.parameters() if p.requires_grad]
-    frozen = [] if train_model or not isinstance(f, nn.Module) else [p for p in f.parameters() if p.requires_grad]
-    opt = torch.optim.Adam(params, lr=float(lr))
+    frozen = [] if recipe.train_model or not isinstance(f, nn.Module) else [p for p in f.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(params, lr=float(recipe.lr))
     result = TunedGains(gains, [], 0.0)
     start = time.perf_counter()
     try:
         for p in frozen:  # a frozen model gets no gradient (and keeps no .grad)
             p.requires_grad_(False)
-        for _ in range(int(iterations)):
+        fixed_first = None
+        if observer is not None and obs_gain is None and not recipe.train_model and objective is None:
+            with torch.no_grad():  # the observer layer does not change: solve it once
+                fixed_first = _observer_layer(f, meas, dt, n, observer, None)
+        for _ in range(int(recipe.iterations)):
             opt.zero_grad()
-            loss = _loss(f, meas, Ts, N, gains, objective)
+            loss = _loss(f, meas, dt, N, gains, objective, observer, obs_gain, fixed_first)
             loss.backward()
             opt.step()
             result.loss.append(loss.item())
@@ -308,12 +304,25 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float, N: int, *, L0: float | Tens
         for p in frozen:
             p.requires_grad_(True)
     result.seconds = time.perf_counter() - start
-    if C is not None:
-        with torch.no_grad():
-            check_output_gain(gains.L(), meas.C, Ts, A=A)  # still stabilising after the descent
+    if observer is not None:
+        result.observer = observer
+        if obs_gain is not None:
+            with torch.no_grad():
+                tuned = obs_gain().detach().clone()
+            result.observer = MeasuredFeedback(observer.f, tuned, observer.measurement, observer.Ts, A=observer._A,
+                                               x0=observer.x0, allow_unstable=observer._allow)
+            result.observer.gain_for(dt)  # still stabilising after the descent (raises if not)
     vals = gains.values()
     result.L, result.beta = vals["L"], vals["beta"]
     return result
+
+
+def _observer_layer(f: VectorField, meas, dt: Steps, n: int, observer: MeasuredFeedback,
+                    obs_gain: ObserverGain | None) -> Tensor:
+    """The first layer's output (..., T, n): the observer's one-step estimates."""
+    L = observer.gain_for(dt) if obs_gain is None else obs_gain()
+    _, _, z1, _ = first_layer(f, meas, L.to(meas.y.dtype), dt, start_state(meas, n, observer.x0), diagonal=False)
+    return z1
 
 
 def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
@@ -333,7 +342,8 @@ def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
     return TuneRecipe(L0=L0, **given)
 
 
-def _loss(f: VectorField, meas, Ts: float, N: int, gains: CascadeGains, objective: Objective | None) -> Tensor:
+def _loss(f: VectorField, meas, dt: Steps, N: int, gains: CascadeGains, objective: Objective | None,
+          observer: MeasuredFeedback | None, obs_gain: ObserverGain | None, fixed_first: Tensor | None) -> Tensor:
     """One iteration's cost: ``objective``, or the N-step prediction error (through the gaps, on present targets)."""
     x = meas.y
     if objective is not None:
@@ -341,15 +351,23 @@ def _loss(f: VectorField, meas, Ts: float, N: int, gains: CascadeGains, objectiv
         if not isinstance(loss, Tensor) or loss.numel() != 1 or not loss.requires_grad:
             raise ValueError("the objective must return a scalar tensor differentiable in the gains")
         return loss.reshape(())
-    n = gains.n
-    if meas.mask is None and meas.C is None:
+    T = x.shape[-2]
+    if meas.mask is None and observer is None:
         # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
-        return prediction_loss(cascade_forward(f, x, Ts, N, gains, u=meas.u, rows=x.shape[-2] - N), x, N)
-    z = gap_cascade(f, meas, gains.L_stack(N, x.dtype), Ts, n, diagonal=not gains.full)
-    if meas.C is not None:
-        z = z @ meas.C.to(x.dtype).T  # the predicted outputs
+        return prediction_loss(run_cascade(f, x, gains.L_stack(N, x.dtype), dt, diagonal=not gains.full, u=meas.u,
+                                           rows=T - N), x, N)
+    L_stack = gains.L_stack(N, x.dtype)
+    if observer is not None:
+        z1 = fixed_first if fixed_first is not None else _observer_layer(f, meas, dt, gains.n, observer, obs_gain)
+    else:
+        x0 = start_state(meas, gains.n, None)
+        _, _, z1, _ = first_layer(f, meas, L_stack[0], dt, x0, diagonal=not gains.full)
+    z = run_cascade(f, z1, L_stack[1:], dt, diagonal=not gains.full, u=meas.u, first_depth=1, rows=T - N)
+    measure = measure_fn(meas, x.dtype)
+    if measure is not None:
+        z = measure(z)  # the predicted outputs
     present = (torch.ones_like(x) if meas.mask is None else meas.mask.to(x.dtype))[..., N:, :]
-    err = (z[..., : x.shape[-2] - N, :] - x[..., N:, :]).pow(2) * present  # targets N samples later, measured
+    err = (z - x[..., N:, :]).pow(2) * present  # targets N samples later, measured
     return err.sum() / present.sum().clamp_min(1.0) * x.shape[-1]
 
 

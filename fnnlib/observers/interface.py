@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from fnnlib.metrics import error_norm, rmse
+from fnnlib.feedback.sampling import check_times
 from fnnlib.feedback.types import Estimate
 
 
@@ -36,7 +37,9 @@ class Observer(Protocol):
     Ts: float
 
     def observe(self, x: Tensor) -> Estimate:
-        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n)."""
+        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n).
+
+        fnnlib's observers also take ``t=`` (..., T), the sample times, instead of the nominal step ``Ts``."""
 
     def predict(self, x: Tensor, N: int) -> Tensor:
         """Predictions (..., T, n) from every sample of ``x``; row k predicts the state at ``t_{k+N}``."""
@@ -62,7 +65,7 @@ def _best_seconds(fn, repeats: int):
 
 def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Tensor, N: int, *,
                       settle: int = 0, repeats: int = 3, u: Tensor | None = None,
-                      mask: Tensor | None = None) -> ObserverReport:
+                      mask: Tensor | None = None, t: Tensor | None = None) -> ObserverReport:
     """Run ``observer`` on measurements ``y`` and score it against the truth.
 
     Parameters
@@ -77,6 +80,9 @@ def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Ten
         Inputs of a controlled model, passed to ``observe`` and ``predict``.
     mask : Tensor of bool, shape (T,) or (T, p), optional
         Missing samples, passed to ``observe`` and ``predict``.
+    t : Tensor, shape (T,), optional
+        The sample times (uneven sampling), passed to ``observe`` and ``predict`` instead of the observer's
+        ``Ts``; checked here before any work (:func:`~fnnlib.feedback.sampling.check_times`).
     N : int
         Prediction horizon.
     settle : int
@@ -111,8 +117,10 @@ def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Ten
     settle = int(settle)
     if not 0 <= settle < T:
         raise ValueError(f"need 0 <= settle < T = {T}, got settle = {settle}")
+    if t is not None:
+        check_times(t, None, y)
     args = () if u is None else (u,)
-    kw = {} if mask is None else {"mask": mask}
+    kw = ({} if mask is None else {"mask": mask}) | ({} if t is None else {"t": t})
     est, t_obs = _best_seconds(lambda: observer.observe(y, *args, **kw), repeats)
     z_N, t_pred = _best_seconds(lambda: observer.predict(y, int(N), *args, **kw), repeats)
     metrics = {

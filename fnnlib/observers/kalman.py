@@ -17,6 +17,21 @@ on :math:`y_k = C z_k + v_k`.
   :math:`\hat x_{k+1|k} = \hat x_{k|k} + T_s(f_{neural}(\hat x_{k|k}) + \hat d_{k|k})`,
   with the Jacobian of :math:`f_{neural}` by autograd. filterpy steps one
   sample at a time, so this one loops over time (and over batch) in Python.
+
+**Uneven sample times** ``t`` (..., T) (every ``estimate``/``observe``/``predict`` takes ``t=`` instead of the
+nominal ``Ts`` given at construction): each interval :math:`\Delta_k = t_{k+1} - t_k` has its own transition.
+
+* The plant evaluated at the measurement (the full-state :class:`KalmanObserver`) is linear, and its
+  transition :math:`A(\Delta_k) = I + \Delta_k A_c`, :math:`B(\Delta_k) = \Delta_k B_c` is its exact
+  zero-order-hold discretisation (:func:`~fnnlib.observers.augmented.augmented_step`).
+* The model evaluated at the estimate (the EKF, the UKF, the filters with ``C``) steps by Euler with
+  :math:`\Delta_k`: :math:`\Phi_{\Delta}(x, d) = (x + \Delta(f(x, u) + E d),\; d)`.
+* **Process noise convention**: ``Q`` is the covariance of one *nominal* step ``Ts`` and is scaled with the
+  interval, :math:`Q_k = Q\,\Delta_k / T_s` (a random walk's variance grows linearly with the time elapsed;
+  for the model error on :math:`x` this is the first-order value of the continuous-time integral).
+* ``steady_state=True``: a stationary gain belongs to one step, so with ``t`` the filter gain :math:`K` of the
+  nominal ``Ts`` (:func:`steady_state_gain`) is held at every sample while the prediction steps by
+  :math:`\Delta_k`; the time-varying filter (``steady_state=False``) is the optimal one per interval.
 """
 
 from __future__ import annotations
@@ -28,11 +43,23 @@ import torch
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from torch import Tensor
 
+from fnnlib._validation import as_trajectory
 from fnnlib.feedback.gains import gain_matrix
 from fnnlib.feedback.layer import eval_field
 from fnnlib.feedback.measurement import check_detectable, check_measurements, check_output_matrix, model_jacobian
 from fnnlib.feedback.types import VectorField
-from fnnlib.observers.augmented import AugmentedObserver, DisturbanceEstimate, split_estimate
+from fnnlib.observers.augmented import (
+    AugmentedObserver,
+    DisturbanceEstimate,
+    augmented_step,
+    check_x0,
+    observer_steps,
+    split_estimate,
+    steps_per_record,
+)
+
+#: Beyond this magnitude the squared deviations a filter forms overflow float64 (its largest value is ~1.8e308).
+SQUARE_LIMIT = 1e150
 
 
 class SteadyState(NamedTuple):
@@ -123,8 +150,16 @@ class _OutputModel(AugmentedObserver):
                              [f"d{j}" for j in range(q)], what="the augmented [x; d] model")
         self.q, self.p = q, self.C.shape[0]
 
-    def _linearised(self, A) -> Tensor:
-        """The augmented transition at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
+    def _linearised(self, A, h: float | None = None) -> Tensor:
+        """The augmented transition of step ``h`` (default ``Ts``) at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
+        h = self.Ts if h is None else float(h)
+        A = self._jacobian(A)
+        Phi = self.A.clone() if h == self.Ts else augmented_step(self.A, self.B, self.Ts, torch.tensor(h))[0]
+        Phi[: self.n, : self.n] += h * A
+        return Phi
+
+    def _jacobian(self, A) -> Tensor:
+        """The model Jacobian ``A`` (n, n) float64, checked; by autograd at the origin if None."""
         if A is None:
             dtype = next((p.dtype for p in getattr(self.f, "parameters", lambda: iter(()))() if p.is_floating_point()),
                          torch.float64)
@@ -134,9 +169,7 @@ class _OutputModel(AugmentedObserver):
         A = torch.as_tensor(A, dtype=torch.float64)
         if A.shape != (self.n, self.n):
             raise ValueError(f"the model Jacobian A must have shape ({self.n}, {self.n}), got {tuple(A.shape)}")
-        Phi = self.A.clone()
-        Phi[: self.n, : self.n] += self.Ts * A
-        return Phi
+        return A
 
     def _new(self, cls, *args, **kwargs):
         """A filterpy filter with this plant's matrices (numpy), started at P0."""
@@ -145,19 +178,61 @@ class _OutputModel(AugmentedObserver):
         kf.Q, kf.R, kf.P = self.Q.numpy().copy(), self.R.numpy().copy(), self.P0.numpy().copy()
         return kf
 
-    def measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None):
-        """The one check of ``y`` (..., T, p), ``u``, ``mask``; numpy arrays per trajectory (B, T, .)."""
-        meas = check_measurements(y, self.n, C=self.C_x, u=u, mask=mask, f=self.f)
+    def measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None, *, t: Tensor | None = None, x0=None,
+                     limit: float | None = None):
+        """The one check of ``y`` (..., T, p), ``u``, ``mask``, the times ``t`` and a first estimate ``x0``, before any work.
+
+        Returns the checked measurements and numpy arrays per trajectory: ``ys`` (B, T, p), ``us`` (B, T, m)
+        or None, ``ms`` (B, T, p) or None, ``hs`` (B, T-1) the step of each interval (``Ts`` everywhere
+        without ``t``), ``x0s`` (B, n) or None. ``limit``: refuse measurements larger in magnitude.
+        """
+        meas = check_measurements(y, self.n, C=self.C_x, u=u, mask=mask, f=self.f)  # refuses a record with no sample
+        lead, T = meas.y.shape[:-2], meas.y.shape[-2]
+        if limit is not None:
+            big = float(meas.y.abs().max()) if meas.y.numel() else 0.0
+            if big > limit:
+                raise ValueError(f"y reaches {big:.3g}: beyond {limit:.0e} the squared deviations the filter forms "
+                                 "overflow float64; rescale the measurements (and the model) first")
+        dt = observer_steps(t, self.Ts, meas.y)
+        B = int(np.prod(lead)) if lead else 1
+        hs = (np.full((B, max(T - 1, 0)), self.Ts) if not isinstance(dt, Tensor)
+              else steps_per_record(dt, tuple(lead)).reshape(B, -1).numpy())
+        x0s = check_x0(x0, self.n, tuple(lead), torch.float64)
+        if x0s is not None:
+            x0s = x0s.reshape(B, self.n).numpy()
+            if limit is not None and float(np.abs(x0s).max()) > limit:
+                raise ValueError(f"x0 reaches {float(np.abs(x0s).max()):.3g}: beyond {limit:.0e} the filter's squares "
+                                 "overflow float64; rescale first")
+        self.check_model(meas)
         ys = meas.y.reshape(-1, *meas.y.shape[-2:]).double().numpy()
-        lead = meas.y.shape[:-2]
         us = None if meas.u is None else meas.u.expand(*lead, *meas.u.shape[-2:]).reshape(-1, *meas.u.shape[-2:])
         ms = None if meas.mask is None else meas.mask.reshape(-1, *meas.mask.shape[-2:]).numpy()
-        return meas, ys, us, ms
+        return meas, ys, us, ms, hs, x0s
 
-    def start(self, y0: np.ndarray, m0: np.ndarray | None) -> np.ndarray:
-        """The prior :math:`z_{0|-1} = [C^+ y_0; 0]` (column, n + q), over the present outputs only."""
+    def check_model(self, meas) -> None:
+        """One call of the model on a zero state (and the first input): it must return (1, n), else a clear error."""
+        x = torch.zeros(1, self.n, dtype=meas.y.dtype)
+        with torch.no_grad():
+            if meas.u is None:
+                out = self.f(0.0, x)
+            else:
+                out = self.f(0.0, x, meas.u.reshape(-1, meas.u.shape[-1])[:1])
+        if not isinstance(out, Tensor) or tuple(out.shape) != (1, self.n):
+            raise ValueError(f"the model f(t, x{'' if meas.u is None else ', u'}) must return the rate of every state, "
+                             f"shape (batch, n) = (1, {self.n}) for x of shape (1, {self.n}); got "
+                             f"{tuple(getattr(out, 'shape', ())) or type(out).__name__}")
+
+    def start(self, y0: np.ndarray, m0: np.ndarray | None, x0: np.ndarray | None = None) -> np.ndarray:
+        """The prior :math:`z_{0|-1} = [C^+ y_0; 0]` (column, n + q), over the present outputs only; ``[x0; 0]`` if given."""
+        if x0 is not None:
+            return np.concatenate([x0, np.zeros(self.q)])[:, None]
         Cx = self.C.numpy()[:, : self.n] if m0 is None else self.C.numpy()[:, : self.n] * m0[:, None]
         return np.concatenate([np.linalg.pinv(Cx) @ y0, np.zeros(self.q)])[:, None]
+
+    def noise(self, h: float) -> np.ndarray:
+        """The process noise of a step ``h``: :math:`Q\\,h/T_s` (``Q`` is given per nominal step; module docstring)."""
+        Q = self.Q.numpy()
+        return Q.copy() if h == self.Ts else Q * (h / self.Ts)
 
     def update(self, kf, y: np.ndarray, m: np.ndarray | None, *, extended: bool) -> None:
         """filterpy's measurement update on the present outputs (none: no update, the estimate runs open loop).
@@ -174,34 +249,40 @@ class _OutputModel(AugmentedObserver):
             return kf.update(y[:, None], HJacobian=lambda _: C, Hx=lambda s: C @ s, R=R)
         return kf.update(y, R=R, hx=lambda s: C @ s)
 
-    def _phi(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None) -> np.ndarray:
-        r"""The model step :math:`\Phi(x, d) = (x + T_s(f(x, u) + E d),\; d)` of a filtered ``z`` (n + q,)."""
+    def _phi(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None, h: float | None = None) -> np.ndarray:
+        r"""The model step :math:`\Phi(x, d) = (x + h(f(x, u) + E d),\; d)` of a filtered ``z`` (n + q,), ``h`` default ``Ts``."""
+        h = self.Ts if h is None else h
         n = self.n
         x, d = z[:n], z[n:]
         with torch.no_grad():
             xt = torch.as_tensor(x, dtype=dtype)[None]
             rate = (self.f(0.0, xt) if u is None else self.f(0.0, xt, u[None]))[0].double().numpy()
         Ed = d if self.E is None else self.E.numpy() @ d
-        return np.concatenate([x + self.Ts * (rate + Ed), d])
+        return np.concatenate([x + h * (rate + Ed), d])
 
-    def constant_gain_loop(self, K: np.ndarray, y: Tensor, u: Tensor | None, mask: Tensor | None) -> DisturbanceEstimate:
-        r"""A constant filter gain ``K`` (n + q, p) with the model evaluated at the estimate (partial outputs, gaps).
+    def constant_gain_loop(self, K, y: Tensor, u: Tensor | None, mask: Tensor | None, *, t: Tensor | None = None,
+                           x0=None) -> DisturbanceEstimate:
+        r"""A filter gain ``K`` (n + q, p) with the model evaluated at the estimate (partial outputs, gaps).
 
-        :math:`\hat z_{k|k} = \hat z_{k|k-1} + K\,\mathrm{diag}(m_k)(y_k - C\hat z_{k|k-1})` (``m_k`` the
+        :math:`\hat z_{k|k} = \hat z_{k|k-1} + K_k\,\mathrm{diag}(m_k)(y_k - C\hat z_{k|k-1})` (``m_k`` the
         present outputs: a missing one adds no correction, none at all moves the estimate open loop), then
-        :math:`\hat z_{k+1|k} = \Phi(\hat z_{k|k}, u_k)`, from :math:`\hat z_{0|-1} = [C^+ y_0; 0]`.
+        :math:`\hat z_{k+1|k} = \Phi_{\Delta_k}(\hat z_{k|k}, u_k)`, from :math:`\hat z_{0|-1} = [C^+ y_0; 0]`
+        (or ``[x0; 0]``). ``K`` is one gain, or a callable ``K(hs)`` giving the gain of each sample (B, T, n + q, p)
+        from the intervals ``hs`` (B, T-1) (the gain of sample k pairs with the interval after it).
         """
-        meas, ys, us, ms = self.measurements(y, u, mask)
+        meas, ys, us, ms, hs, x0s = self.measurements(y, u, mask, t=t, x0=x0)
+        Ks = K(hs) if callable(K) else None
         dtype, C = meas.y.dtype, self.C.numpy()
         z = np.empty((*ys.shape[:2], self.n + self.q))
         for i, yi in enumerate(ys):
-            prior = self.start(yi[0], None if ms is None else ms[i, 0])[:, 0]
+            prior = self.start(yi[0], None if ms is None else ms[i, 0], None if x0s is None else x0s[i])[:, 0]
             for k in range(yi.shape[0]):
                 innov = yi[k] - C @ prior
                 if ms is not None:
                     innov = innov * ms[i, k]
-                z[i, k] = prior + K @ innov
-                prior = self._phi(z[i, k], dtype, None if us is None else us[i, k])
+                z[i, k] = prior + (K if Ks is None else Ks[i, k]) @ innov
+                if k < yi.shape[0] - 1:
+                    prior = self._phi(z[i, k], dtype, None if us is None else us[i, k], hs[i, k])
         return self.split(z, meas)
 
     def split(self, z: np.ndarray, meas) -> DisturbanceEstimate:
@@ -302,24 +383,47 @@ class KalmanObserver(_KalmanBase):
             kf.predict(u=np.zeros(self.n))  # P = A P A' + Q
         return K
 
-    def estimate(self, x: Tensor, u_ext: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+    def estimate(self, x: Tensor, u_ext: Tensor | None = None, *, mask: Tensor | None = None,
+                 t: Tensor | None = None, x0=None) -> DisturbanceEstimate:
         """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u_ext``);
-        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs."""
+        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs.
+
+        ``t`` (..., T): the sample times instead of ``Ts`` (module docstring: exact zero-order hold per interval,
+        ``Q`` scaled by :math:`\\Delta_k/T_s`, the stationary gain held); ``x0`` (n,) or (..., n): the first
+        estimate instead of the first measurement's."""
         if self.output_form:
-            return self.constant_gain_loop(np.asarray(self.stationary.K), x, u_ext, mask)
+            return self.constant_gain_loop(np.asarray(self.stationary.K), x, u_ext, mask, t=t, x0=x0)
         if mask is not None:
             raise ValueError("mask needs the output form of KalmanObserver (give C, e.g. the identity)")
+        x = as_trajectory(x, self.n)
+        dt = observer_steps(t, self.Ts, x)
+        z0 = self.start_prior(x, x0)
         x, u = self.inputs(x, u_ext)  # u_k = f_neural(y_k), as in Eq. (7)
         if self.steady_state:
-            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext)
+            K = torch.as_tensor(self.stationary.K)
+            return self.constant_gain_estimate(x, u, torch.as_tensor(self.stationary.L), u_ext, dt=dt, x0=x0,
+                                               M=None if not isinstance(dt, Tensor) else K)
         ys, us = x.reshape(-1, *x.shape[-2:]).double().numpy(), u.reshape(-1, *u.shape[-2:]).double().numpy()
-        z = np.empty((*ys.shape[:2], 2 * self.n))
+        T, m = x.shape[-2], 2 * self.n
+        if isinstance(dt, Tensor):  # one exact zero-order-hold plant per interval; the last prediction is unused
+            Ak, Bk = augmented_step(self.A, self.B, self.Ts, steps_per_record(dt, tuple(x.shape[:-2])))
+            Ak, Bk = Ak.reshape(-1, T - 1, m, m).numpy(), Bk.reshape(-1, T - 1, m, self.n).numpy()
+            hs = steps_per_record(dt, tuple(x.shape[:-2])).reshape(-1, T - 1).numpy()
+        z0s = None if z0 is None else z0.reshape(-1, m).numpy()
+        z = np.empty((*ys.shape[:2], m))
         for i, (y, ui) in enumerate(zip(ys, us)):  # filterpy filters one trajectory at a time
             kf = self.make_filter()
-            kf.x = np.concatenate([y[0], np.zeros(self.n)])  # prior z_{0|-1} = [y_0; 0]
-            means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
+            kf.x = np.concatenate([y[0], np.zeros(self.n)]) if z0s is None else z0s[i].copy()  # prior z_{0|-1}
+            if isinstance(dt, Tensor):
+                last = T - 2
+                Fs = [Ak[i, min(k, last)] for k in range(T)]
+                Bs = [Bk[i, min(k, last)] for k in range(T)]
+                Qs = [self.noise(float(hs[i, min(k, last)])) for k in range(T)]
+                means, *_ = kf.batch_filter(list(y), Fs=Fs, Qs=Qs, Bs=Bs, us=list(ui), update_first=True)
+            else:
+                means, *_ = kf.batch_filter(list(y), us=list(ui), update_first=True)  # update(y_k), predict(u_k)
             z[i] = means
-        z = torch.as_tensor(z).reshape(*x.shape[:-1], 2 * self.n)
+        z = torch.as_tensor(z).reshape(*x.shape[:-1], m)
         return split_estimate(self.f, z, x, u_ext)
 
     def __repr__(self) -> str:
@@ -367,36 +471,40 @@ class ExtendedKalmanObserver(_KalmanBase):
 
     takes_gaps = True
 
-    def _step(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None = None):
-        r"""The prediction :math:`\Phi(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,)."""
-        n, Ts = self.n, self.Ts
+    def _step(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None = None, h: float | None = None):
+        r"""The prediction :math:`\Phi_h(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,), step ``h``."""
+        n, Ts = self.n, (self.Ts if h is None else h)
         x, d = z[:n, 0], z[n:, 0]
         with torch.enable_grad():  # J by one batched backward pass: row i of f(X), X = n copies of x
             X = torch.as_tensor(x, dtype=dtype).expand(n, n).clone().requires_grad_(True)
             out = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(n, -1))
             (J,) = torch.autograd.grad(out.diagonal().sum(), X)  # J[i, j] = d f_i / d x_j
-        F = self.A.numpy().copy()
+        F = (self.A if Ts == self.Ts else augmented_step(self.A, self.B, self.Ts, torch.tensor(Ts))[0]).numpy().copy()
         F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts E], [0, I]]
         Ed = d if self.E is None else self.E.numpy() @ d
         x_next = x + Ts * (out[0].detach().double().numpy() + Ed)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}, u_k) + E d)
         return np.concatenate([x_next, d])[:, None], F
 
-    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None, t: Tensor | None = None,
+                 x0=None) -> DisturbanceEstimate:
         """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p), inputs ``u`` (..., T, m).
 
         A NaN in ``x`` or a ``False`` in ``mask`` ((..., T) or (..., T, p)) is a missing output: the update
-        uses the present ones only, and none at all moves the estimate open loop.
+        uses the present ones only, and none at all moves the estimate open loop. ``t`` (..., T): the sample
+        times (Euler step and :math:`Q\\,\\Delta_k/T_s` per interval, module docstring); ``x0``: the first estimate.
         """
-        meas, ys, us, ms = self.measurements(x, u, mask)
+        meas, ys, us, ms, hs, x0s = self.measurements(x, u, mask, t=t, x0=x0)
         dtype = meas.y.dtype
         z = np.empty((*ys.shape[:2], self.n + self.q))
         for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
-            ui = None if us is None else us[i]
-            ekf = self._new(_LearnedModelEKF, lambda s, k=None: self._step(s, dtype, None if ui is None else ui[k]))
-            ekf.x = self.start(y[0], None if ms is None else ms[i, 0])  # prior z_{0|-1} = [C^+ y_0; 0]
+            ui, hi = (None if us is None else us[i]), hs[i]
+            ekf = self._new(_LearnedModelEKF,
+                            lambda s, k=None: self._step(s, dtype, None if ui is None else ui[k], float(hi[k])))
+            ekf.x = self.start(y[0], None if ms is None else ms[i, 0], None if x0s is None else x0s[i])  # z_{0|-1}
             for k in range(y.shape[0]):
                 if k:
                     ekf.k = k - 1
+                    ekf.Q = self.noise(float(hi[k - 1]))
                     ekf.predict()  # z = Phi(z, u_{k-1}); P = F P F' + Q
                 self.update(ekf, y[k], None if ms is None else ms[i, k], extended=True)  # K, z += K (y - C z)
                 z[i, k] = ekf.x[:, 0]

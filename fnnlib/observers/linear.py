@@ -1,4 +1,10 @@
-"""The linear feedback network, Eqs. (7)-(8), behind the :class:`~fnnlib.observers.Observer` interface."""
+r"""The linear feedback network, Eqs. (7)-(8), behind the :class:`~fnnlib.observers.Observer` interface.
+
+With the sample times ``t`` (..., T) instead of ``Ts`` Eq. (8) steps by each interval,
+:math:`\hat x_{k+1} = \hat x_k + \Delta_k \hat f_k` (:mod:`fnnlib.feedback.sampling`), the cascade predicts
+along the record's own times, and Eq. (25)'s condition :math:`\rho(I - \Delta L) < 1` is checked at the
+longest interval (where it is strictest).
+"""
 
 from __future__ import annotations
 
@@ -10,6 +16,7 @@ from fnnlib.feedback.cascade import cascade_predict
 from fnnlib.feedback.decay import check_beta
 from fnnlib.feedback.gains import check_gain, gain_compact, implied_n
 from fnnlib.feedback.layer import eval_field, feedback_layer
+from fnnlib.feedback.sampling import check_times, longest, row_steps
 from fnnlib.feedback.types import Estimate, VectorField
 
 
@@ -49,21 +56,34 @@ class LinearFeedback:
         self.allow_unstable = bool(allow_unstable)
         self.beta = check_beta(beta)
 
-    def observe(self, x: Tensor, u: Tensor | None = None) -> Estimate:
+    def observe(self, x: Tensor, u: Tensor | None = None, *, t: Tensor | None = None) -> Estimate:
         """Run the feedback network along measurements ``x`` (..., T, n) (inputs ``u`` (..., T, m) of a controlled model).
 
         Returns ``x_hat`` (the estimate of Eq. (8)) and ``f_hat`` (the
-        corrected change rate of Eq. (7)), both (..., T, n).
+        corrected change rate of Eq. (7)), both (..., T, n). ``t`` (..., T): the sample times instead of ``Ts``.
         """
         x = as_trajectory(x, self.n)
+        dt = self.steps(x, t)
         with torch.no_grad():
             fx = eval_field(self.f, x, u)
-        return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), self.Ts)
+        step = row_steps(dt, 0, x.shape[-2])
+        if isinstance(step, Tensor):
+            step = step.to(x.dtype)
+        return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), step)
 
-    def predict(self, x: Tensor, N: int, u: Tensor | None = None) -> Tensor:
+    def steps(self, x: Tensor, t: Tensor | None):
+        """``Ts``, or the intervals (..., T-1) of the times ``t`` of ``x``, the gain checked at the longest (Eq. (25))."""
+        if t is None:
+            return self.Ts
+        dt = check_times(t, None, x, name="x")
+        check_gain(self.L, self.n, longest(dt), allow_unstable=self.allow_unstable)
+        return dt
+
+    def predict(self, x: Tensor, N: int, u: Tensor | None = None, *, t: Tensor | None = None) -> Tensor:
         """N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
 
         :func:`~fnnlib.feedback.cascade.cascade_predict` with this base gain and the decay
-        ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}``.
+        ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}`` (with ``t``, the record's own).
         """
-        return cascade_predict(self.f, x, self.Ts, N, self.L, self.beta, allow_unstable=self.allow_unstable, u=u)
+        return cascade_predict(self.f, x, None if t is not None else self.Ts, N, self.L, self.beta,
+                               allow_unstable=self.allow_unstable, u=u, t=t)

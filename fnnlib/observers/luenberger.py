@@ -9,6 +9,17 @@ The observer runs on the augmented learned model of
 whose error obeys :math:`e_{k+1} = (A - LC)e_k` plus the noise terms, so the
 requested discrete poles are the eigenvalues of :math:`A - LC` exactly
 (Luenberger 1966; pole placement by the dual :math:`A^T - C^T L^T`).
+
+**Uneven sample times** ``t`` (``estimate``/``observe``/``predict`` take ``t=`` instead of the nominal ``Ts``):
+the poles are placed **per sample** (each step contracts the error by the same requested discrete poles,
+whatever its length) and the gain is recomputed **per interval** :math:`\Delta_k` for that interval's plant.
+
+* Full state: :math:`A(\Delta) = D_\Delta A(1) D_\Delta^{-1}` with :math:`D_\Delta = \mathrm{diag}(I, I/\Delta)`
+  and :math:`C D_\Delta = C`, so :math:`L_\Delta = \mathrm{diag}(I, (T_s/\Delta) I)\,L` has exactly the poles
+  of :math:`L` at :math:`T_s` (closed form, no placement per interval).
+* With ``C``: :math:`\Phi_\Delta` (the Euler step of the linearised model) is no such similarity, so the poles
+  are placed for every distinct interval (about 2 ms each; a log with many distinct intervals pays that
+  once per interval, shown by a progress bar; intervals within 1e-10 of each other share one).
 """
 
 from __future__ import annotations
@@ -19,10 +30,12 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 from torch import Tensor
+from tqdm.auto import tqdm
 
 from fnnlib.feedback.gains import gain_matrix
 from fnnlib.feedback.types import VectorField
-from fnnlib.observers.augmented import DisturbanceEstimate
+from fnnlib._validation import as_trajectory
+from fnnlib.observers.augmented import DisturbanceEstimate, observer_steps, steps_per_record
 from fnnlib.observers.kalman import _OutputModel
 
 
@@ -133,7 +146,8 @@ class LuenbergerObserver(_OutputModel):
         if (poles is None) == (L is None):
             raise ValueError("give exactly one of poles (to place) or L (a ready observer gain)")
         self.output_form = C is not None or disturbance is not None
-        self.Phi = self._linearised(A) if self.output_form else self.A  # the transition the poles are placed for
+        self.J = self._jacobian(A) if self.output_form else None  # the model Jacobian the output form is linearised at
+        self.Phi = self._linearised(self.J) if self.output_form else self.A  # the transition the poles are placed for
         if self.output_form:
             self.takes_gaps = True
         if poles is not None:
@@ -148,13 +162,50 @@ class LuenbergerObserver(_OutputModel):
                                  "pass allow_unstable=True to use it anyway")
         self.poles = [complex(z) for z in (poles if poles is not None else self.error_poles())]
 
-    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None, t: Tensor | None = None,
+                 x0=None) -> DisturbanceEstimate:
         """Filtered state, disturbance and change rate along measurements ``x`` (..., T, n) (inputs ``u``);
-        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs."""
+        with ``C``, ``x`` is ``y`` (..., T, p) and ``mask`` marks missing outputs. ``t`` (..., T): the sample
+        times (module docstring: the poles per sample, the gain per interval); ``x0``: the first estimate."""
         if self.output_form:
-            K = torch.linalg.solve(self.Phi, self.L).numpy()  # filter form: z_{k|k} = z_{k|k-1} + Phi^{-1} L (...)
-            return self.constant_gain_loop(K, x, u, mask)
-        return self.constant_gain_estimate(*self.inputs(x, u), self.L, u)
+            if t is None:
+                K = torch.linalg.solve(self.Phi, self.L).numpy()  # filter form: z_{k|k} = z_{k|k-1} + Phi^{-1} L (...)
+            else:
+                K = self.interval_gains
+            return self.constant_gain_loop(K, x, u, mask, t=t, x0=x0)
+        x = as_trajectory(x, self.n)
+        dt = observer_steps(t, self.Ts, x)
+        self.start_prior(x, x0)  # x0 checked before the model runs
+        if not isinstance(dt, Tensor):
+            return self.constant_gain_estimate(*self.inputs(x, u), self.L, u, x0=x0)
+        h = steps_per_record(dt, tuple(x.shape[:-2]))
+        h = torch.cat([h, h[..., -1:]], -1)  # the gain of sample k pairs with the interval after it
+        scale = torch.cat([torch.ones(*h.shape, self.n, dtype=torch.float64),
+                           (self.Ts / h)[..., None].expand(*h.shape, self.q)], -1)  # diag(I, Ts/Delta I)
+        L_k = scale[..., None] * self.L  # (..., T, 2n, n): the poles of L at every interval
+        return self.constant_gain_estimate(*self.inputs(x, u), L_k, u, dt=dt, x0=x0)
+
+    def interval_gains(self, hs: np.ndarray, *, rtol: float = 1e-10) -> np.ndarray:
+        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval of ``hs`` (B, T-1).
+
+        One placement per distinct interval; sample k uses the interval after it (the last sample the one before).
+        Intervals within ``rtol`` of each other share one placement (a grid's rounding, ~1e-15, would
+        otherwise give a new one each); one within ``rtol`` of ``Ts`` uses the gain of ``Ts`` itself.
+        """
+        h_all = np.concatenate([hs, hs[:, -1:]], 1) if hs.shape[1] else np.full((hs.shape[0], 1), self.Ts)
+        uniq, inv = np.unique(h_all, return_inverse=True)
+        group = np.concatenate([[0], np.cumsum(np.diff(uniq) > rtol * uniq[1:])])  # runs of near-equal intervals
+        reps = [uniq[group == g] for g in range(int(group[-1]) + 1)]
+        gains = np.empty((len(reps), self.n + self.q, self.p))
+        K_Ts = torch.linalg.solve(self.Phi, self.L).numpy()
+        for j, hg in enumerate(tqdm(reps, desc="placing poles per interval", disable=len(reps) < 100, leave=False)):
+            if np.any(np.abs(hg - self.Ts) <= rtol * self.Ts):
+                gains[j] = K_Ts
+                continue
+            Phi = self._linearised(self.J, float(hg[0]))
+            L = place_observer_gain(Phi, self.C, self.poles, allow_unstable=True)
+            gains[j] = torch.linalg.solve(Phi, L).numpy()
+        return gains[group[inv.reshape(h_all.shape)]]
 
     def error_poles(self) -> np.ndarray:
         r"""Eigenvalues of :math:`\Phi - LC` (complex, shape (n + q,)); :math:`\Phi = A` without ``C``."""

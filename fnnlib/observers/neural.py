@@ -1,4 +1,4 @@
-"""The neural feedback network: a frozen neural ODE corrected by a learned h_neural (Sec. 4).
+r"""The neural feedback network: a frozen neural ODE corrected by a learned h_neural (Sec. 4).
 
 Eq. (7) with the linear term replaced by a network,
 :math:`\\hat f_k = f_{neural}(x_k) + h_{neural}(x_k - \\hat x_k)`, and Eq. (8)
@@ -6,6 +6,12 @@ Eq. (7) with the linear term replaced by a network,
 :math:`\\hat x` is nonlinear, so it runs as a loop over time, batched over all
 leading axes (cases, levels, start times); the N-step cascade of Sec. 3.3 runs
 its layers as anti-diagonal wavefronts (T + N - 1 sequential steps, not T * N).
+
+With the sample times ``t`` (..., T) instead of ``Ts`` every step is its own interval,
+:math:`\hat x_{k+1} = \hat x_k + \Delta_k \hat f_k` (:mod:`fnnlib.feedback.sampling`); layer ``i`` of the
+cascade moves row ``k`` from :math:`t_{k+i}` to :math:`t_{k+i+1}`, so every cell of a wavefront ``w = i + k``
+steps by the same :math:`\Delta_w` (past the record's end the last interval is repeated). The decay
+:math:`e^{-\beta i}` is read per layer, as for Eq. (11) (:mod:`fnnlib.feedback.sampling`).
 """
 
 from __future__ import annotations
@@ -16,10 +22,19 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_beta, check_N, decay_factors
 from fnnlib.feedback.layer import eval_field
+from fnnlib.feedback.sampling import Steps, check_times
 from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
 
-def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: float) -> Estimate:
+
+def _flat_steps(dt: Steps, lead: tuple[int, ...], T: int, dtype: torch.dtype) -> Steps:
+    """``Ts`` as it is, or the intervals (..., T-1) expanded to the records' leading axes and flattened, (B, T-1)."""
+    if not isinstance(dt, Tensor):
+        return dt
+    return dt.to(dtype).expand(*lead, T - 1).reshape(-1, T - 1)
+
+
+def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: Steps) -> Estimate:
     r"""Run the neural feedback along measurements ``x`` (..., T, n), all leading axes at once.
 
     ``fx = f_neural(x)`` (same shape) is given, so the frozen model is evaluated once, outside
@@ -28,7 +43,9 @@ def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: float) -> Estimate:
     * :math:`\hat f_k = f_{neural}(x_k) + h_{neural}(x_k - \hat x_k)`  (Eq. (7), neural form)
     * :math:`\hat x_{k+1} = \hat x_k + T_s \hat f_k`  (Eq. (8) `sys2_2`)
 
-    Gradients flow through ``h`` unless the caller disables them.
+    ``Ts`` is the step, or the intervals :math:`\Delta_k` (..., T-1) of uneven times (leading axes ``x``'s or
+    none): :math:`\hat x_{k+1} = \hat x_k + \Delta_k \hat f_k`. Gradients flow through ``h`` unless the
+    caller disables them.
 
     Returns
     -------
@@ -38,13 +55,15 @@ def feedback_rollout(fx: Tensor, x: Tensor, h: Feedback, Ts: float) -> Estimate:
     lead, (T, n) = x.shape[:-2], x.shape[-2:]
     xs = x.reshape(-1, T, n)
     fs = fx.reshape(-1, T, n)
+    dts = _flat_steps(Ts, lead, T, x.dtype)
     x_hat_k = xs[:, 0]
     x_hats, f_hats = [], []
     for k in range(T):
         f_hat_k = fs[:, k] + h(xs[:, k] - x_hat_k)  # f_hat = f_neural(x) + h_neural(x - x_hat)
         x_hats.append(x_hat_k)
         f_hats.append(f_hat_k)
-        x_hat_k = x_hat_k + Ts * f_hat_k  # x_hat += Ts * f_hat   (Eq. 8)
+        step = dts if not isinstance(dts, Tensor) else dts[:, min(k, T - 2), None]
+        x_hat_k = x_hat_k + step * f_hat_k  # x_hat += Delta_k * f_hat   (Eq. 8)
     x_hat = torch.stack(x_hats, dim=1).reshape(*lead, T, n)
     f_hat = torch.stack(f_hats, dim=1).reshape(*lead, T, n)
     return Estimate(x_hat, f_hat)
@@ -79,14 +98,21 @@ class NeuralFeedbackObserver:
         self.n = int(n)
         self.beta = check_beta(beta)
 
-    @torch.no_grad()
-    def observe(self, x: Tensor) -> Estimate:
-        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n)."""
-        x = as_trajectory(x, self.n)
-        return feedback_rollout(eval_field(self.f, x), x, self.h, self.Ts)
+    def steps(self, x: Tensor, t: Tensor | None) -> Steps:
+        """``Ts``, or the checked intervals (..., T-1) of the sample times ``t`` of ``x``."""
+        return self.Ts if t is None else check_times(t, None, x, name="x")
 
     @torch.no_grad()
-    def predict(self, x: Tensor, N: int) -> Tensor:
+    def observe(self, x: Tensor, *, t: Tensor | None = None) -> Estimate:
+        """State and change-rate estimates along measurements ``x`` (..., T, n), each (..., T, n).
+
+        ``t`` (..., T): the sample times instead of ``Ts`` (module docstring)."""
+        x = as_trajectory(x, self.n)
+        dt = self.steps(x, t)  # checked before the model runs
+        return feedback_rollout(eval_field(self.f, x), x, self.h, dt)
+
+    @torch.no_grad()
+    def predict(self, x: Tensor, N: int, *, t: Tensor | None = None) -> Tensor:
         r"""N-step prediction from every sample of ``x`` (..., T, n) by the cascade of Sec. 3.3.
 
         Layer ``i`` takes the previous layer's one-step predictions :math:`z^{(i)}_k`
@@ -94,10 +120,12 @@ class NeuralFeedbackObserver:
         and outputs :math:`z^{(i+1)}_k = z^{(i)}_k + T_s \hat f^{(i)}_k`. Layer ``i`` at time ``k``
         needs layer ``i-1`` at time ``k`` and itself at ``k-1``, so every cell with ``i + k = w``
         is computed at once: T + N - 1 batched steps. Row k of the result predicts ``x(t_{k+N})``.
+        With ``t`` (..., T) the cells of wavefront ``w`` step by :math:`\Delta_w` (module docstring).
         """
         N = check_N(N)
         x = as_trajectory(x, self.n)
         lead, (T, n) = x.shape[:-2], x.shape[-2:]
+        dts = _flat_steps(self.steps(x, t), lead, T, x.dtype)
         xs = x.reshape(-1, T, n)
         B = xs.shape[0]
         decay = decay_factors(self.beta, N)[0].to(x.dtype)[:, None, None]  # (N, 1, 1): e^{-beta i}   (Eq. 11)
@@ -115,8 +143,9 @@ class NeuralFeedbackObserver:
             e = z - x_hat[lo:hi + 1]
             f_hat = (self.f(0.0, z.reshape(-1, n)) + self.h(e.reshape(-1, n))
                      * decay[lo:hi + 1].expand(m, B, 1).reshape(-1, 1)).reshape(m, B, n)
-            x_hat[lo:hi + 1] += self.Ts * f_hat  # x_hat^(i) += Ts * f_hat^(i)   (Eq. 8)
-            z_next = z + self.Ts * f_hat  # z^(i+1)_k = z^(i)_k + Ts * f_hat^(i)_k
+            step = dts if not isinstance(dts, Tensor) else dts[:, min(w, T - 2), None]  # Delta_{k+i}, k + i = w
+            x_hat[lo:hi + 1] += step * f_hat  # x_hat^(i) += Ts * f_hat^(i)   (Eq. 8)
+            z_next = z + step * f_hat  # z^(i+1)_k = z^(i)_k + Ts * f_hat^(i)_k
             if hi == N - 1:
                 out[:, w - N + 1] = z_next[-1]
                 z_next = z_next[:-1]
@@ -124,10 +153,11 @@ class NeuralFeedbackObserver:
         return out.reshape(*lead, T, n)
 
     @torch.no_grad()
-    def predict_loop(self, x: Tensor, N: int) -> Tensor:
-        """Reference for :meth:`predict`: a plain loop over start times and depths; ``x`` (T, n)."""
+    def predict_loop(self, x: Tensor, N: int, *, t: Tensor | None = None) -> Tensor:
+        """Reference for :meth:`predict`: a plain loop over start times and depths; ``x`` (T, n), ``t`` (T,)."""
         N = check_N(N)
         x = as_trajectory(x, self.n)
+        dt = self.steps(x, t)
         decay = decay_factors(self.beta, N)[0].tolist()
         if x.ndim != 2:
             raise ValueError(f"the loop reference takes one trajectory of shape (T, n), got {tuple(x.shape)}")
@@ -139,7 +169,8 @@ class NeuralFeedbackObserver:
                 if k == 0:
                     x_hat.append(z.clone())
                 f_hat = self.f(0.0, z[None])[0] + decay[i] * self.h((z - x_hat[i])[None])[0]
-                x_hat[i] = x_hat[i] + self.Ts * f_hat
-                z = z + self.Ts * f_hat
+                h = dt if not isinstance(dt, Tensor) else float(dt[min(k + i, x.shape[0] - 2)])
+                x_hat[i] = x_hat[i] + h * f_hat
+                z = z + h * f_hat
             out[k] = z
         return out

@@ -4,6 +4,12 @@ The same plant as :class:`~fnnlib.observers.ExtendedKalmanObserver`,
 :math:`\Phi(x, d) = (x + T_s(f_{neural}(x, u) + E d),\; d)` and :math:`y = C x + v`, but the mean and
 covariance are carried through :math:`\Phi` by sigma points (van der Merwe's scaled set) instead of a
 Jacobian; all sigma points of a step go through the model in one batched call.
+
+Uneven sample times ``t`` are taken as by the EKF (:mod:`fnnlib.observers.kalman`): Euler with each interval
+:math:`\Delta_k`, process noise :math:`Q\,\Delta_k/T_s`. The sigma points' squared deviations overflow float64
+for states near :math:`10^{154}`: measurements or a first estimate beyond
+:data:`~fnnlib.observers.kalman.SQUARE_LIMIT` are refused before any work, and a covariance that still turns
+non-finite or indefinite (a diverging model) stops the filter with the sample where it happened.
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ from torch import Tensor
 
 from fnnlib.feedback.types import VectorField
 from fnnlib.observers.augmented import DisturbanceEstimate
-from fnnlib.observers.kalman import _KalmanBase
+from fnnlib.observers.kalman import SQUARE_LIMIT, _KalmanBase
 
 
 class _BatchedUKF(UnscentedKalmanFilter):
@@ -46,33 +52,45 @@ class UnscentedKalmanObserver(_KalmanBase):
             raise ValueError(f"alpha must be > 0, got {alpha!r}")
         self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
 
-    def _fx(self, sigmas: np.ndarray, dtype: torch.dtype, u: Tensor | None) -> np.ndarray:
-        """:math:`\\Phi` of every sigma point (S, n + q) in one model call."""
+    def _fx(self, sigmas: np.ndarray, dtype: torch.dtype, u: Tensor | None, h: float | None = None) -> np.ndarray:
+        """:math:`\\Phi_h` of every sigma point (S, n + q) in one model call (step ``h``, default ``Ts``)."""
+        h = self.Ts if h is None else h
         n = self.n
         X = torch.as_tensor(sigmas[:, :n], dtype=dtype)
         with torch.no_grad():
             fx = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(X.shape[0], -1))
         d = sigmas[:, n:]
         Ed = d if self.E is None else d @ self.E.numpy().T
-        return np.concatenate([sigmas[:, :n] + self.Ts * (fx.double().numpy() + Ed), d], 1)
+        return np.concatenate([sigmas[:, :n] + h * (fx.double().numpy() + Ed), d], 1)
 
-    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's."""
-        meas, ys, us, ms = self.measurements(x, u, mask)
+    def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None, t: Tensor | None = None,
+                 x0=None) -> DisturbanceEstimate:
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's (``t``, ``x0``)."""
+        meas, ys, us, ms, hs, x0s = self.measurements(x, u, mask, t=t, x0=x0, limit=SQUARE_LIMIT)
         dtype = meas.y.dtype
         dim = self.n + self.q
         z = np.empty((*ys.shape[:2], dim))
         for i, y in enumerate(ys):
-            ui = None if us is None else us[i]
+            ui, hi = (None if us is None else us[i]), hs[i]
             points = MerweScaledSigmaPoints(dim, alpha=self.alpha, beta=self.beta, kappa=self.kappa)
-            ukf = self._new(_BatchedUKF, lambda s, k: self._fx(s, dtype, None if ui is None else ui[k]),
+            ukf = self._new(_BatchedUKF, lambda s, k: self._fx(s, dtype, None if ui is None else ui[k], float(hi[k])),
                             dt=self.Ts, points=points)
-            ukf.x = self.start(y[0], None if ms is None else ms[i, 0])[:, 0]
+            ukf.x = self.start(y[0], None if ms is None else ms[i, 0], None if x0s is None else x0s[i])[:, 0]
             ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # the first update has no prediction before it
             for k in range(y.shape[0]):
-                if k:
-                    ukf.predict(k=k - 1)  # sigma points through Phi(., u_{k-1})
-                self.update(ukf, y[k], None if ms is None else ms[i, k], extended=False)
+                try:
+                    with np.errstate(over="raise", invalid="raise"):
+                        if k:
+                            ukf.Q = self.noise(float(hi[k - 1]))
+                            ukf.predict(k=k - 1)  # sigma points through Phi(., u_{k-1})
+                        self.update(ukf, y[k], None if ms is None else ms[i, k], extended=False)
+                except (FloatingPointError, np.linalg.LinAlgError, ValueError) as exc:
+                    raise RuntimeError(f"the UKF failed at sample {k} of record {i} ({exc}): its covariance overflowed or "
+                                       "lost definiteness, e.g. a model that diverges from the estimate or states of "
+                                       "a magnitude near 1e154; rescale the data or check the model") from None
+                if not np.all(np.isfinite(ukf.x)):
+                    raise RuntimeError(f"the UKF's estimate became non-finite at sample {k} of record {i}: the model "
+                                       "diverges from it, or the states overflow float64; rescale or check the model")
                 z[i, k] = ukf.x
         return self.split(z, meas)
 

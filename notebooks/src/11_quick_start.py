@@ -51,10 +51,11 @@ y[torch.rand(y.shape, generator=gen) < drop] = float("nan")  # ... with lost sam
 model = Cart(c=0.3)  # your model: the damping is off
 A = F.model_jacobian(model, torch.zeros(2, dtype=torch.float64), torch.zeros(1, dtype=torch.float64))
 L0 = F.place_observer_gain(torch.eye(2, dtype=torch.float64) + Ts * A, Ts * C, [0.8, 0.85])  # a stable start
-tuned = F.tune_gains(model, y[0], Ts, N, u=u[0], C=C, A=A, L0=L0, beta0=0.05, iterations=tune_iterations, lr=0.5)
-preds = {"open loop": F.rollout_predict(model, F.MeasuredFeedback(model, L0, C, Ts, A=A).observe(y[1], u[1]).x_hat,
-                                        Ts, N, u=u[1]),
-         "feedback, tuned": F.cascade_predict(model, y[1], Ts, N, torch.tensor(tuned.L), tuned.beta, u=u[1], C=C, A=A)}
+observer = F.MeasuredFeedback(model, L0, C, Ts, A=A)  # the first layer, on the position
+tuned = F.tune_gains(model, y[0], Ts, N, u=u[0], observer=observer, L0=2.0, beta0=0.05, iterations=tune_iterations,
+                     lr=0.5)
+preds = {"open loop": observer.predict(y[1], N, u[1]),
+         "feedback, tuned": F.cascade_predict(model, y[1], Ts, N, tuned.L_tensor, tuned.beta, u=u[1], observer=observer)}
 Q = [1e-6, 1e-6, 1e-3]  # process noise of (position, velocity, a disturbance on the velocity)
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
     preds[name] = kf(model, Ts, 2, Q, noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[1], N, u[1])
@@ -68,7 +69,7 @@ errors
 # %% tags=["nbval-check-output"]
 best = min(errors, key=errors.get)
 print(f"lowest N-step error: {best} ({errors[best]:.4g}); the tuned feedback: {errors['feedback, tuned']:.4g}")
-print(f"tuned L = {[round(v[0], 3) for v in tuned.L]}, beta = {tuned.beta:.3f}, "
+print(f"tuned L = {[round(v, 3) for v in tuned.L]}, beta = {tuned.beta:.3f}, "
       f"N-step loss {tuned.loss[0]:.4g} -> {tuned.loss[-1]:.4g}")
 
 # %%

@@ -304,9 +304,11 @@ for cid, gs in grids.items():
 
 # %%
 def authors_networks():
-    """The authors' f, h and domain-randomized f, or None (with a printed line) without the data directory."""
-    if data_dir is None or not (Path(data_dir) / "release").is_dir():
-        print(f"the authors' networks are not checked: no release folder in data_dir = {data_dir!r}")
+    """The authors' f, h and domain-randomized f, or None (with a printed line) without their release."""
+    names = (authors_ode, authors_feedback, authors_dr_ode)  # each there, its SHA-256 the published one
+    if not all(release.release_present(data_dir, f"spiral_curve/trained_model/{n}") for n in names):
+        print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
+              f"all in data_dir = {data_dir!r} with their published SHA-256")
         return None
     return (release.load_release_spiral_ode(data_dir, authors_ode),
             release.load_release_spiral_feedback(data_dir, authors_feedback),
@@ -363,7 +365,12 @@ if authors is not None:
 
 # %%
 def release_curves():
-    if authors is None:
+    """The release's loss curves, or None (with a printed line) where they are not all in data_dir."""
+    keys = [("spiral_curve/" if n.startswith("../") else "spiral_curve/trained_model/") + n.removeprefix("../")
+            for n in release.SPIRAL_LOSS_NAMES]
+    if not all(release.release_present(data_dir, k) for k in keys):
+        print(f"the release's loss curves are not read: not all in data_dir = {data_dir!r} (fnn-pipeline data fetch "
+              "--release)")
         return None
     return {name: release.load_release_feedback_losses(data_dir, name) for name in release.SPIRAL_LOSS_NAMES}
 

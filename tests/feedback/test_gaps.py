@@ -76,7 +76,8 @@ def test_cascade_with_C_predicts_a_partially_measured_plant():
     x, u = _data()
     y = x @ C.T
     y[30:45] = float("nan")
-    z = F.cascade_predict(PLANT, y, TS, 5, _gain(), 0.05, u=u, C=C, A=A)
+    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    z = F.cascade_predict(PLANT, y, TS, 5, 3.0, 0.05, u=u, observer=obs)
     assert z.shape == (T, 2) and bool(torch.isfinite(z).all())
     torch.testing.assert_close(z[100:-5], x[105:], rtol=0, atol=1e-6)
 
@@ -87,8 +88,8 @@ def test_multi_rate_mask_per_output():
     mask = torch.ones(T, 2, dtype=torch.bool)
     mask[1::2, 1] = False  # the velocity sensor at half the rate
     L = torch.tensor([[8.0, 0.0], [0.0, 8.0]], dtype=F64)
-    obs = F.MeasuredFeedback(PLANT, L, C2, TS, A=A)
-    est = obs.observe(x + 0.1, u, mask=mask, x0=torch.zeros(2, dtype=F64))
+    obs = F.MeasuredFeedback(PLANT, L, C2, TS, A=A, x0=torch.zeros(2, dtype=F64))
+    est = obs.observe(x + 0.1, u, mask=mask)
     assert bool(torch.isfinite(est.x_hat).all())
     with pytest.raises(ValueError, match=r"mask of shape \(120, 3\) fits neither"):
         obs.observe(x, u, mask=torch.ones(T, 3, dtype=torch.bool))
@@ -126,32 +127,34 @@ def test_tune_gains_through_gaps_and_with_a_recipe_and_an_objective():
         F.tune_gains(PLANT, y, TS, 5, u=u, L0=2.0, beta0=0.1)
 
 
-def test_tune_gains_with_C_tunes_an_output_gain_and_checks_it():
+def test_tune_gains_with_an_observer_tunes_the_layers_after_it_and_checks_its_gain():
     x, u = _data()
     y = x @ C.T + 0.01 * torch.randn(T, 1, generator=torch.Generator().manual_seed(2), dtype=F64)
     y[10:20] = float("nan")
-    tuned = F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=A, L0=_gain(), beta0=0.05, iterations=3, lr=0.1)
-    assert torch.tensor(tuned.L).shape == (2, 1) and tuned.loss[-1] < tuned.loss[0]
-    with pytest.raises(ValueError, match=r"with C give L0 as an \(n, p\) output gain"):
-        F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=A, L0=1.0, beta0=0.05, iterations=1, lr=0.1)
+    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    tuned = F.tune_gains(PLANT, y, TS, 4, u=u, observer=obs, L0=2.0, beta0=0.05, iterations=3, lr=0.1)
+    assert torch.tensor(tuned.L).shape == (2,) and tuned.loss[-1] < tuned.loss[0] and tuned.observer is obs
+    both = F.tune_gains(PLANT, y, TS, 4, u=u, observer=obs, L0=2.0, beta0=0.05, iterations=3, lr=0.1,
+                        tune_observer=True)
+    assert both.observer is not obs and both.observer.L.shape == (2, 1) and both.loss[-1] < both.loss[0]
+    assert not torch.equal(both.observer.L, obs.L)
+    with pytest.raises(ValueError, match="tune_observer=True needs an observer"):
+        F.tune_gains(PLANT, x, TS, 4, u=u, L0=2.0, beta0=0.05, iterations=1, lr=0.1, tune_observer=True)
     with pytest.raises(F.GainError, match="not detectable"):  # a Jacobian whose mode the position does not see
-        F.tune_gains(PLANT, y, TS, 4, u=u, C=C, A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64),
-                     L0=_gain(), beta0=0.05, iterations=1, lr=0.1)
+        F.MeasuredFeedback(PLANT, _gain(), C, TS, A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64))
 
 
-def test_cascade_sweep_with_C_runs_each_output_gain_as_cascade_predict():
+def test_cascade_sweep_with_an_observer_sweeps_the_layers_after_it():
     x, u = _data()
     y = x @ C.T
     y[30:45] = float("nan")
-    L1, L2 = _gain(), 0.5 * _gain()
-    sweep = F.cascade_sweep(PLANT, y, TS, 5, torch.stack([L1, L2]), [0.05, 0.2], u=u, C=C, A=A)
+    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    sweep = F.cascade_sweep(PLANT, y, TS, 5, torch.tensor([1.0, 3.0]), [0.05, 0.2], u=u, observer=obs)
     assert sweep.shape == (2, T, 2)
-    for g, (L, beta) in enumerate([(L1, 0.05), (L2, 0.2)]):
-        torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, L, beta, u=u, C=C, A=A),
-                                   rtol=0, atol=0)
-    one_gain = F.cascade_sweep(PLANT, y, TS, 5, L1, [0.05, 0.2], u=u, C=C, A=A)  # one gain, two decays
-    torch.testing.assert_close(one_gain[0], sweep[0], rtol=0, atol=0)
+    for g, (L, beta) in enumerate([(1.0, 0.05), (3.0, 0.2)]):
+        torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, L, beta, u=u, observer=obs),
+                                   rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="do not pair up"):
-        F.cascade_sweep(PLANT, y, TS, 5, torch.stack([L1, L2, L1]), [0.05, 0.2], u=u, C=C, A=A)
-    with pytest.raises(ValueError, match=r"output gain \(n, p\) or a batch \(G, n, p\)"):
-        F.cascade_sweep(PLANT, y, TS, 5, 3.0, 0.1, u=u, C=C, A=A)
+        F.cascade_sweep(PLANT, y, TS, 5, torch.tensor([1.0, 2.0, 3.0]), [0.05, 0.2], u=u, observer=obs)
+    with pytest.raises(TypeError, match="observer must be a fnnlib.MeasuredFeedback"):
+        F.cascade_sweep(PLANT, y, TS, 5, 1.0, 0.1, u=u, observer="C")

@@ -24,11 +24,11 @@ def test_estimate_converges_at_the_placed_rate_and_predicts_exactly():
     L = _gain()
     u = torch.sin(0.7 * torch.arange(T, dtype=F64) * TS)[:, None]
     x = _euler(torch.tensor([1.0, -2.0], dtype=F64), u)
-    obs = MeasuredFeedback(LinearSystem(A, B), L, C, TS, A=A)
-    est = obs.observe(x @ C.T, u, x0=torch.zeros(2, dtype=F64))
+    obs = MeasuredFeedback(LinearSystem(A, B), L, C, TS, A=A, x0=torch.zeros(2, dtype=F64))
+    est = obs.observe(x @ C.T, u)
     err = (est.x_hat - x).norm(dim=-1)
     assert float(err[0]) > 1.0 and float(err[60]) < 1e-6 * float(err[0])  # error poles 0.6, 0.7: 0.7^60 ~ 5e-10
-    z = obs.predict(x @ C.T, 5, u, x0=torch.zeros(2, dtype=F64))
+    z = obs.predict(x @ C.T, 5, u)
     torch.testing.assert_close(z[80:-5], x[85:], rtol=0, atol=1e-8)
 
 

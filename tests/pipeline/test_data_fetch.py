@@ -150,3 +150,67 @@ def test_optional_release_fetch_without_network_is_one_line(tmp_path: Path, monk
     assert main(["data", "fetch", "--data-dir", str(tmp_path), "--release", "--optional"]) == 0
     out = capsys.readouterr().out
     assert out.count("note: going on without the authors' networks") == 1 and "no connection" in out
+
+
+def test_optional_release_fetch_without_network_leaves_no_empty_folders(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An empty ``release/.../trained_model/`` looked like a release to the why notebooks: none is left behind."""
+    monkeypatch.setattr(fnnbook.data, "RELEASE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    monkeypatch.setattr(fnnbook.data, "BOTTLE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    (tmp_path / "kept").mkdir()  # a folder that was there before stays
+    assert main(["data", "fetch", "--data-dir", str(tmp_path), "--release", "--optional"]) == 0
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["kept"]
+
+
+def _zip(path: Path, members: dict[str, bytes]) -> None:
+    import zipfile  # noqa: PLC0415
+
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+
+
+def test_the_tanks_file_is_extracted_from_its_archive_and_checked(www: tuple[str, Path], tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The member of the archive is kept when its SHA-256 is the pinned one; a changed member, an archive
+    without it and a file that is no archive are refused, each source tried once, in order."""
+    url, root = www
+    good = b"the benchmark's records"
+    monkeypatch.setattr(fnnbook.data, "TANKS_SHA256", hashlib.sha256(good).hexdigest())
+    _zip(root / "first" / "changed.zip", {"CascadedTanksFiles/dataBenchmark.mat": b"other records"})
+    _zip(root / "first" / "empty.zip", {"CascadedTanksFiles/README.txt": b"no data"})
+    (root / "first" / "page.zip").write_bytes(b"<html>not found</html>")
+    _zip(root / "second" / "CascadedTanksFiles.zip", {"CascadedTanksFiles/dataBenchmark.mat": good,
+                                                      "CascadedTanksFiles/dataBenchmark.csv": b"csv"})
+    sources = {"changed": f"{url}/first/changed.zip", "empty": f"{url}/first/empty.zip",
+               "page": f"{url}/first/page.zip", "good": f"{url}/second/CascadedTanksFiles.zip"}
+    lines: list[str] = []
+    path = fnnbook.data.fetch_tanks(tmp_path / "data", sources=sources, echo=lines.append)
+    assert path == tmp_path / "data" / "cascaded_tanks" / "dataBenchmark.mat" and path.read_bytes() == good
+    assert sorted(p.name for p in path.parent.iterdir()) == ["dataBenchmark.mat"]  # no archive, no other member
+    assert lines == [f"{path}: extracted from the archive on good, SHA-256 ok"]
+    assert fnnbook.data.fetch_tanks(tmp_path / "data", sources={}, echo=lines.append) == path  # present: kept
+    assert lines[-1] == f"{path}: present, SHA-256 ok"
+    path.unlink()
+    with pytest.raises(fnnbook.data.DataError) as err:
+        fnnbook.data.fetch_tanks(tmp_path / "data", sources={k: sources[k] for k in ("changed", "empty", "page")})
+    msg = str(err.value)
+    assert "changed (" in msg and "SHA-256 is not the pinned one, file refused" in msg
+    assert "empty (" in msg and "not in the archive" in msg and "page (" in msg and "not a zip archive" in msg
+    assert _empty(tmp_path / "data" / "cascaded_tanks")
+
+
+def test_optional_tanks_fetch_without_network_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(fnnbook.data, "TANKS_SOURCES", {"nowhere": "http://127.0.0.1:9/CascadedTanksFiles.zip"})
+    monkeypatch.setattr(fnnbook.data, "BOTTLE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    assert main(["data", "fetch", "--data-dir", str(tmp_path), "--tanks", "--optional"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("note: going on without the cascaded tanks data") == 1 and "no connection" in out
+    assert main(["data", "fetch", "--data-dir", str(tmp_path), "--tanks"]) == 2
+
+
+def test_the_tanks_archive_comes_from_its_official_hosts() -> None:
+    (first, doi), (second, site) = fnnbook.data.TANKS_SOURCES.items()
+    assert (first, second) == ("4TU.ResearchData", "nonlinearbenchmark.org")
+    assert doi.startswith("https://data.4tu.nl/file/") and site.endswith("/CascadedTanksFiles.zip")
