@@ -375,6 +375,7 @@ def release_curves():
     return {name: release.load_release_feedback_losses(data_dir, name) for name in release.SPIRAL_LOSS_NAMES}
 
 
+# %%
 def curves_grid(curves):
     """D3's readings over the release's curves (one unit per training run)."""
     cols = list(curves.values())
