@@ -303,9 +303,11 @@ for cid, gs in grids.items():
 # n = 1, so "in >= S-1 of S seeds" reads "in the run" and a win is "lower".
 
 # %%
+names = (authors_ode, authors_feedback, authors_dr_ode)  # each must be there, its SHA-256 the published one
+
+
 def authors_networks():
     """The authors' f, h and domain-randomized f, or None (with a printed line) without their release."""
-    names = (authors_ode, authors_feedback, authors_dr_ode)  # each there, its SHA-256 the published one
     if not all(release.release_present(data_dir, f"spiral_curve/trained_model/{n}") for n in names):
         print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
               f"all in data_dir = {data_dir!r} with their published SHA-256")
@@ -315,6 +317,7 @@ def authors_networks():
             release.load_release_spiral_ode(data_dir, authors_dr_ode))
 
 
+# %%
 def authors_checks(f, h, f_dr):
     """D1, D2, D4 with the authors' networks on the release's spiral, beside ours; and their numbers."""
     theirs, numbers = judge(f, h, evaluation_setup(globals(), release.release_spiral), 1, loss=None,
