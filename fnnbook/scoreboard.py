@@ -34,7 +34,8 @@ SCOREBOARD_TASK = "scoreboard"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
-_BADGE = {"reproduced": "success", BETTER: "primary", "partly": "warning", "not reproduced": "danger", BY_CONSTRUCTION: "info",
+_BADGE = {"reproduced": "success", BETTER: "primary", "partly": "warning", "not reproduced": "danger",
+          BY_CONSTRUCTION: "info",
           NOT_RUN: "secondary"}
 
 
@@ -314,7 +315,8 @@ def verdict_counts(rows: Sequence[ScoreRow]) -> dict[str, dict[str, int]]:
 
 
 #: badge colours of sphinx-design (Bootstrap), also used by the verdict figure
-_COLOURS = {"reproduced": "#198754", BETTER: "#0d6efd", "partly": "#ffc107", "not reproduced": "#dc3545", BY_CONSTRUCTION: "#0dcaf0",
+_COLOURS = {"reproduced": "#198754", BETTER: "#0d6efd", "partly": "#ffc107", "not reproduced": "#dc3545",
+            BY_CONSTRUCTION: "#0dcaf0",
             NOT_RUN: "#6c757d"}
 
 
