@@ -4,7 +4,7 @@
 #   make test   set up the venv from environment-lock.txt, run the test suite
 #
 # Variables: PROFILE (paper|smoke), DATA_DIR (data directory, default data/ in the repository), VENV (venv folder), PYTHON (interpreter that makes the venv),
-# PIP_ARGS (extra pip options, e.g. an index that serves the CPU build of torch 2.13.0),
+# PIP_ARGS (extra pip options, e.g. another index), TORCH_INDEX (the index of torch's CPU build, default PyTorch's),
 # RUN_ARGS (options of `fnn-pipeline run`: --workers K, --scheduler tcp://HOST:PORT; default: a local Dask
 # cluster with one worker per core, capped by memory).
 
@@ -12,6 +12,8 @@ PYTHON ?= python3
 VENV ?= .venv
 PROFILE ?= paper
 PIP_ARGS ?=
+# where pip finds the locked CPU build of torch (torch-2.13.0+cpu); PIP_ARGS adds any other index
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 RUN_ARGS ?=
 # the real throws (Sec. 5.1): data/ in the repository (git-ignored) unless told otherwise
 DATA_DIR ?= data
@@ -36,8 +38,14 @@ why: venv
 
 venv: $(VENV)/.installed
 
+# torch first, alone, with PyTorch's CPU wheel index as an extra index (PyPI does not serve the locked CPU
+# build): where that index is unreachable pip retries it for about 10 s and goes on with what its other
+# indexes and find-links hold. Then the rest of the lock, torch already in place.
 $(VENV)/.installed: environment-lock.txt pyproject.toml
 	$(PYTHON) -m venv $(VENV)
+	awk '/^torch==/{p=1; print; next} p && /^[^ #]/{p=0} p' environment-lock.txt > $(VENV)/torch-lock.txt
+	$(PY) -m pip install --quiet --require-hashes --no-deps --extra-index-url $(TORCH_INDEX) $(PIP_ARGS) \
+		-r $(VENV)/torch-lock.txt
 	$(PY) -m pip install --quiet --require-hashes --no-deps $(PIP_ARGS) -r environment-lock.txt
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(PY) -m pip check
