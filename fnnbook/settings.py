@@ -287,7 +287,7 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                        "u_scale": _POS, "rate": _POS, "observer_gain": _vec(2, 0.0), "train_N": _N1,
                        "train_iterations": _N1, "train_lr": _POS, "L_start": _POS, "beta_start": _NONNEG,
                        "horizons": _horizons, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0),
-                       "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1,
+                       "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1, "overflow_gap": _N0,
                        "series_N": _N1},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},

@@ -75,11 +75,19 @@ def free_run(observer: Any, y: Tensor, u: Tensor, n_init: int, C: Tensor) -> np.
     return _signal("simulation", x_hat.to(C.dtype) @ C.T)
 
 
-def overflow_episodes(saturated: Any) -> list[tuple[int, int]]:
-    """The runs of ``True`` in ``saturated`` (T,), as ``[start, end)`` sample ranges, in time order."""
+def overflow_episodes(saturated: Any, *, gap: int = 0) -> list[tuple[int, int]]:
+    """The runs of ``True`` in ``saturated`` (T,), as ``[start, end)`` sample ranges, in time order; runs
+    separated by at most ``gap`` samples are one episode (noise flickering at the limit)."""
     s = np.asarray(saturated, dtype=bool).reshape(-1)
     edges = np.diff(np.r_[0, s.astype(int), 0])
-    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    runs = [(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    merged: list[tuple[int, int]] = []
+    for a, b in runs:
+        if merged and a - merged[-1][1] <= gap:
+            merged[-1] = (merged[-1][0], b)
+        else:
+            merged.append((a, b))
+    return merged
 
 
 def episode_errors(y_hat: Any, y: Any, episodes: Sequence[tuple[int, int]], *, after: int) -> list[dict]:
@@ -143,7 +151,7 @@ def run_seed(rec: Any, seed: int, s: Mapping[str, Any]) -> dict[str, Any]:
     ``s`` holds the notebook's settings (its parameters cell): ``hidden``, ``activation``, ``rate``,
     ``x_center``, ``x_scale``, ``u_center``, ``u_scale``, ``observer_gain``, ``train_N``, ``train_iterations``,
     ``train_lr``, ``L_start``, ``beta_start``, ``horizons``, ``hand_L_grid``, ``hand_beta_grid``, ``kf_q``,
-    ``kf_qd_grid``, ``kf_r``, ``n_init``, ``overflow_after``, ``series_N``.
+    ``kf_qd_grid``, ``kf_r``, ``n_init``, ``overflow_after``, ``overflow_gap``, ``series_N``.
     """
     import time  # noqa: PLC0415
 
@@ -237,7 +245,7 @@ def _overflow(rec: Any, free: Mapping[str, np.ndarray], preds: Mapping[int, Mapp
               s: Mapping[str, Any]) -> dict[str, Any]:
     """The error during and after each overflow episode of the validation record: the free run and, at
     ``series_N``, the open-loop and tuned-feedback predictions (each moved to its target sample)."""
-    eps = overflow_episodes(rec.saturated("val").numpy())
+    eps = overflow_episodes(rec.saturated("val").numpy(), gap=int(s["overflow_gap"]))
     N = int(s["series_N"])
     series = {"free_run": free["observer_trained"]}
     series |= {k: _aligned(v, N, C) for k, v in preds.get(N, {}).items() if k in ("open_loop", "tuned")}

@@ -57,5 +57,6 @@ def test_overflow_episodes_and_their_errors() -> None:
     assert out[0] == {"start": 1, "samples": 2, "during": 1.0, "after": 2.0}
     assert out[1]["after"] == 0.0 and out[2]["after"] is None  # the record ends with the last episode
     assert overflow_episodes([False, False]) == []
+    assert overflow_episodes(s, gap=2) == [(1, 6), (9, 10)]
     with pytest.raises(ValueError, match="after"):
         episode_errors(y_hat, y, eps, after=0)
