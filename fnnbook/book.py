@@ -14,7 +14,8 @@ import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +30,66 @@ from fnnlib.io import atomic_write, file_sha256
 from fnnbook.why import WHYS_FILENAME, Why, read_whys
 from fnnlib.results import RESULTS_FILENAME, Results, read_results
 
-__all__ = ["GENERATED", "assemble_book", "build_book"]
+__all__ = ["GENERATED", "SHOWN_FILE", "assemble_book", "book_lock", "build_book", "make_book"]
 
 GENERATED = "_generated"
 _STATIC_PAGES = ("intro.md", "paper_vs_release.md", "_config.yml")
+#: the lock file a build holds on its book folder (one build per folder at a time)
+LOCK_FILE = ".book.lock"
+#: what a book shows, written beside its pages: ``{"profile": ..., "output_root": ...}``
+SHOWN_FILE = "shown.json"
+#: what a build writes into the book folder; everything else there is hand-written and copied to the scratch folder
+_BUILT = ("_build", GENERATED, "_toc.yml", LOCK_FILE)
+
+
+@contextlib.contextmanager
+def book_lock(book_dir: Path, echo: Callable[[str], None] = print) -> Iterator[None]:
+    """Hold the book folder's lock (``fcntl``, released if the process dies); a second build waits, and says so."""
+    import fcntl  # noqa: PLC0415 (POSIX)
+
+    book_dir.mkdir(parents=True, exist_ok=True)
+    with open(book_dir / LOCK_FILE, "a+b") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            echo(f"waiting for another book build on {book_dir} to finish")
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def make_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[str], *, api: bool = True,
+              quiet: bool = False, echo: Callable[[str], None] = print) -> Path:
+    """Assemble and build the book of ``profile`` into ``book_dir``, safe beside another build of the same folder.
+
+    The build holds the folder's lock (:func:`book_lock`: a second build waits for the first), assembles and
+    builds in a scratch folder of its own beside the book (its hand-written pages copied in), then swaps the
+    generated pages, the table of contents and the HTML in by renames: a reader sees the last complete book,
+    and each book's pages are its own output root's. The book records what it shows (:data:`SHOWN_FILE`, and
+    a line of the scoreboard).
+
+    Returns
+    -------
+    Path
+        ``<book_dir>/_build/html``.
+    """
+    book = Path(book_dir).resolve()
+    with book_lock(book, echo):
+        scratch = Path(tempfile.mkdtemp(prefix=".build-", dir=book))
+        try:
+            work = scratch / "book"
+            shutil.copytree(book, work, ignore=lambda folder, names: [
+                n for n in names if Path(folder) == book and (n in _BUILT or n.startswith((".build-", f"{GENERATED}.")))])
+            assemble_book(spec, profile, work, api=api)
+            build_book(work, quiet=quiet)
+            for name in (GENERATED, "_build"):
+                _swap_in(work / name, book / name)
+            os.replace(work / "_toc.yml", book / "_toc.yml")
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)
+    return book / "_build" / "html"
 
 
 #: a code cell longer than this (in lines) starts folded, like every cell that draws a figure
@@ -182,20 +239,20 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
     claims = read_claims(spec.claims_file)
     writable = os.access(spec.output_root, os.W_OK)  # a read-only root has no writer to keep out
     with contextlib.ExitStack() as held:
+        held.enter_context(book_lock(book))
         for p in (profile, *spec.extended_by(profile)) if writable else ():  # a reader's share of all it shows
             held.enter_context(holding(spec, p, (), read=spec.declares(p) if p != profile else spec.tasks))
+        aside = Path(tempfile.mkdtemp(prefix=f"{GENERATED}.new-", dir=book))  # this build's own
         try:
-            return _assemble(spec, profile, book, claims, api=api)
+            return _assemble(spec, profile, book, aside, claims, api=api)
         finally:
-            shutil.rmtree(book / f"{GENERATED}.new", ignore_errors=True)  # gone once swapped in, or failed
+            shutil.rmtree(aside, ignore_errors=True)  # gone once swapped in, or failed
 
 
-def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *, api: bool) -> Path:
+def _assemble(spec: PipelineSpec, profile: str, book: Path, aside: Path, claims: list[Any], *, api: bool) -> Path:
     generated = book / GENERATED
-    aside = book / f"{GENERATED}.new"  # assembled aside, swapped in only when complete
-    shutil.rmtree(aside, ignore_errors=True)
-    aside.mkdir(parents=True)
 
+    stale, unchecked = stale_tasks(spec, profile)
     results: dict[str, Results] = {}
     pages: dict[str, str] = {}
     figures: dict[str, str] = {}
@@ -247,10 +304,16 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *
         if row.verdict in ("partly", "not reproduced") and row.claim.id not in whys:
             whys[row.claim.id] = ("no why task explains this claim yet", None)
     plot_verdicts(rows, aside / "verdicts.png")
+    root = _shown_root(spec)
+    stale_claims = {c: stale[n] for n, t in spec.tasks.items() if n in stale for c in t.claims}
+    stale_whys = {c: stale[n] for n, t in spec.tasks.items() if n in stale for c in t.explains}
     (aside / "scoreboard.md").write_text(
         render_scoreboard(rows, profile=profile, pages=pages, figures=figures, notes=notes,
-                          summary_figure="verdicts.png", whys=whys, why_pages=why_pages),
+                          summary_figure="verdicts.png", whys=whys, why_pages=why_pages, stale=stale_claims,
+                          stale_whys=stale_whys, unchecked=unchecked)
+        + f"\n*This book shows the outputs of profile `{profile}` in the output root `{root}`.*\n",
         encoding="utf-8")
+    (aside / SHOWN_FILE).write_text(json.dumps({"profile": profile, "output_root": root}) + "\n", encoding="utf-8")
     parts.append({"caption": "Results", "chapters": [{"file": f"{GENERATED}/scoreboard"},
                                                      {"file": "paper_vs_release"}]})
     if api:
@@ -262,6 +325,34 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, claims: list[Any], *
     with atomic_write(path, "w") as fh:
         fh.write("# Generated by fnnbook.book.assemble_book; do not edit.\n" + yaml.safe_dump(toc, sort_keys=False))
     return path
+
+
+def stale_tasks(spec: PipelineSpec, profile: str) -> tuple[dict[str, str], str]:
+    """The tasks of the book of ``profile`` (and of the profiles extending it) whose outputs are there but stale
+    (:func:`fnnbook.runner.decide` would rerun them: an input changed since they ran), each with the command that
+    refreshes it; and, when that cannot be decided (the pipeline does not check), the reason ("" otherwise)."""
+    from fnnbook.runner import check, decide  # noqa: PLC0415 (the runner imports the book's neighbours)
+    from fnnbook.outcome import Action  # noqa: PLC0415
+
+    stale: dict[str, str] = {}
+    for p in (profile, *spec.extended_by(profile)):
+        try:
+            plan = check(spec, p, spec.declares(p))
+        except PipelineError as exc:
+            return stale, str(exc)
+        for name, decision in decide(spec, plan).items():
+            if decision.action is Action.RUN and name not in stale and stored(spec, p, name):
+                home = spec.home(p, name)
+                stale[name] = _RUN_HINT.get(home, f"fnn-pipeline run --profile {home} {name}")
+    return stale, ""
+
+
+def _shown_root(spec: PipelineSpec) -> str:
+    """The output root, relative to the repository when inside it (no absolute path of this machine in a book)."""
+    try:
+        return spec.output_root.relative_to(spec.root).as_posix()
+    except ValueError:
+        return str(spec.output_root)
 
 
 #: how a reader runs the tasks of a profile that extends the book's (the Makefile's target)
@@ -327,6 +418,11 @@ def build_book(book_dir: str | os.PathLike[str], *, quiet: bool = False) -> Path
     book = Path(book_dir).resolve()
     if not (book / "_toc.yml").is_file():
         raise PipelineError(f"{book} has no _toc.yml; run assemble_book first")
+    with book_lock(book):
+        return _build(book, quiet)
+
+
+def _build(book: Path, quiet: bool) -> Path:
     exe = Path(sys.executable).parent / "jupyter-book"
     if not exe.is_file():
         found = shutil.which("jupyter-book")

@@ -23,12 +23,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from fnnbook.book import assemble_book, build_book
+from fnnbook.book import make_book
 from fnnbook.data import BOTTLE_SOURCES, fetch_bottle, fetch_release, fetch_tanks
 from fnnbook.executor import default_workers
 from fnnbook.pipeline import run
 from fnnbook.outcome import Status
-from fnnbook.runner import check, is_up_to_date, read_status
+from fnnbook.outcome import Action
+from fnnbook.runner import check, decide, read_status
 from fnnbook.spec import PipelineError, PipelineSpec, load_spec
 from fnnlib.data.bottle import DataError
 
@@ -85,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     common(p_list, profile=False)
 
     p_book = sub.add_parser("book", help="assemble the executed notebooks and scoreboard, build the book")
-    common(p_book, data=False)
+    common(p_book)  # the data directory of the run: what decides whether the outputs shown are current
     p_book.add_argument("--book-dir", metavar="DIR", help="book folder (default: book/ beside pipeline.yaml)")
 
     p_data = sub.add_parser("data", help="get the data the real-data tasks read")
@@ -112,24 +113,41 @@ def _spec(args: argparse.Namespace) -> PipelineSpec:
     return spec.with_paths(output_root=args.output_root, data_dir=getattr(args, "data_dir", None))
 
 
+def _states(spec: PipelineSpec, profile: str) -> dict[str, str]:
+    """Each task's state in ``profile``: up to date, stale (with the input that changed), not run, data missing."""
+    names = [n for n, t in spec.tasks.items() if profile in t.parameters]
+    try:
+        plan = check(spec, profile, names)
+    except PipelineError:
+        plan = None
+    states: dict[str, str] = {}
+    for name in names:
+        try:
+            one = plan if plan is not None else check(spec, profile, [name])
+        except PipelineError:
+            states[name] = "invalid (run check)"
+            continue
+        exists = spec.output_dir(profile, name).exists()
+        if name in one.missing_data:  # e.g. another --data-dir than the run's
+            states[name] = "data missing here" + (" (outputs of an earlier run kept)" if exists else "")
+            continue
+        decision = decide(spec, one)[name]
+        if decision.action is Action.SKIP:
+            states[name] = "up to date"
+        elif decision.action is Action.NOT_RUN:
+            states[name] = f"not run ({decision.reason})"
+        else:
+            states[name] = f"stale ({decision.reason})" if exists else "not run"
+    return states
+
+
 def _list(spec: PipelineSpec) -> None:
+    states = {profile: _states(spec, profile) for profile in spec.profiles}
     for part in spec.parts:
         print(part.title)
         for name in (n for listed in part.tasks for n in spec.grids.get(listed, (listed,))):
             task = spec.tasks[name]
-            status = []
-            for profile in spec.profiles:
-                try:
-                    plan = check(spec, profile, [name])
-                    exists = spec.output_dir(profile, name).exists()
-                    if name in plan.missing_data:  # e.g. another --data-dir than the run's
-                        state = "data missing here" + (" (outputs of an earlier run kept)" if exists else "")
-                    else:
-                        state = "up to date" if is_up_to_date(spec, plan, name) else (
-                            "stale" if exists else "not run")
-                except PipelineError:
-                    state = "invalid (run check)"
-                status.append(f"{profile}: {state}")
+            status = [f"{profile}: {states[profile][name]}" for profile in spec.profiles if name in states[profile]]
             print(f"  {name:<16} {task.title}")
             print(f"  {'':<16} claims {' '.join(task.claims) or '-'}; upstream "
                   f"{' '.join(task.upstream) or '-'}; {'; '.join(status)}")
@@ -186,14 +204,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "book":
             book_dir = Path(args.book_dir) if args.book_dir else spec.root / "book"
-            assemble_book(spec, args.profile, book_dir)
+            start = time.perf_counter()
+            html = make_book(spec, args.profile, book_dir, echo=lambda line: print(line, flush=True))
             not_run = {t: s["message"] for t, s in read_status(spec, args.profile).items()
                        if s.get("status") in (Status.FAILED, Status.NOT_RUN)}
             for task, why in not_run.items():
                 print(f"note: {task} is shown as not run or from an older run ({why})")
-            start = time.perf_counter()
-            html = build_book(book_dir)
-            print(f"book built in {time.perf_counter() - start:.1f} s: {html / 'index.html'}")
+            print(f"book of profile {args.profile} (output root {spec.output_root}) built in "
+                  f"{time.perf_counter() - start:.1f} s: {html / 'index.html'}")
             return 0
     except (PipelineError, DataError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -21,6 +21,7 @@ when its SHA-256 is :data:`fnnlib.data.tanks.TANKS_SHA256` (:func:`fetch_tanks`)
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -138,6 +139,30 @@ def _fetch(folder: Path, files: Mapping[str, str], sources: Mapping[str, str], t
     bad = [label for label, url in sources.items() if "{name}" not in url]
     if not sources or bad:
         raise DataError(f"each source must be a URL template containing {{name}}; got {sources!r}")
+    existed = {folder, *(p for p in folder.rglob("*") if p.is_dir())} if folder.is_dir() else set()
+    try:
+        return _fetch_each(folder, files, sources, timeout, echo, each_present)
+    except BaseException:
+        _remove_new_empty_folders(folder, existed)
+        raise
+
+
+def _remove_new_empty_folders(folder: Path, existed: set[Path]) -> None:
+    """Remove the folders below ``folder`` (and itself) that a failed fetch created and left empty: an empty
+    ``release/.../trained_model/`` must not look like a release."""
+    if not folder.is_dir():
+        return
+    for path in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        if path not in existed:
+            with contextlib.suppress(OSError):
+                path.rmdir()  # only when empty
+    if folder not in existed:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
+def _fetch_each(folder: Path, files: Mapping[str, str], sources: Mapping[str, str], timeout: float,
+                echo: Callable[[str], None], each_present: bool) -> list[Path]:
     import requests  # noqa: PLC0415 (pooch's HTTP client)
 
     done, present = [], 0

@@ -143,7 +143,8 @@ def _publish(spec: PipelineSpec, plan: Plan, name: str, staging: Path, executed:
               "parameters": {k: v for k, v in params.items() if k not in INJECTED or k == "profile"},
               "run_id": uuid.uuid4().hex,
               "upstream_runs": {u: stored(spec, plan.profile, u).get("run_id") for u in task.upstream},
-              "products": {p: file_sha256(staging / p) for p in products}}
+              "products": {p: file_sha256(staging / p) for p in products},
+              "inputs": plan.inputs.get(name)}
     with atomic_write(staging / FINGERPRINT_FILE, "w") as fh:
         fh.write(json.dumps(record, indent=2, sort_keys=True) + "\n")
     swap(staging, final)

@@ -19,6 +19,7 @@ from fnnbook.kernel import task_threads
 from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_of, write_status
 from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line, summary, utilisation_line)
+from fnnbook.fingerprint import NO_EARLIER_RUN
 from fnnbook.runner import Plan, check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
@@ -106,9 +107,17 @@ def run(
                     raise PipelineError(f"cannot clear the staging folder of an earlier run: {exc}") from exc
                 verdict = decide(spec, plan, force=force)  # again, now that no other run writes these
                 if {n for n, d in verdict.items() if d.action is Action.RUN} <= writes:
+                    for line in rerun_lines(verdict):
+                        echo(line)
                     return _execute(spec, plan, verdict, workers=workers, scheduler=scheduler, threads=threads,
                                     echo=echo, progress_bar=progress_bar)
             # another run changed an output meanwhile: lock what must run now, and look again
+
+
+def rerun_lines(verdict: Mapping[str, Decision]) -> list[str]:
+    """One line per task that reruns over an earlier output, naming the input that changed (its trigger)."""
+    return [f"{name} reruns: {d.reason}" for name, d in verdict.items()
+            if d.action is Action.RUN and d.reason and d.reason != NO_EARLIER_RUN]
 
 
 def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *, workers: int,
@@ -121,11 +130,20 @@ def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *,
                                    echo=echo, progress_bar=progress_bar, on_workers=used.append)
         else:
             outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-    except Interrupted as stop:
-        with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
-            _finish(spec, plan, stop.outcomes, echo, used[-1], time.perf_counter() - start)
+    except KeyboardInterrupt as stop:  # a second Ctrl-C meanwhile: the run is still recorded as interrupted
+        with ignoring_interrupts():
+            outcomes = stop.outcomes if isinstance(stop, Interrupted) else _stopped_before_tasks(spec, plan, verdict)
+            _finish(spec, plan, outcomes, echo, used[-1], time.perf_counter() - start)
         raise KeyboardInterrupt from None
     return _finish(spec, plan, outcomes, echo, used[-1], time.perf_counter() - start)
+
+
+def _stopped_before_tasks(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision]) -> dict[str, TaskOutcome]:
+    """The outcomes of a run stopped before its tasks started (a Ctrl-C while the cluster starts): each task
+    to run, interrupted; the others as decided."""
+    logs = logs_dir(spec, plan.profile)
+    return {n: interrupted(n, spec.output_dir(plan.profile, n), logs / f"{n}.log") if d.action is Action.RUN
+            else d.outcome(n, spec.output_dir(plan.profile, n)) for n, d in verdict.items()}
 
 
 def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome], echo: Callable[[str], None],

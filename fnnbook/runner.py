@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import fnnlib
 from fnnbook.execution import execute, execute_task
-from fnnbook.fingerprint import data_digest, fingerprint, is_up_to_date, product_files, sources_digest
+from fnnbook.fingerprint import (NO_EARLIER_RUN, data_inputs, environment, fingerprint, imported_modules, inputs_of, is_up_to_date,
+                                 notebook_code, package_roots, product_files, stale_reason, stored)
 from fnnbook.kernel import KERNEL, TASK_THREADS, cpu_count, kill_kernels, task_threads
 from fnnbook.layout import STATUS_FILE, logs_dir, mark_killed, read_status, staging_dir, write_status
 from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, summary
@@ -27,10 +27,11 @@ from fnnbook.params import FINGERPRINT_FILE, check_task_parameters, read_paramet
 from fnnbook.preflight import check_grid_upstream, check_task_values
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
+from fnnlib.data.release import release_files
 
 __all__ = ["FINGERPRINT_FILE", "KERNEL", "STATUS_FILE", "TASK_THREADS", "Action", "Decision", "Plan",
            "RunReport", "Status", "TaskOutcome", "check", "cpu_count", "decide", "execute", "execute_task",
-           "is_up_to_date", "kill_kernels", "logs_dir", "mark_killed", "product_files", "read_status",
+           "is_up_to_date", "kill_kernels", "stale_reason", "logs_dir", "mark_killed", "product_files", "read_status",
            "staging_dir", "summary", "task_threads", "write_status"]
 
 
@@ -48,9 +49,10 @@ class Plan:
     parameters : mapping of str to dict
         Task -> parameters papermill injects.
     fingerprints : mapping of str to str
-        Task -> sha256 over its notebook, parameters, upstream fingerprints,
-        the library sources and (where it reads data) the data files' bytes;
-        no absolute path enters it.
+        Task -> sha256 over its inputs (:mod:`fnnbook.fingerprint`); no absolute path enters it.
+    inputs : mapping of str to dict
+        Task -> each part of its fingerprint (notebook, parameters, the modules it imports, the environment,
+        the data it reads, its upstream fingerprints), kept in the run record to name a rerun's trigger.
     missing_data : mapping of str to str
         Task -> why it cannot run here (its data files are missing); such a
         task and its dependants are "not run", the rest runs.
@@ -65,6 +67,7 @@ class Plan:
     fingerprints: Mapping[str, str]
     missing_data: Mapping[str, str] = dataclasses.field(default_factory=dict)
     run: str = dataclasses.field(default_factory=lambda: run_name())
+    inputs: Mapping[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
 
 
 
@@ -99,8 +102,8 @@ def check(
     tasks : iterable of str, optional
         Tasks to run; their upstream tasks are added.  Default: all.
     sources : sequence of path-like, optional
-        Folders whose ``*.py`` files enter every fingerprint.  Default: the
-        installed ``fnnlib`` package.
+        Package folders whose modules a notebook imports enter its fingerprint (each module it imports,
+        transitively).  Default: the installed ``fnnlib`` and ``fnnbook`` packages.
 
     Returns
     -------
@@ -120,12 +123,14 @@ def check(
     selected = list(dict.fromkeys(tasks)) if tasks else spec.declares(profile)
     order = spec.closure(selected)
     claims = _known_claims(spec.claims_file)
-    src = [Path(s) for s in sources] if sources is not None else [Path(fnnlib.__file__).resolve().parent]
-    digest = sources_digest(src)
-    data = data_digest(spec.data_dir) if spec.data_dir is not None and spec.data_dir.is_dir() else None
+    roots = package_roots([Path(s) for s in sources] if sources is not None else None)
+    env = environment()
+    code: dict[Path, dict[str, str]] = {}
+    data: dict[tuple[str, ...], dict[str, str]] = {}
     run = run_name()
     parameters: dict[str, dict[str, Any]] = {}
     fingerprints: dict[str, str] = {}
+    inputs: dict[str, dict[str, Any]] = {}
     missing_data: dict[str, str] = {}
     for name in order:
         task = spec.tasks[name]
@@ -143,11 +148,36 @@ def check(
         if reason:
             missing_data[name] = reason
         parameters[name] = params
-        fingerprints[name] = fingerprint(task, params, {u: fingerprints[u] for u in task.upstream}, digest,
-                                          data if "data_dir" in params else None)
-    return Plan(profile=profile, order=tuple(order), selected=tuple(selected),
-                parameters=parameters, fingerprints=fingerprints, missing_data=missing_data, run=run)
+        if task.notebook not in code:
+            code[task.notebook] = imported_modules(notebook_code(task.notebook), roots)
+        _check_release(spec, task, params)
+        reads = None
+        if "data_dir" in params and spec.data_dir is not None and spec.data_dir.is_dir():
+            if task.data not in data:
+                data[task.data] = data_inputs(spec.data_dir, task.data)
+            reads = data[task.data]
+        inputs[name] = inputs_of(task, params, {u: fingerprints[u] for u in task.upstream}, code[task.notebook],
+                                 env, reads)
+        fingerprints[name] = fingerprint(inputs[name])
+    return Plan(profile=profile, order=tuple(order), selected=tuple(selected), parameters=parameters,
+                fingerprints=fingerprints, missing_data=missing_data, run=run, inputs=inputs)
 
+
+
+def _check_release(spec: PipelineSpec, task: Task, params: Mapping[str, Any]) -> None:
+    """A release file the task reads that is there with another SHA-256 than the published one: an error now, not
+    inside the notebook (a missing file is no error: the task then judges our networks only)."""
+    if "data_dir" not in params or spec.data_dir is None:
+        return
+    for entry in task.data:
+        if not (entry == "release" or entry.startswith("release/")):
+            continue
+        under = entry.removeprefix("release").lstrip("/")
+        changed = [k for k, v in release_files(spec.data_dir, under).items() if v == "changed"]
+        if changed:
+            raise PipelineError(f"task {task.name!r}: {spec.data_dir / 'release' / changed[0]} fails its SHA-256 "
+                                f"check ({len(changed)} file(s) so): it is not the authors' published file; fetch "
+                                "it again (fnn-pipeline data fetch --release) or remove it")
 
 
 def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, Decision]:
@@ -167,7 +197,14 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
             o = blocked(name, spec.output_dir(plan.profile, name), up, verdict)
             verdict[name] = Decision(Action.NOT_RUN, o.message, data_missing=o.data_missing)
         else:
-            stale = ((force and name in plan.selected) or any(verdict[u].action is Action.RUN for u in task.upstream)
-                     or not is_up_to_date(spec, plan, name))
-            verdict[name] = Decision(Action.RUN if stale else Action.SKIP)
+            ran = [u for u in task.upstream if verdict[u].action is Action.RUN]
+            if force and name in plan.selected:
+                why: str | None = "forced"
+            elif not stored(spec, plan.profile, name):
+                why = NO_EARLIER_RUN
+            elif ran:
+                why = f"upstream: {', '.join(ran[:3])}{' and more' if len(ran) > 3 else ''} reruns"
+            else:
+                why = stale_reason(spec, plan, name)
+            verdict[name] = Decision(Action.SKIP) if why is None else Decision(Action.RUN, why)
     return verdict

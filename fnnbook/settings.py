@@ -267,7 +267,7 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                    "spiral_noise_std": _POS, "spiral_L": _GAIN, "spiral_beta": _NONNEG,
                    "spiral_tune_iterations": _N1, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0)},
     "quick_start": {"T": _N2, "Ts": _POS, "N": _N1, "noise_std": _POS, "drop": _fraction,
-                    "tune_iterations": _N1},
+                    "train_iterations": _N1, "tune_iterations": _N1},
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
                     "bottle_hand_throws": _N1, "bottle_hand_L_grid": _vec(minimum=0.0),
                     "bottle_hand_beta_grid": _vec(minimum=0.0), "quad_tune_cases": _N1,
@@ -443,6 +443,8 @@ def _own_system(p: Mapping[str, Any]) -> None:
 
 def _quick_start(p: Mapping[str, Any]) -> None:
     C.horizon("N", p["N"], below=p["T"], below_name="T")
+    if p["T"] < 60:  # a training segment: 20 samples to estimate from, 40 predicted (OutputRecipe's defaults)
+        raise ValueError(f"T = {p['T']} is below the 60 samples of one training segment (20 + 40)")
 
 
 def _why_sec3(p: Mapping[str, Any]) -> None:

@@ -29,7 +29,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
 _TOP_OPTIONAL = ("data_dir", "profiles", "shared")
 _TASK_REQUIRED = ("title", "notebook", "products", "parameters")
-_TASK_OPTIONAL = ("claims", "explains", "upstream", "grid")
+_TASK_OPTIONAL = ("claims", "explains", "upstream", "grid", "data")
 _PART_KEYS = ("title", "tasks")
 
 
@@ -63,6 +63,10 @@ class Task:
     inherited : frozenset of str
         Profiles the task does not declare but takes from the profile they extend (``profiles:`` in
         ``pipeline.yaml``): there it runs as in that profile, with that profile's output folder.
+    data : tuple of str
+        The entries of the data directory the task reads (``bottle/``, ``release/quadrotor/``: a folder and
+        all below it, symlinks followed); they enter its fingerprint. Empty: the whole data directory, for a
+        task that reads ``data_dir``.
     """
 
     name: str
@@ -74,6 +78,7 @@ class Task:
     parameters: Mapping[str, Mapping[str, Any]]
     explains: tuple[str, ...] = ()
     inherited: frozenset[str] = frozenset()
+    data: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -283,6 +288,11 @@ def _load_task(root: Path, name: str, data: Any) -> Task:
         if pure.is_absolute() or ".." in pure.parts or not pure.parts:
             raise PipelineError(f"{where}: product {product!r} must be a relative path "
                                 "inside the task's output folder")
+    reads = _str_list(f"{where}: data", data.get("data"))
+    for entry in reads:
+        pure = PurePosixPath(entry)
+        if pure.is_absolute() or ".." in pure.parts or not pure.parts:
+            raise PipelineError(f"{where}: data entry {entry!r} must be a relative path inside the data directory")
     parameters = _mapping(f"{where}: parameters", data["parameters"])
     if not parameters:
         raise PipelineError(f"{where}: parameters must name at least one profile")
@@ -301,6 +311,7 @@ def _load_task(root: Path, name: str, data: Any) -> Task:
         upstream=_str_list(f"{where}: upstream", data.get("upstream")),
         products=products,
         parameters=profiles,
+        data=reads,
     )
 
 

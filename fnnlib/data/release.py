@@ -55,10 +55,15 @@ from fnnlib.systems import Spiral
 
 __all__ = [
     "ALLOWED_GLOBALS", "BOTTLE_ODE_NAMES", "RELEASE_FILES", "RESIDUAL_RUNS", "MLP_RUNS", "SPIRAL_FEEDBACK_NAMES",
-    "SPIRAL_ODE_NAMES", "PickledModule", "ReleaseError", "UnsafePickleError", "load_release_bottle_ode",
-    "load_release_losses", "load_release_mlp", "load_release_residual", "load_release_spiral_feedback",
-    "load_release_spiral_ode", "read_pickled_module", "release_spiral",
+    "SPIRAL_ODE_NAMES", "MAX_PICKLE_BYTES", "PickledModule", "ReleaseError", "UnsafePickleError",
+    "load_release_bottle_ode", "load_release_losses", "load_release_mlp", "load_release_residual",
+    "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module", "release_files",
+    "release_present", "release_spiral",
 ]
+
+#: the largest release pickle read, on disk and unpacked (the release's largest ``.pt`` is 91 KB, 89 KB unpacked);
+#: a file or archive over it is refused before it is read (a small zip bomb unpacks to gigabytes)
+MAX_PICKLE_BYTES = 8 * 1024**2
 
 #: path below ``<data_dir>/release/`` -> SHA-256 of the published file (the data directory's README table)
 RELEASE_FILES: Mapping[str, str] = MappingProxyType({
@@ -180,6 +185,32 @@ def _release_file(data_dir: str | Path, key: str) -> Path:
     return path
 
 
+def release_files(data_dir: str | Path | None, under: str = "") -> dict[str, str]:
+    """Each pinned release file (below ``under``, e.g. ``"spiral_curve/"``) -> ``"ok"`` (there, its SHA-256 the
+    published one), ``"missing"`` or ``"changed"`` (there, another SHA-256: corrupt or not the published file)."""
+    state: dict[str, str] = {}
+    for key, digest in RELEASE_FILES.items():
+        if not key.startswith(under):
+            continue
+        path = Path(data_dir) / "release" / key if data_dir is not None else None
+        if path is None or not path.is_file():
+            state[key] = "missing"
+            continue
+        with path.open("rb") as fh:
+            state[key] = "ok" if hashlib.file_digest(fh, "sha256").hexdigest() == digest else "changed"
+    return state
+
+
+def release_present(data_dir: str | Path | None, under: str = "") -> bool:
+    """Whether every pinned release file below ``under`` is in ``<data_dir>/release/`` with its published SHA-256.
+
+    The why notebooks evaluate the authors' networks only then; otherwise they judge ours only and say so (an
+    empty or partly fetched ``release/`` folder is no release).
+    """
+    files = release_files(data_dir, under)
+    return bool(files) and all(v == "ok" for v in files.values())
+
+
 def _key(folder: str, name: str, choices: Sequence[str], what: str) -> str:
     if name not in choices:
         raise ValueError(f"unknown {what} {name!r}; the release has {list(choices)}")
@@ -223,10 +254,21 @@ class PickledModule:
 
 
 def _scan_globals(path: Path) -> bytes:
-    """The archive's ``data.pkl``, after checking every global it names is allowed (nothing is unpickled)."""
+    """The archive's ``data.pkl``, after checking every global it names is allowed (nothing is unpickled).
+
+    A file, or an archive unpacked, over :data:`MAX_PICKLE_BYTES` is refused before anything in it is read.
+    """
+    size = path.stat().st_size
+    if size > MAX_PICKLE_BYTES:
+        raise ReleaseError(f"{path} is {size} bytes, over the {MAX_PICKLE_BYTES} a release network takes; "
+                           "refused unread")
     if not zipfile.is_zipfile(path):
         raise ReleaseError(f"{path} is not a torch zip archive (the release's format); refused unread")
     with zipfile.ZipFile(path) as zf:
+        unpacked = sum(info.file_size for info in zf.infolist())
+        if unpacked > MAX_PICKLE_BYTES:
+            raise ReleaseError(f"{path} unpacks to {unpacked} bytes, over the {MAX_PICKLE_BYTES} a release network "
+                               "takes (a zip bomb?); refused unread")
         members = [n for n in zf.namelist() if n == "data.pkl" or n.endswith("/data.pkl")]
         if len(members) != 1:
             raise ReleaseError(f"{path}: expected one data.pkl in the archive, found {len(members)}")

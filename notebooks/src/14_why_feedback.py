@@ -215,9 +215,10 @@ for cid, gs in grids.items():
 
 # %%
 def authors_networks():
-    """The authors' f, h and domain-randomized f, or None (with a printed line) without the data directory."""
-    if data_dir is None or not (Path(data_dir) / "release").is_dir():
-        print(f"the authors' networks are not checked: no release folder in data_dir = {data_dir!r}")
+    """The authors' f, h and domain-randomized f, or None (with a printed line) without their release."""
+    if not release.release_present(data_dir, "spiral_curve/"):  # every file there, its SHA-256 the published one
+        print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
+              f"all in data_dir = {data_dir!r} with their published SHA-256")
         return None
     return (release.load_release_spiral_ode(data_dir, authors_ode),
             release.load_release_spiral_feedback(data_dir, authors_feedback),

@@ -160,6 +160,9 @@ authors, authors_result, theirs = None, None, None
 try:
     if ran["data"] != "real":
         raise release.ReleaseError("the throws are synthetic; the release's networks know only the real ones")
+    if not release.release_present(data_dir, "irregular_object/"):
+        raise release.ReleaseError(f"the release's bottle networks are not all in data_dir = {data_dir!r} with their "
+                                   "published SHA-256; ours are judged only")
     theirs = [release.load_release_bottle_ode(data_dir, name) for name in release.BOTTLE_ODE_NAMES]
 except release.ReleaseError as exc:
     print(f"the authors' check is skipped: {exc}")

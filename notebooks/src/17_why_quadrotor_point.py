@@ -138,9 +138,9 @@ if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to t
 # %% tags=["hide-input"]
 def authors_networks():
     """The release's first S residual runs and MLP k mod 2 for unit k; None (a line says why) where not flown."""
-    rel = Path(data_dir) / "release" if data_dir else None
-    if rel is None or not rel.is_dir():
-        print(f"authors' networks: not evaluated (no release under data_dir = {data_dir!r})")
+    if not release.release_present(data_dir, "quadrotor/"):  # every file there, its SHA-256 the published one
+        print(f"authors' networks: not evaluated, ours judged only (the release's quadrotor networks are not all "
+              f"in data_dir = {data_dir!r} with their published SHA-256)")
         return None
     if u_max not in authors_u_max:
         print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")

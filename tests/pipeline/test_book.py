@@ -8,6 +8,7 @@ import struct
 import zlib
 from base64 import b64encode
 from pathlib import Path
+from typing import Any
 
 import nbformat
 import pytest
@@ -264,3 +265,75 @@ def test_the_why_rows_read_not_run_then_the_runs_summary(fake_outputs: PipelineS
     assert "*(b) a setting the paper leaves open:*" in board and "*why: (b)*" in board
     html = build_book(book, quiet=True)
     assert "holds for noise_std &lt;= 0.001, fails at 0.01 and above" in (html / "_generated" / "scoreboard.html").read_text()
+
+
+def test_two_builds_side_by_side_on_one_book_folder(fake_outputs: PipelineSpec, tmp_path: Path) -> None:
+    """Two builds of one book folder from two output roots, 0.5 s apart: both succeed, one after the other
+    (the folder's lock), each in a scratch folder of its own; the book left shows one root's pages only, and
+    records which root and profile it shows. (Before, both used ``_generated.new``: both failed, or one book
+    showed the other root's verdicts.)"""
+    import threading  # noqa: PLC0415
+    import time  # noqa: PLC0415
+
+    from fnnbook.book import SHOWN_FILE, make_book  # noqa: PLC0415
+
+    other = fake_outputs.with_paths(output_root=tmp_path / "other")
+    shutil.copytree(fake_outputs.output_root, other.output_root)
+    write_results(other.output_dir("paper", "alpha"), task="alpha", profile="paper", claims=[
+        ClaimResult("S1", checks={"error below 0.1": False}, numbers={"rmse": 0.5, "n": 1000}, rule="rmse < 0.1",
+                    figure="figures/fig4c.png")])
+    book = _copy_book(tmp_path)
+    said: dict[str, list[str]] = {"outputs": [], "other": []}
+    finished: list[str] = []
+    errors: list[BaseException] = []
+
+    def build(spec: PipelineSpec, name: str) -> None:
+        try:
+            make_book(spec, "paper", book, api=False, quiet=True, echo=said[name].append)
+            finished.append(name)
+        except BaseException as exc:  # noqa: BLE001 (reported below)
+            errors.append(exc)
+
+    threads = [threading.Thread(target=build, args=(fake_outputs, "outputs")),
+               threading.Thread(target=build, args=(other, "other"))]
+    threads[0].start()
+    time.sleep(0.5)
+    threads[1].start()
+    for t in threads:
+        t.join(timeout=600)
+    assert not errors and sorted(finished) == ["other", "outputs"]
+    assert any("waiting for another book build" in line for line in said[finished[1]])
+    last = finished[1]
+    shown = json.loads((book / GENERATED / SHOWN_FILE).read_text())
+    assert shown == {"profile": "paper", "output_root": last}
+    scoreboard = (book / GENERATED / "scoreboard.md").read_text()
+    assert ("1 reproduced, 0 partly, 0 not reproduced" in scoreboard) == (last == "outputs")
+    assert ("0 reproduced, 0 partly, 1 not reproduced" in scoreboard) == (last == "other")
+    page = (book / "_build" / "html" / "_generated" / "scoreboard.html").read_text()
+    assert f"output root <code class=\"docutils literal notranslate\"><span class=\"pre\">{last}</span>" in page
+    assert not [p.name for p in book.iterdir() if p.name.startswith((".build-", "_generated."))]  # no scratch left
+
+
+def test_a_stale_claim_is_said_with_the_command_that_refreshes_it(make_pipeline: Any, tmp_path: Path) -> None:
+    """A task rerun would change (here its parameter): the scoreboard marks its claims stale, never current."""
+    from fnnbook import run  # noqa: PLC0415
+
+    from .nbfactory import child_task, leaf_task  # noqa: PLC0415
+
+    pipeline = make_pipeline({"leaf": leaf_task(), "child": child_task()})
+    spec = load_spec(pipeline)
+    assert run(spec, "smoke", progress_bar=False, echo=lambda _: None).ok
+    book = _copy_book(tmp_path)
+    assemble_book(spec, "smoke", book, api=False)
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "stale" not in board.lower()
+    doc = yaml.safe_load(pipeline.read_text())
+    doc["tasks"]["leaf"]["parameters"]["smoke"]["value"] = 7  # the run's input changed: its result is stale
+    pipeline.write_text(yaml.safe_dump(doc, sort_keys=False))
+    spec = load_spec(pipeline)
+    assemble_book(spec, "smoke", book, api=False)
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "`reproduced` *stale*" in board
+    assert "**Stale.** This verdict comes from outputs whose inputs changed since they ran; " \
+           "`fnn-pipeline run --profile smoke leaf` refreshes it." in board
+    assert "2 row(s) show results that are **stale**" not in board and "1 row(s) show results that are **stale**" in board

@@ -152,6 +152,16 @@ def test_optional_release_fetch_without_network_is_one_line(tmp_path: Path, monk
     assert out.count("note: going on without the authors' networks") == 1 and "no connection" in out
 
 
+def test_optional_release_fetch_without_network_leaves_no_empty_folders(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An empty ``release/.../trained_model/`` looked like a release to the why notebooks: none is left behind."""
+    monkeypatch.setattr(fnnbook.data, "RELEASE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    monkeypatch.setattr(fnnbook.data, "BOTTLE_SOURCES", {"nowhere": "http://127.0.0.1:9/{name}"})
+    (tmp_path / "kept").mkdir()  # a folder that was there before stays
+    assert main(["data", "fetch", "--data-dir", str(tmp_path), "--release", "--optional"]) == 0
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["kept"]
+
+
 def _zip(path: Path, members: dict[str, bytes]) -> None:
     import zipfile  # noqa: PLC0415
 
