@@ -157,7 +157,7 @@ def run_seed(rec: Any, seed: int, s: Mapping[str, Any]) -> dict[str, Any]:
 
     import fnnlib as F  # noqa: PLC0415
     from fnnlib.models.scaled import ScaledField  # noqa: PLC0415
-    from fnnlib.training.segments import train_free_initial_states  # noqa: PLC0415
+    from fnnlib.training.outputs import OutputRecipe, train_from_outputs  # noqa: PLC0415
 
     f64 = torch.float64
     C = torch.tensor([[0.0, 1.0]], dtype=f64)
@@ -180,9 +180,9 @@ def run_seed(rec: Any, seed: int, s: Mapping[str, Any]) -> dict[str, Any]:
     clock["train_observer"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     plain = field()  # the same architecture and seed, trained with a free initial state per segment
-    fit = train_free_initial_states(plain, rec.y_est, rec.u_est, Ts, C, horizon=int(s["train_N"]),
-                                    iterations=int(s["train_iterations"]), lr=s["train_lr"],
-                                    x0_guess=torch.tensor([float(s["x_center"]), 0.0], dtype=f64))
+    fit = train_from_outputs(plain, rec.y_est, C, OutputRecipe(
+        start="free", iterations=int(s["train_iterations"]), lr=s["train_lr"], burn=1, horizon=int(s["train_N"])),
+        Ts=Ts, u=rec.u_est, seed=seed, progress=False)
     clock["train_no_feedback"] = time.perf_counter() - t0
     out["loss"] = {"observer": [tuned.loss[0], tuned.loss[-1]], "no_feedback": [fit.loss[0], fit.loss[-1]]}
     t0 = time.perf_counter()

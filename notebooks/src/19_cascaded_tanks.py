@@ -132,7 +132,7 @@ simulation_figure = F.save_figure(fig, out, "tanks_free_run")
 # The **hand gains** are the best $(L, \beta)$ of a small sweep (`hand_L_grid` x `hand_beta_grid`) by the
 # `train_N`-step error on the estimation record. The baseline **without feedback** is the same architecture
 # and seed trained on the same record with a free initial state per segment of `train_N` samples
-# (`fnnlib.training.segments`): "feedback, or just a better initial state?". The EKF and UKF run on the
+# (`fnnlib.training.outputs.train_from_outputs` with `start="free"`): "feedback, or just a better initial state?". The EKF and UKF run on the
 # observer-trained model with a disturbance on the lower level, its process noise the better of `kf_qd_grid`
 # on the estimation record. Everything below is measured on the validation record.
 
