@@ -10,7 +10,8 @@ mean N-step error after the first quarter (the start-up). Columns:
   (L = 0 included: the feedback switched off);
 * cascade, tuned gains: ``tune_gains`` on the calibration record (observer fixed, start-up not scored);
 * open loop: the Euler rollout of the model from the same observer's latest estimate (L = 0 after it);
-* EKF, UKF: rollouts from their filtered state, on the same model.
+* EKF, UKF: rollouts from their filtered state, on the same model;
+* and the error of the measured component (position) alone, for the cascade and open loop.
 
     .venv/bin/python benchmarks/study_partial_cascade.py [--iterations 300]
 """
@@ -78,6 +79,9 @@ def main() -> None:
             def score(z, k=1):
                 return float(F.n_step_errors(z, x[k], N)[settle:].mean())
 
+            def position(z, k=1):  # the measured component only
+                return float(F.n_step_errors(z[..., :1], x[k, :, :1], N)[settle:].mean())
+
             def measured_score(z):  # calibration: the measured position N samples later, present samples only
                 e = (z[..., : T - N, :1] - y[0, N:]).pow(2)[..., settle:, :]
                 return float(e.nan_to_num(0).sum() / (~torch.isnan(e)).sum())
@@ -99,6 +103,11 @@ def main() -> None:
                                                                    u=u[1], observer=obs)),
                    "open loop from the observer": score(obs.predict(y[1], N, u[1])),
                    "EKF": score(ekf.predict(y[1], N, u[1])), "UKF": score(ukf.predict(y[1], N, u[1]))}
+            row["position only: cascade hand / tuned / open loop"] = [
+                round(position(F.cascade_predict(model, y[1], TS, N, L_hand, 0.05, u=u[1], observer=obs)), 4),
+                round(position(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta, u=u[1],
+                                                 observer=obs)), 4),
+                round(position(obs.predict(y[1], N, u[1])), 4)]
             rows.append(row)
             print(json.dumps(row), flush=True)
 
