@@ -4,7 +4,7 @@
 #   make test   set up the venv from environment-lock.txt, run the test suite
 #
 # Variables: PROFILE (paper|smoke), DATA_DIR (data directory, default data/ in the repository), VENV (venv folder), PYTHON (interpreter that makes the venv),
-# PIP_ARGS (extra pip options, e.g. an index that serves the CPU build of torch 2.13.0),
+# PIP_ARGS (extra pip options, e.g. another index), TORCH_INDEX (the index of torch's CPU build, default PyTorch's),
 # RUN_ARGS (options of `fnn-pipeline run`: --workers K, --scheduler tcp://HOST:PORT; default: a local Dask
 # cluster with one worker per core, capped by memory).
 
@@ -12,6 +12,8 @@ PYTHON ?= python3
 VENV ?= .venv
 PROFILE ?= paper
 PIP_ARGS ?=
+# where pip finds the locked CPU build of torch (torch-2.13.0+cpu); PIP_ARGS adds any other index
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 RUN_ARGS ?=
 # the real throws (Sec. 5.1): data/ in the repository (git-ignored) unless told otherwise
 DATA_DIR ?= data
@@ -25,19 +27,25 @@ PY := $(VENV)/bin/python
 main: venv
 	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
-	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) && exit $$status
+	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) --data-dir $(DATA_DIR) && exit $$status
 
 # The why profile (after or without `make main`: it reuses the paper profile's outputs and runs what they
 # lack), then the paper book, whose scoreboard rows then carry each claim's why.
 why: venv
 	$(VENV)/bin/fnn-pipeline data fetch --optional --tanks --release --data-dir $(DATA_DIR)
 	$(VENV)/bin/fnn-pipeline run --profile why --data-dir $(DATA_DIR) $(RUN_ARGS); status=$$?; \
-	$(VENV)/bin/fnn-pipeline book --profile paper && exit $$status
+	$(VENV)/bin/fnn-pipeline book --profile paper --data-dir $(DATA_DIR) && exit $$status
 
 venv: $(VENV)/.installed
 
+# torch first, alone, with PyTorch's CPU wheel index as an extra index (PyPI does not serve the locked CPU
+# build): where that index is unreachable pip retries it for about 10 s and goes on with what its other
+# indexes and find-links hold. Then the rest of the lock, torch already in place.
 $(VENV)/.installed: environment-lock.txt pyproject.toml
 	$(PYTHON) -m venv $(VENV)
+	awk '/^torch==/{p=1; print; next} p && /^[^ #]/{p=0} p' environment-lock.txt > $(VENV)/torch-lock.txt
+	$(PY) -m pip install --quiet --require-hashes --no-deps --extra-index-url $(TORCH_INDEX) $(PIP_ARGS) \
+		-r $(VENV)/torch-lock.txt
 	$(PY) -m pip install --quiet --require-hashes --no-deps $(PIP_ARGS) -r environment-lock.txt
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(PY) -m pip check
@@ -47,7 +55,7 @@ pipeline: venv
 	$(VENV)/bin/fnn-pipeline run --profile $(PROFILE) --data-dir $(DATA_DIR) $(RUN_ARGS)
 
 book: venv
-	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE)
+	$(VENV)/bin/fnn-pipeline book --profile $(PROFILE) --data-dir $(DATA_DIR)
 
 # Download the published throws (Sec. 5.1) and the cascaded tanks benchmark into DATA_DIR and check their SHA-256 (an error without network).
 data: venv

@@ -2,6 +2,6 @@
 
 import sys
 
-from fnnbook.cli import main
+from fnnbook.entry import main
 
 sys.exit(main())

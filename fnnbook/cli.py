@@ -86,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     common(p_list, profile=False)
 
     p_book = sub.add_parser("book", help="assemble the executed notebooks and scoreboard, build the book")
-    common(p_book, data=False)
+    common(p_book)  # the data directory of the run: what decides whether the outputs shown are current
     p_book.add_argument("--book-dir", metavar="DIR", help="book folder (default: book/ beside pipeline.yaml)")
 
     p_data = sub.add_parser("data", help="get the data the real-data tasks read")

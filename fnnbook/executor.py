@@ -28,6 +28,8 @@ import importlib.util
 import logging
 import os
 import shutil
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
@@ -45,14 +47,17 @@ from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome,
 from fnnbook.runner import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
-__all__ = ["TASK_MEMORY", "UNMEASURED_SECONDS", "WORKERS_IGNORE_CTRL_C", "default_workers", "local_cluster",
+__all__ = ["TASK_MEMORY", "blocking_interrupts", "UNMEASURED_SECONDS", "WORKERS_IGNORE_CTRL_C", "default_workers", "local_cluster",
            "longest_remaining", "priorities", "run_on_dask"]
 
 _HAS_BOKEH = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
 
 #: run by each worker process as it starts (a Dask preload, as script text): the terminal's Ctrl-C reaches
 #: the whole process group, workers included; they ignore it, and the run stops their tasks, then closes them
-WORKERS_IGNORE_CTRL_C = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+#: (a worker starts with SIGINT blocked, :func:`blocking_interrupts`: one pressed meanwhile is pending and
+#: discarded by the ignore, then the signal is unblocked for the kernels it starts)
+WORKERS_IGNORE_CTRL_C = ("import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+                         "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})\n")
 #: memory one task may take (the largest, quadrotor_learning, peaks near 1.2 GiB)
 TASK_MEMORY = 2 * 1024**3
 #: the estimated seconds of a task never measured
@@ -76,7 +81,9 @@ def local_cluster(workers: int) -> Iterator[Client]:
     Ctrl-C is the run's alone (:data:`WORKERS_IGNORE_CTRL_C`): a worker that closed itself on Ctrl-C would
     miss the run's order to stop its kernels, be killed by its nanny 4 s later and leave a kernel that was
     still starting as an orphan, or be restarted by its nanny meanwhile. The run cancels the tasks, stops
-    their kernels, then closes the cluster. A Ctrl-C while the cluster starts takes effect once it is up.
+    their kernels, then closes the cluster. A Ctrl-C while the cluster starts takes effect once it is up: SIGINT
+    is blocked meanwhile (:func:`blocking_interrupts`), so a worker process starting then does not get it (its
+    nanny would fail to start it) and the run gets it as the start ends.
     """
     logging.getLogger("distributed").setLevel(logging.ERROR)  # a killed worker is reported by the runner
     # worker-saturation 1: a worker holds only the task it runs, the ready ones wait at the scheduler in
@@ -85,7 +92,7 @@ def local_cluster(workers: int) -> Iterator[Client]:
                           "distributed.scheduler.worker-saturation": 1.0}):
         cluster = client = None
         try:
-            with deferring_interrupts():  # a Ctrl-C meanwhile arrives once both are up: inside this try
+            with blocking_interrupts():  # a Ctrl-C meanwhile arrives once both are up: inside this try
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                        protocol="tls://", security=Security.temporary(),
                                        dashboard_address="127.0.0.1:0",  # any free port
@@ -98,6 +105,32 @@ def local_cluster(workers: int) -> Iterator[Client]:
                 client.close()
             if cluster is not None:
                 cluster.close()
+
+
+@contextlib.contextmanager
+def blocking_interrupts() -> Iterator[None]:
+    """Hold Ctrl-C back while the block runs, from this process and from the processes it starts meanwhile.
+
+    SIGINT is blocked in this thread, so the threads and processes started meanwhile inherit it blocked (a
+    worker process being spawned must not die of a Ctrl-C before its preload ignores it: its nanny would fail
+    to start it); multiprocessing's resource tracker is started first, since starting it unblocks SIGINT in the
+    calling thread. A Ctrl-C pressed meanwhile raises KeyboardInterrupt as the block ends
+    (:func:`fnnbook.execution.deferring_interrupts`, for the one a thread of a native library takes).
+
+    (In the main thread; elsewhere, where Python delivers no Ctrl-C, the block just runs.)
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    from multiprocessing import resource_tracker  # noqa: PLC0415
+
+    resource_tracker.ensure_running()
+    with deferring_interrupts():
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a pending Ctrl-C is delivered now, and recorded
 
 
 def longest_remaining(upstream: Mapping[str, Sequence[str]], seconds: Mapping[str, float]) -> dict[str, float]:

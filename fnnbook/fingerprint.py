@@ -26,6 +26,7 @@ import hashlib
 import json
 import os
 import sys
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from functools import lru_cache
 from importlib import metadata
@@ -65,7 +66,9 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
 def code_digest(source: str) -> str:
     """SHA-256 of a module's code without docstrings and comments (its AST dump); of the text if it does not parse."""
     try:
-        tree = _strip_docstrings(ast.parse(source))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tree = _strip_docstrings(ast.parse(source))
     except SyntaxError:
         return hashlib.sha256(source.encode()).hexdigest()
     return hashlib.sha256(ast.dump(tree, include_attributes=False).encode()).hexdigest()
@@ -116,7 +119,9 @@ def _parsed(path: Path, module: str, stamp: tuple[int, int]) -> tuple[str, froze
     """(code digest, imported module names) of one module file; cached by its size and modification time."""
     source = path.read_text(encoding="utf-8")
     try:
-        tree = ast.parse(source)
+        with warnings.catch_warnings():  # a module's own warnings (an invalid escape) are its tests' business
+            warnings.simplefilter("ignore")
+            tree = ast.parse(source)
     except SyntaxError:
         return code_digest(source), None
     names = frozenset(_imports(tree, module, path.name == "__init__.py"))

@@ -130,11 +130,20 @@ def _execute(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *,
                                    echo=echo, progress_bar=progress_bar, on_workers=used.append)
         else:
             outcomes = run_here(spec, plan, verdict, threads=threads, echo=echo, progress_bar=progress_bar)
-    except Interrupted as stop:
-        with ignoring_interrupts():  # a second Ctrl-C: the run is still recorded as interrupted
-            _finish(spec, plan, stop.outcomes, echo, used[-1], time.perf_counter() - start)
+    except KeyboardInterrupt as stop:  # a second Ctrl-C meanwhile: the run is still recorded as interrupted
+        with ignoring_interrupts():
+            outcomes = stop.outcomes if isinstance(stop, Interrupted) else _stopped_before_tasks(spec, plan, verdict)
+            _finish(spec, plan, outcomes, echo, used[-1], time.perf_counter() - start)
         raise KeyboardInterrupt from None
     return _finish(spec, plan, outcomes, echo, used[-1], time.perf_counter() - start)
+
+
+def _stopped_before_tasks(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision]) -> dict[str, TaskOutcome]:
+    """The outcomes of a run stopped before its tasks started (a Ctrl-C while the cluster starts): each task
+    to run, interrupted; the others as decided."""
+    logs = logs_dir(spec, plan.profile)
+    return {n: interrupted(n, spec.output_dir(plan.profile, n), logs / f"{n}.log") if d.action is Action.RUN
+            else d.outcome(n, spec.output_dir(plan.profile, n)) for n, d in verdict.items()}
 
 
 def _finish(spec: PipelineSpec, plan: Plan, outcomes: Mapping[str, TaskOutcome], echo: Callable[[str], None],

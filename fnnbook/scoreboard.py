@@ -425,6 +425,9 @@ def render_scoreboard(
     summary_figure: str | None = None,
     whys: Mapping[str, Why | Missing] | None = None,
     why_pages: Mapping[str, str] | None = None,
+    stale: Mapping[str, str] | None = None,
+    stale_whys: Mapping[str, str] | None = None,
+    unchecked: str = "",
 ) -> str:
     """Render the scoreboard page as MyST markdown (the template ``templates/scoreboard.md.j2``).
 
@@ -456,6 +459,13 @@ def render_scoreboard(
         makes it (``("not run", "make why")``); shown under **Why**.
     why_pages : mapping of str to str, optional
         Claim -> link target of the page of the task that wrote its why.
+    stale : mapping of str to str, optional
+        Claim -> the command that refreshes it, for a claim whose task's outputs are stale (an input changed
+        since they ran): the row says so; its verdict is never shown as current.
+    stale_whys : mapping of str to str, optional
+        The same for a claim whose why task's outputs are stale.
+    unchecked : str
+        Why it could not be decided whether the outputs are current ("" when it was); said at the top.
 
     Returns
     -------
@@ -468,9 +478,17 @@ def render_scoreboard(
                   for v in (*STATUSES, NOT_RUN)]
         counts.append("by the strict readings of " + ", ".join(r.claim.id for r in strict) + ": "
                       + ", ".join(f"{k} {v}" for v, k in beside if k))
-    shown = [_summary(r, pages, figures or {}, notes or {}, why_of(r.claim.id, whys or {}, why_pages or {}))
-             for r in rows]
-    return _template().render(rows=shown, profile=profile, counts=counts, summary_figure=summary_figure)
+    stale, stale_whys = stale or {}, stale_whys or {}
+    shown = []
+    for r in rows:
+        row = _summary(r, pages, figures or {}, notes or {}, why_of(r.claim.id, whys or {}, why_pages or {}))
+        row["stale"] = stale.get(r.claim.id)
+        if row["why"] is not None:
+            row["why"]["stale"] = stale_whys.get(r.claim.id)
+        shown.append(row)
+    n_stale = sum(1 for r in shown if r["stale"] or (r["why"] or {}).get("stale"))
+    return _template().render(rows=shown, profile=profile, counts=counts, summary_figure=summary_figure,
+                              n_stale=n_stale, unchecked=unchecked)
 
 
 def seeds_check(results: Mapping[str, Results]) -> ClaimResult | None:

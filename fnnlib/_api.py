@@ -94,6 +94,8 @@ from fnnlib.training import (
     train_neural_feedback,
     train_neural_ode,
 )
+from fnnlib.training.outputs import OutputFit, OutputRecipe, free_run, train_from_outputs
+from fnnlib.models.neural_ode import init_parameters
 
 # A real plant: measurements y = C x (or h(x)), inputs, gaps, the UKF, tuning recipes.
 from fnnlib.feedback import (
@@ -127,6 +129,7 @@ __all__ = [
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
     "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
+    "OutputFit", "OutputRecipe", "free_run", "train_from_outputs", "init_parameters",
 ]
 
 # -- the paper authors' released networks, read safely and mapped onto the models above (fnnlib.data.release)

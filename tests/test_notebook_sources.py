@@ -48,3 +48,25 @@ def test_no_code_cell_is_over_15_lines(src: Path) -> None:
             if c.cell_type == "code" and "parameters" not in c.metadata.get("tags", [])
             and (n := sum(1 for line in c.source.splitlines() if line.strip())) > MAX_CELL_LINES]
     assert not long, f"{src.name}: code cells over {MAX_CELL_LINES} non-blank lines (cell index, lines): {long}"
+
+
+def test_the_quick_start_is_a_short_program_of_public_calls():
+    """The quick start's program (its code cells from the imports to the printed result): at most 25 lines
+    besides its two imports, visible (not folded), and every ``F.`` name it calls is in fnnlib's public API."""
+    import re
+
+    import fnnlib
+
+    src = (Path(__file__).parent.parent / "notebooks" / "src" / "11_quick_start.py").read_text()
+    cells = src.split("# %%")
+    first = next(i for i, c in enumerate(cells) if c.lstrip("\n").startswith("import torch"))
+    last = next(i for i, c in enumerate(cells) if "nbval-check-output" in (c.splitlines() or [""])[0])
+    code_cells = [c for c in cells[first:last] if not c.startswith(" [markdown]")]
+    assert all("hide-input" not in c.splitlines()[0] and "remove-input" not in c.splitlines()[0] for c in code_cells)
+    program = "\n".join(c.split("\n", 1)[1] for c in code_cells)
+    lines = [ln for ln in program.splitlines() if ln.strip() and not ln.strip().startswith("#")]
+    code = [ln for ln in lines if not ln.startswith(("import ", "from "))]
+    assert len(code) <= 25, len(code)
+    for name in set(re.findall(r"\bF\.([A-Za-z_]\w*)", program)):
+        assert name in fnnlib.__all__, name
+    assert "train_from_outputs" in program and "cascade_predict" in program

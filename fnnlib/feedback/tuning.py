@@ -148,7 +148,9 @@ class TuneRecipe:
     ``iterations`` and ``lr``: Adam steps and learning rate; ``full``, ``L_max``: the gain's form and bound;
     ``train_model``: also descend on the model; ``tune_observer``: also descend on the output gain of the
     first layer's observer (partial measurements; off by default: on noisy records it fits the noise of the
-    tuning record, measured by ``benchmarks/study_partial_cascade.py``). Checked in ``__post_init__``; replace a field with
+    tuning record, measured by ``benchmarks/study_partial_cascade.py``); ``settle``: the first start
+    times not scored (an observer's start-up transient, where any large gain helps and which a prediction
+    made after it never meets). Checked in ``__post_init__``; replace a field with
     ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
     own-system chapter.
     """
@@ -161,6 +163,7 @@ class TuneRecipe:
     L_max: float | None = None
     train_model: bool = False
     tune_observer: bool = False
+    settle: int = 0
 
     def __post_init__(self):
         L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
@@ -175,6 +178,8 @@ class TuneRecipe:
         check_positive(self.lr, name="TuneRecipe.lr")
         if self.L_max is not None:
             check_positive(self.L_max, name="TuneRecipe.L_max")
+        if isinstance(self.settle, bool) or not isinstance(self.settle, int) or self.settle < 0:
+            raise ValueError(f"TuneRecipe.settle must be an integer >= 0, got {self.settle!r}")
         for name in ("full", "train_model", "tune_observer"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"TuneRecipe.{name} must be a bool, got {getattr(self, name)!r}")
@@ -213,7 +218,8 @@ def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
 def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor | None = None,
                L0: float | Tensor | None = None, beta0: float | None = None, iterations: int | None = None,
                lr: float | None = None, u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
-               train_model: bool | None = None, tune_observer: bool | None = None, recipe: TuneRecipe | None = None,
+               train_model: bool | None = None, tune_observer: bool | None = None, settle: int | None = None,
+               recipe: TuneRecipe | None = None,
                objective: Objective | None = None, mask: Tensor | None = None,
                observer: MeasuredFeedback | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
@@ -247,6 +253,8 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         Also descend on ``f``'s parameters (an ``nn.Module``).
     tune_observer : bool
         With an ``observer``: also descend on its output gain (:class:`TuneRecipe`).
+    settle : int
+        Start times not scored at the beginning of each record (:class:`TuneRecipe`).
     recipe : TuneRecipe, optional
         All of ``L0 .. tune_observer`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
     objective : callable, optional
@@ -261,15 +269,16 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         that of the predicted outputs. The result's ``observer`` is the one used (tuned with ``tune_observer``).
     """
     recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
-                     train_model=train_model, tune_observer=tune_observer)
+                     train_model=train_model, tune_observer=tune_observer, settle=settle)
     if objective is not None and not callable(objective):
         raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
     meas, dt, N, n = measured(f, y, Ts, N, t=t, u=u, mask=mask, observer=observer)
     if recipe.tune_observer and observer is None:
         raise ValueError("tune_observer=True needs an observer (the first layer on partial measurements)")
     x = meas.y
-    if x.shape[-2] <= N:
-        raise ValueError(f"the tuning data need more than N = {N} samples per trajectory, got {x.shape[-2]}")
+    if x.shape[-2] <= N + recipe.settle:
+        raise ValueError(f"the tuning data need more than N + settle = {N + recipe.settle} samples per trajectory, "
+                         f"got {x.shape[-2]}")
     L0 = recipe.L0 if isinstance(recipe.L0, (int, float)) else torch.tensor(recipe.L0, dtype=torch.float64)
     gains = CascadeGains(n, longest(dt), L0=L0, beta0=recipe.beta0, full=recipe.full, L_max=recipe.L_max)
     params = list(gains.parameters())
@@ -296,7 +305,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
                 fixed_first = _observer_layer(f, meas, dt, n, observer, None)
         for _ in range(int(recipe.iterations)):
             opt.zero_grad()
-            loss = _loss(f, meas, dt, N, gains, objective, observer, obs_gain, fixed_first)
+            loss = _loss(f, meas, dt, N, gains, objective, observer, obs_gain, fixed_first, recipe.settle)
             loss.backward()
             opt.step()
             result.loss.append(loss.item())
@@ -343,7 +352,8 @@ def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
 
 
 def _loss(f: VectorField, meas, dt: Steps, N: int, gains: CascadeGains, objective: Objective | None,
-          observer: MeasuredFeedback | None, obs_gain: ObserverGain | None, fixed_first: Tensor | None) -> Tensor:
+          observer: MeasuredFeedback | None, obs_gain: ObserverGain | None, fixed_first: Tensor | None,
+          settle: int = 0) -> Tensor:
     """One iteration's cost: ``objective``, or the N-step prediction error (through the gaps, on present targets)."""
     x = meas.y
     if objective is not None:
@@ -352,7 +362,7 @@ def _loss(f: VectorField, meas, dt: Steps, N: int, gains: CascadeGains, objectiv
             raise ValueError("the objective must return a scalar tensor differentiable in the gains")
         return loss.reshape(())
     T = x.shape[-2]
-    if meas.mask is None and observer is None:
+    if meas.mask is None and observer is None and settle == 0:
         # only the T - N starts with a target N samples later are run (exact: the cascade is causal)
         return prediction_loss(run_cascade(f, x, gains.L_stack(N, x.dtype), dt, diagonal=not gains.full, u=meas.u,
                                            rows=T - N), x, N)
@@ -367,6 +377,8 @@ def _loss(f: VectorField, meas, dt: Steps, N: int, gains: CascadeGains, objectiv
     if measure is not None:
         z = measure(z)  # the predicted outputs
     present = (torch.ones_like(x) if meas.mask is None else meas.mask.to(x.dtype))[..., N:, :]
+    if settle:
+        present = torch.cat([torch.zeros_like(present[..., :settle, :]), present[..., settle:, :]], -2)
     err = (z - x[..., N:, :]).pow(2) * present  # targets N samples later, measured
     return err.sum() / present.sum().clamp_min(1.0) * x.shape[-1]
 

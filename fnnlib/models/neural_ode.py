@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,6 +35,20 @@ def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str) -> nn.Seq
         if i < len(sizes) - 2:
             layers.append(ACTIVATIONS[activation]())
     return nn.Sequential(*layers)
+
+
+def init_parameters(module: nn.Module, generator: torch.Generator) -> nn.Module:
+    r"""Initialise every ``nn.Linear`` of ``module`` from ``generator`` (torch's default law, uniform in
+    :math:`\pm 1/\sqrt{fan_{in}}` for weights and biases), leaving torch's global random state untouched.
+    Returns ``module``."""
+    with torch.no_grad():
+        for m in module.modules():
+            if isinstance(m, nn.Linear):
+                bound = 1.0 / math.sqrt(m.in_features)
+                m.weight.copy_((torch.rand(m.weight.shape, generator=generator, dtype=m.weight.dtype) * 2 - 1) * bound)
+                if m.bias is not None:
+                    m.bias.copy_((torch.rand(m.bias.shape, generator=generator, dtype=m.bias.dtype) * 2 - 1) * bound)
+    return module
 
 
 class NeuralODE(nn.Module):

@@ -36,7 +36,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from fnnlib._scan import linear_recurrence
+from fnnlib._scan import linear_recurrence, varying_recurrence
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.layer import eval_field, shift_inputs
@@ -76,7 +76,9 @@ def augmented_matrices(n: int, Ts: float) -> tuple[Tensor, Tensor, Tensor]:
 
 
 def augmented_step(A: Tensor, B: Tensor, Ts: float, h: Tensor) -> tuple[Tensor, Tensor]:
-    r"""The augmented plant ``A``, ``B`` of step ``Ts`` rediscretised at the steps ``h`` (...,): (..., m, m), (..., m, p).
+    r"""The augmented plant ``A``, ``B`` of step ``Ts`` rediscretised at the steps ``h`` (...,).
+
+    Returns :math:`A(\Delta)` (..., m, m) and :math:`B(\Delta)` (..., m, p).
 
     The plant is :math:`A(\Delta) = I + \Delta A_c`, :math:`B(\Delta) = \Delta B_c` (module docstring: the exact
     zero-order hold, :math:`A_c` nilpotent), so :math:`A_c = (A - I)/T_s`, :math:`B_c = B/T_s`.
@@ -87,17 +89,28 @@ def augmented_step(A: Tensor, B: Tensor, Ts: float, h: Tensor) -> tuple[Tensor, 
 
 
 def steps_per_record(dt: Tensor, lead: tuple[int, ...]) -> Tensor:
-    """The intervals ``dt`` (..., T-1) of :func:`~fnnlib.feedback.sampling.check_times` expanded to the records' leading axes."""
-    return dt.to(F64).expand(*lead, dt.shape[-1])
+    """The intervals ``dt`` (..., T-1) of :func:`~fnnlib.feedback.sampling.check_times` expanded to the records'
+    leading axes."""
+    try:
+        return dt.to(F64).expand(*lead, dt.shape[-1])
+    except RuntimeError:
+        raise ValueError(f"the sample times t have leading axes {tuple(dt.shape[:-1])} but the records have "
+                         f"{tuple(lead)}: give one grid (T,) or one per record") from None
 
 
 def observer_steps(t: Tensor | None, Ts: float, y: Tensor, *, name: str = "y") -> Steps:
-    """The observer's nominal ``Ts`` without ``t``; with it, the checked intervals (..., T-1) of ``y``'s sample times."""
-    return Ts if t is None else check_times(t, None, y, name=name)
+    """The observer's nominal ``Ts`` without ``t``; with it, the checked intervals (..., T-1) of ``y``'s sample
+    times."""
+    if t is None:
+        return Ts
+    dt = check_times(t, None, y, name=name)
+    steps_per_record(dt, tuple(y.shape[:-2]))  # no more time grids than records
+    return dt
 
 
 def check_x0(x0, n: int, lead: tuple[int, ...], dtype: torch.dtype) -> Tensor | None:
-    """A first state estimate ``x0``: (n,) or (..., n) broadcasting against the records' leading axes ``lead``, finite."""
+    """A first state estimate ``x0``: (n,) or (..., n) broadcasting against the records' leading axes ``lead``,
+    finite."""
     if x0 is None:
         return None
     try:
@@ -124,8 +137,8 @@ def varying_gain_filter(A: Tensor, B: Tensor, C: Tensor, M: Tensor, u: Tensor, y
 
     :math:`\hat z_{k|k} = \hat z_{k|k-1} + M_k(y_k - C\hat z_{k|k-1})`,
     :math:`\hat z_{k+1|k} = A_k \hat z_{k|k} + B_k u_k`, from :math:`\hat z_{0|-1} = [y_0; 0]` (or ``z0``): the
-    recursion of :func:`constant_gain_filter` with a plant per interval. One loop over time, batched over
-    the leading axes.
+    recursion of :func:`constant_gain_filter` with a plant per interval, solved by the doubling scan of
+    :func:`~fnnlib._scan.varying_recurrence` (log2 T batched passes, every leading axis at once).
 
     Parameters
     ----------
@@ -145,18 +158,16 @@ def varying_gain_filter(A: Tensor, B: Tensor, C: Tensor, M: Tensor, u: Tensor, y
     T, m = y.shape[-2], A.shape[-1]
     if z0 is None:
         z0 = torch.cat([y[..., 0, :], torch.zeros(*y.shape[:-2], m - y.shape[-1], dtype=F64)], -1)
-    lead = torch.broadcast_shapes(y.shape[:-2], A.shape[:-3], z0.shape[:-1])
-    A, B = A.expand(*lead, *A.shape[-3:]), B.expand(*lead, *B.shape[-3:])
+    lead = torch.broadcast_shapes(y.shape[:-2], A.shape[:-3], z0.shape[:-1], M.shape[:-3] if M.ndim > 2 else ())
     M = M.expand(*lead, T, *M.shape[-2:]) if M.ndim > 2 else M.expand(*lead, T, *M.shape)
     y, u = y.expand(*lead, *y.shape[-2:]), u.expand(*lead, *u.shape[-2:])
-    prior = z0.expand(*lead, m)
-    out = []
-    for k in range(T):
-        z = prior + ((y[..., k, :] - prior @ C.T)[..., None, :] @ M[..., k, :, :].mT)[..., 0, :]
-        out.append(z)
-        if k < T - 1:  # z_{k+1|k} = A_k z_{k|k} + B_k u_k
-            prior = (A[..., k, :, :] @ z[..., None])[..., 0] + (B[..., k, :, :] @ u[..., k, :, None])[..., 0]
-    return torch.stack(out, -2)
+    eye = torch.eye(m, dtype=F64)
+    # z_{k+1|k} = A_k (I - M_k C) z_{k|k-1} + A_k M_k y_k + B_k u_k: one scan with a transition per step
+    Mk = M[..., :-1, :, :]
+    trans = A @ (eye - Mk @ C)
+    b = (A @ (Mk @ y[..., :-1, :, None]))[..., 0] + (B @ u[..., :-1, :, None])[..., 0]
+    prior = varying_recurrence(trans, b, z0.expand(*lead, m))
+    return prior + ((y - prior @ C.T)[..., None, :] @ M.mT)[..., 0, :]  # z_{k|k} = z_{k|k-1} + M_k (y_k - C z_{k|k-1})
 
 
 def constant_gain_filter(A: Tensor, B: Tensor, C: Tensor, L: Tensor, u: Tensor, y: Tensor,
@@ -302,7 +313,8 @@ class AugmentedObserver:
         return x, u
 
     def start_prior(self, x: Tensor, x0) -> Tensor | None:
-        """The prior :math:`\\hat z_{0|-1} = [x_0; 0]` (..., 2n) from a checked first estimate ``x0``, or None (then :math:`[y_0; 0]`)."""
+        """The prior :math:`\\hat z_{0|-1} = [x_0; 0]` (..., 2n) from a checked first estimate ``x0``, or None (then
+        :math:`[y_0; 0]`)."""
         x0 = check_x0(x0, self.n, tuple(x.shape[:-2]), F64)
         return None if x0 is None else torch.cat([x0, torch.zeros_like(x0)], -1)
 

@@ -74,6 +74,8 @@ def as_covariance(M: float | Tensor | list, m: int, *, name: str, definite: bool
     """A covariance (m, m) float64 from a scalar (times I), a vector (diagonal) or a matrix; checked PSD (or PD)."""
     try:
         M = gain_matrix(M, m)
+    except TypeError:
+        raise TypeError(f"{name} must be a number, a vector or a matrix of numbers, got {M!r}") from None
     except ValueError:
         raise ValueError(f"{name} must be a scalar, a vector of length {m} or an ({m}, {m}) matrix; "
                          f"got shape {tuple(torch.as_tensor(M).shape)}") from None
@@ -151,7 +153,8 @@ class _OutputModel(AugmentedObserver):
         self.q, self.p = q, self.C.shape[0]
 
     def _linearised(self, A, h: float | None = None) -> Tensor:
-        """The augmented transition of step ``h`` (default ``Ts``) at the model's Jacobian ``A`` (default: at the origin, by autograd)."""
+        """The augmented transition of step ``h`` (default ``Ts``) at the model's Jacobian ``A`` (default: at the
+        origin, by autograd)."""
         h = self.Ts if h is None else float(h)
         A = self._jacobian(A)
         Phi = self.A.clone() if h == self.Ts else augmented_step(self.A, self.B, self.Ts, torch.tensor(h))[0]
@@ -180,7 +183,8 @@ class _OutputModel(AugmentedObserver):
 
     def measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None, *, t: Tensor | None = None, x0=None,
                      limit: float | None = None):
-        """The one check of ``y`` (..., T, p), ``u``, ``mask``, the times ``t`` and a first estimate ``x0``, before any work.
+        """The one check of ``y`` (..., T, p), ``u``, ``mask``, the times ``t`` and a first estimate ``x0``, before
+        any work.
 
         Returns the checked measurements and numpy arrays per trajectory: ``ys`` (B, T, p), ``us`` (B, T, m)
         or None, ``ms`` (B, T, p) or None, ``hs`` (B, T-1) the step of each interval (``Ts`` everywhere
@@ -223,7 +227,8 @@ class _OutputModel(AugmentedObserver):
                              f"{tuple(getattr(out, 'shape', ())) or type(out).__name__}")
 
     def start(self, y0: np.ndarray, m0: np.ndarray | None, x0: np.ndarray | None = None) -> np.ndarray:
-        """The prior :math:`z_{0|-1} = [C^+ y_0; 0]` (column, n + q), over the present outputs only; ``[x0; 0]`` if given."""
+        """The prior :math:`z_{0|-1} = [C^+ y_0; 0]` (column, n + q), over the present outputs only; ``[x0; 0]`` if
+        given."""
         if x0 is not None:
             return np.concatenate([x0, np.zeros(self.q)])[:, None]
         Cx = self.C.numpy()[:, : self.n] if m0 is None else self.C.numpy()[:, : self.n] * m0[:, None]
@@ -250,7 +255,8 @@ class _OutputModel(AugmentedObserver):
         return kf.update(y, R=R, hx=lambda s: C @ s)
 
     def _phi(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None, h: float | None = None) -> np.ndarray:
-        r"""The model step :math:`\Phi(x, d) = (x + h(f(x, u) + E d),\; d)` of a filtered ``z`` (n + q,), ``h`` default ``Ts``."""
+        r"""The model step :math:`\Phi(x, d) = (x + h(f(x, u) + E d),\; d)` of a filtered ``z`` (n + q,), ``h``
+        default ``Ts``."""
         h = self.Ts if h is None else h
         n = self.n
         x, d = z[:n], z[n:]
@@ -472,14 +478,20 @@ class ExtendedKalmanObserver(_KalmanBase):
     takes_gaps = True
 
     def _step(self, z: np.ndarray, dtype: torch.dtype, u: Tensor | None = None, h: float | None = None):
-        r"""The prediction :math:`\Phi_h(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u`` (m,), step ``h``."""
+        r"""The prediction :math:`\Phi_h(z)` and its Jacobian :math:`F`, for a column ``z`` (n + q, 1), input ``u``
+        (m,), step ``h``."""
         n, Ts = self.n, (self.Ts if h is None else h)
         x, d = z[:n, 0], z[n:, 0]
         with torch.enable_grad():  # J by one batched backward pass: row i of f(X), X = n copies of x
             X = torch.as_tensor(x, dtype=dtype).expand(n, n).clone().requires_grad_(True)
             out = self.f(0.0, X) if u is None else self.f(0.0, X, u.expand(n, -1))
             (J,) = torch.autograd.grad(out.diagonal().sum(), X)  # J[i, j] = d f_i / d x_j
-        F = (self.A if Ts == self.Ts else augmented_step(self.A, self.B, self.Ts, torch.tensor(Ts))[0]).numpy().copy()
+        if Ts == self.Ts:
+            F = self.A.numpy().copy()
+        else:  # A(h) = I + h A_c (the exact hold of the augmented plant, fnnlib.observers.augmented)
+            if getattr(self, "_Ac", None) is None:
+                self._Ac = ((self.A - torch.eye(self.A.shape[0], dtype=self.A.dtype)) / self.Ts).numpy()
+            F = np.eye(self._Ac.shape[0]) + Ts * self._Ac
         F[:n, :n] += Ts * J.double().numpy()  # F = dPhi/dz = [[I + Ts J, Ts E], [0, I]]
         Ed = d if self.E is None else self.E.numpy() @ d
         x_next = x + Ts * (out[0].detach().double().numpy() + Ed)  # x_{k+1|k} = x_{k|k} + Ts (f(x_{k|k}, u_k) + E d)

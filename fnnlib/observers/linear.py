@@ -16,7 +16,8 @@ from fnnlib.feedback.cascade import cascade_predict
 from fnnlib.feedback.decay import check_beta
 from fnnlib.feedback.gains import check_gain, gain_compact, implied_n
 from fnnlib.feedback.layer import eval_field, feedback_layer
-from fnnlib.feedback.sampling import check_times, longest, row_steps
+from fnnlib.feedback.sampling import longest, row_steps
+from fnnlib.observers.augmented import observer_steps
 from fnnlib.feedback.types import Estimate, VectorField
 
 
@@ -72,10 +73,11 @@ class LinearFeedback:
         return feedback_layer(fx, x, gain_compact(self.L, self.n, dtype=x.dtype), step)
 
     def steps(self, x: Tensor, t: Tensor | None):
-        """``Ts``, or the intervals (..., T-1) of the times ``t`` of ``x``, the gain checked at the longest (Eq. (25))."""
+        """``Ts``, or the intervals (..., T-1) of the times ``t`` of ``x``, the gain checked at the longest (Eq.
+        (25))."""
         if t is None:
             return self.Ts
-        dt = check_times(t, None, x, name="x")
+        dt = observer_steps(t, self.Ts, x, name="x")
         check_gain(self.L, self.n, longest(dt), allow_unstable=self.allow_unstable)
         return dt
 

@@ -18,8 +18,9 @@ whatever its length) and the gain is recomputed **per interval** :math:`\Delta_k
   and :math:`C D_\Delta = C`, so :math:`L_\Delta = \mathrm{diag}(I, (T_s/\Delta) I)\,L` has exactly the poles
   of :math:`L` at :math:`T_s` (closed form, no placement per interval).
 * With ``C``: :math:`\Phi_\Delta` (the Euler step of the linearised model) is no such similarity, so the poles
-  are placed for every distinct interval (about 2 ms each; a log with many distinct intervals pays that
-  once per interval, shown by a progress bar; intervals within 1e-10 of each other share one).
+  are placed for every distinct interval (intervals within 1e-10 of each other share one): with one output
+  by Ackermann's formula for all of them at once (the placing gain is then unique); with more, by
+  :func:`place_observer_gain` one interval at a time (about 2 ms each, a progress bar for many).
 """
 
 from __future__ import annotations
@@ -70,7 +71,10 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
     m = A.shape[0]
     if A.shape != (m, m) or C.shape[1] != m:
         raise ValueError(f"A must be square and C have as many columns; got A {A.shape}, C {C.shape}")
-    p = np.asarray(poles, dtype=complex).ravel()
+    try:
+        p = np.asarray(poles, dtype=complex).ravel()
+    except (TypeError, ValueError):
+        raise TypeError(f"poles must be numbers (real or complex), got {poles!r}") from None
     if p.size != m:
         raise ValueError(f"need {m} poles for a {m}-state observer, got {p.size}: {p.tolist()}")
     if not np.all(np.isfinite(p)):
@@ -153,7 +157,10 @@ class LuenbergerObserver(_OutputModel):
         if poles is not None:
             self.L = place_observer_gain(self.Phi, self.C, poles, allow_unstable=allow_unstable)
         else:
-            self.L = torch.as_tensor(L, dtype=torch.float64)
+            try:
+                self.L = torch.as_tensor(L, dtype=torch.float64)
+            except (TypeError, ValueError, RuntimeError):
+                raise TypeError(f"observer gain L must be a matrix of numbers, got {L!r}") from None
             if self.L.shape != (self.n + self.q, self.p):
                 raise ValueError(f"observer gain L must have shape {(self.n + self.q, self.p)}, got {tuple(self.L.shape)}")
             rho = float(np.abs(self.error_poles()).max())
@@ -186,7 +193,8 @@ class LuenbergerObserver(_OutputModel):
         return self.constant_gain_estimate(*self.inputs(x, u), L_k, u, dt=dt, x0=x0)
 
     def interval_gains(self, hs: np.ndarray, *, rtol: float = 1e-10) -> np.ndarray:
-        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval of ``hs`` (B, T-1).
+        r"""Filter gains :math:`\Phi_\Delta^{-1}L_\Delta` (B, T, n + q, p) placing ``self.poles`` for each interval
+        of ``hs`` (B, T-1).
 
         One placement per distinct interval; sample k uses the interval after it (the last sample the one before).
         Intervals within ``rtol`` of each other share one placement (a grid's rounding, ~1e-15, would
@@ -196,15 +204,20 @@ class LuenbergerObserver(_OutputModel):
         uniq, inv = np.unique(h_all, return_inverse=True)
         group = np.concatenate([[0], np.cumsum(np.diff(uniq) > rtol * uniq[1:])])  # runs of near-equal intervals
         reps = [uniq[group == g] for g in range(int(group[-1]) + 1)]
+        at_Ts = np.array([bool(np.any(np.abs(hg - self.Ts) <= rtol * self.Ts)) for hg in reps])
+        eye = np.eye(self.n + self.q)
+        Acl = (self.Phi.numpy() - eye) / self.Ts  # Phi(h) = I + h (A_c + [[J, 0], [0, 0]]), linear in h
+        Phis = eye + np.array([float(hg[0]) for hg in reps])[:, None, None] * Acl
         gains = np.empty((len(reps), self.n + self.q, self.p))
-        K_Ts = torch.linalg.solve(self.Phi, self.L).numpy()
-        for j, hg in enumerate(tqdm(reps, desc="placing poles per interval", disable=len(reps) < 100, leave=False)):
-            if np.any(np.abs(hg - self.Ts) <= rtol * self.Ts):
-                gains[j] = K_Ts
-                continue
-            Phi = self._linearised(self.J, float(hg[0]))
-            L = place_observer_gain(Phi, self.C, self.poles, allow_unstable=True)
-            gains[j] = torch.linalg.solve(Phi, L).numpy()
+        todo = np.flatnonzero(~at_Ts)
+        L = _ackermann(Phis[todo], self.C.numpy(), self.poles) if self.p == 1 and todo.size else None
+        for j in tqdm(todo if L is None else [], desc="placing poles per interval",
+                      disable=L is not None or todo.size < 100, leave=False):
+            gains[j] = np.linalg.solve(Phis[j], place_observer_gain(Phis[j], self.C, self.poles,
+                                                                    allow_unstable=True).numpy())
+        if L is not None:
+            gains[todo] = np.linalg.solve(Phis[todo], L)
+        gains[at_Ts] = torch.linalg.solve(self.Phi, self.L).numpy()
         return gains[group[inv.reshape(h_all.shape)]]
 
     def error_poles(self) -> np.ndarray:
@@ -214,6 +227,37 @@ class LuenbergerObserver(_OutputModel):
     def __repr__(self) -> str:
         poles = [z.real if z.imag == 0 else z for z in self.poles]
         return f"LuenbergerObserver(n={self.n}, Ts={self.Ts}, poles={poles})"
+
+
+def _ackermann(Phis: np.ndarray, C: np.ndarray, poles) -> np.ndarray | None:
+    r"""Single-output observer gains for many plants at once (Ackermann): :math:`L = p(\Phi)\,\mathcal O^{-1} e_m`.
+
+    ``Phis`` (K, m, m), ``C`` (1, m); :math:`p` the polynomial with roots ``poles``, :math:`\mathcal O` the
+    observability matrix. With one output the placing gain is unique, so this is
+    :func:`place_observer_gain`'s answer; None if any plant is unobservable or a placed pole misses by more
+    than 1e-6 (ill-conditioned), and the caller places one by one instead.
+    """
+    K, m = Phis.shape[0], Phis.shape[-1]
+    coeffs = np.real(np.poly(np.asarray(poles, dtype=complex)))  # p(s) = s^m + c_1 s^{m-1} + ... + c_m
+    rows, pw = [np.broadcast_to(C, (K, 1, m))], np.broadcast_to(np.eye(m), (K, m, m))
+    p_Phi = coeffs[m] * pw
+    for j in range(1, m + 1):
+        pw = pw @ Phis
+        if j < m:
+            rows.append(C @ pw)
+        p_Phi = p_Phi + coeffs[m - j] * pw
+    O = np.concatenate(rows, 1)  # (K, m, m): [C; C Phi; ...; C Phi^{m-1}]
+    e = np.zeros((K, m, 1))
+    e[:, -1] = 1.0
+    try:
+        L = p_Phi @ np.linalg.solve(O, e)  # (K, m, 1)
+    except np.linalg.LinAlgError:
+        return None
+    got = np.sort_complex(np.linalg.eigvals(Phis - L @ C))
+    want = np.sort_complex(np.asarray(poles, dtype=complex))
+    if not np.all(np.isfinite(L)) or float(np.abs(got - want).max()) > 1e-6 * max(1.0, float(np.abs(want).max())):
+        return None
+    return L
 
 
 def linear_feedback_gain(L: float | Tensor, Ts: float, n: int) -> Tensor:

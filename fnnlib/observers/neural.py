@@ -22,8 +22,9 @@ from torch import Tensor
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.decay import check_beta, check_N, decay_factors
 from fnnlib.feedback.layer import eval_field
-from fnnlib.feedback.sampling import Steps, check_times
+from fnnlib.feedback.sampling import Steps
 from fnnlib.feedback.types import Estimate, Feedback, VectorField
+from fnnlib.observers.augmented import observer_steps
 
 
 
@@ -100,7 +101,7 @@ class NeuralFeedbackObserver:
 
     def steps(self, x: Tensor, t: Tensor | None) -> Steps:
         """``Ts``, or the checked intervals (..., T-1) of the sample times ``t`` of ``x``."""
-        return self.Ts if t is None else check_times(t, None, x, name="x")
+        return observer_steps(t, self.Ts, x, name="x")
 
     @torch.no_grad()
     def observe(self, x: Tensor, *, t: Tensor | None = None) -> Estimate:

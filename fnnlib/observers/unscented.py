@@ -65,7 +65,8 @@ class UnscentedKalmanObserver(_KalmanBase):
 
     def estimate(self, x: Tensor, u: Tensor | None = None, *, mask: Tensor | None = None, t: Tensor | None = None,
                  x0=None) -> DisturbanceEstimate:
-        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's (``t``, ``x0``)."""
+        """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's (``t``,
+        ``x0``)."""
         meas, ys, us, ms, hs, x0s = self.measurements(x, u, mask, t=t, x0=x0, limit=SQUARE_LIMIT)
         dtype = meas.y.dtype
         dim = self.n + self.q
@@ -85,9 +86,10 @@ class UnscentedKalmanObserver(_KalmanBase):
                             ukf.predict(k=k - 1)  # sigma points through Phi(., u_{k-1})
                         self.update(ukf, y[k], None if ms is None else ms[i, k], extended=False)
                 except (FloatingPointError, np.linalg.LinAlgError, ValueError) as exc:
-                    raise RuntimeError(f"the UKF failed at sample {k} of record {i} ({exc}): its covariance overflowed or "
-                                       "lost definiteness, e.g. a model that diverges from the estimate or states of "
-                                       "a magnitude near 1e154; rescale the data or check the model") from None
+                    raise RuntimeError(f"the UKF failed at sample {k} of record {i} ({exc}): its covariance "
+                                       "overflowed or lost definiteness, e.g. a model that diverges from the estimate "
+                                       "or states of a magnitude near 1e154; rescale the data or check the model"
+                                       ) from None
                 if not np.all(np.isfinite(ukf.x)):
                     raise RuntimeError(f"the UKF's estimate became non-finite at sample {k} of record {i}: the model "
                                        "diverges from it, or the states overflow float64; rescale or check the model")

@@ -12,6 +12,7 @@ from torchdiffeq import odeint, odeint_adjoint
 from tqdm import tqdm
 
 from fnnlib._validation import as_trajectory, check_positive, check_uniform_grid
+from fnnlib.feedback.sampling import check_times
 
 OPTIMIZERS: dict[str, type[torch.optim.Optimizer]] = {
     "rmsprop": torch.optim.RMSprop,
@@ -161,6 +162,24 @@ def segment_indices(n_traj: int, T: int, batch_size: int, batch_time: int,
     return traj[None, :].expand_as(idx), idx
 
 
+class ScaledField(nn.Module):
+    r"""A segment on uneven times as an ODE in sample units :math:`s`: :math:`dx/ds = \Delta_{\lfloor s\rfloor} f(x, u_{\lfloor s\rfloor})`.
+
+    Sample ``j`` of every segment sits at :math:`s = j`, whatever its own interval, so one solver call on the
+    grid ``0, 1, .., batch_time - 1`` integrates a batch of segments with different times.
+    ``dt`` (batch_time - 1, batch) the intervals, ``u`` (batch_time, batch, m) or ``None``.
+    """
+
+    def __init__(self, model: nn.Module, dt: Tensor, u: Tensor | None):
+        super().__init__()
+        self.model, self.dt, self.u = model, dt, u
+
+    def forward(self, s: Tensor | float, x: Tensor) -> Tensor:
+        k = min(max(int(float(s) + 1e-6), 0), self.dt.shape[0] - 1)
+        out = self.model(s, x) if self.u is None else self.model(s, x, self.u[k])
+        return self.dt[k][:, None] * out
+
+
 class HeldInputs(nn.Module):
     """``model(t, x, u(t))`` as an autonomous field for the solver: the inputs of a segment held per sample.
 
@@ -214,8 +233,9 @@ def train_neural_ode(
     ----------
     model : nn.Module
         Vector field called as ``model(t, x)``, ``x`` of shape (batch, n).
-    t : Tensor, shape (T,)
-        Uniform sample times.
+    t : Tensor, shape (T,) or (n_traj, T)
+        Sample times: uniform (the paper's setting), or uneven, one grid for all or one per trajectory; then
+        every segment is integrated along its own intervals (:class:`ScaledField`, the solver's step one sample).
     x : Tensor, shape (T, n) or (n_traj, T, n)
         Training trajectories.
     recipe : ODERecipe
@@ -243,9 +263,19 @@ def train_neural_ode(
         x = x[None]
     if x.ndim != 3:
         raise ValueError(f"x must have shape (T, n) or (n_traj, T, n), got {tuple(x.shape)}")
-    Ts = check_uniform_grid(t)
-    if t.numel() != x.shape[1]:
-        raise ValueError(f"t has {t.numel()} points but x has {x.shape[1]} samples")
+    if not isinstance(t, Tensor) or not t.is_floating_point():
+        raise TypeError(f"t must be a floating-point tensor of sample times, got {type(t).__name__}")
+    if t.shape[-1] != x.shape[1]:
+        raise ValueError(f"t has {t.shape[-1]} points but x has {x.shape[1]} samples")
+    steps = check_times(t, None, x)  # increasing, finite, one time per sample
+    Ts = None
+    if t.ndim == 1:
+        try:
+            Ts, steps = check_uniform_grid(t), None  # the paper's uniform grid: the path as it always was
+        except ValueError:
+            pass
+    if steps is not None:
+        steps = steps.to(next(model.parameters()).dtype).expand(x.shape[0], x.shape[1] - 1)
     if adjoint and not isinstance(model, nn.Module):
         raise TypeError("the adjoint method needs model to be an nn.Module")
     if int(batch_time) > x.shape[1]:  # the recipe's own fields are checked when it is made
@@ -255,8 +285,8 @@ def train_neural_ode(
     x = x.to(dtype)  # the data follow the model's precision (simulate returns float64)
     if u is not None:
         u = _inputs_like(as_trajectory(u, name="u").to(dtype), x)
-    t_seg = (torch.arange(int(batch_time), dtype=dtype) * Ts)
-    options = {"step_size": Ts} if method in FIXED_STEP_METHODS else None
+    t_seg = torch.arange(int(batch_time), dtype=dtype) * (Ts if steps is None else 1.0)
+    options = {"step_size": Ts if steps is None else 1.0} if method in FIXED_STEP_METHODS else None
     kwargs: dict = {} if method in FIXED_STEP_METHODS else {"rtol": rtol, "atol": atol}
     if adjoint:
         solve = odeint_adjoint
@@ -274,7 +304,10 @@ def train_neural_ode(
     for _ in bar:
         traj, idx = segment_indices(x.shape[0], x.shape[1], int(batch_size), int(batch_time), gen)
         seg = x[traj, idx]  # (bt, B, n)
-        field = model if u is None else HeldInputs(model, u[traj, idx], Ts)
+        if steps is not None:  # uneven times: each segment along its own intervals
+            field = ScaledField(model, steps[traj[:-1], idx[:-1]], None if u is None else u[traj, idx])
+        else:
+            field = model if u is None else HeldInputs(model, u[traj, idx], Ts)
         opt.zero_grad()
         pred = solve(field, seg[0], t_seg, method=method, options=options, **kwargs)
         value = loss_fn(pred, seg)

@@ -101,7 +101,7 @@ def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="L_max = 30.0 allows rho"):
         CascadeGains(2, 0.1, L0=1.0, beta0=0.1, L_max=30.0)
     model = _model()
-    with pytest.raises(ValueError, match="need more than N = 10 samples"):
+    with pytest.raises(ValueError, match="need more than N \\+ settle = 10 samples"):
         tune_gains(model, torch.randn(10, 2, dtype=F64), 0.1, 10, L0=1.0, beta0=0.1, iterations=1, lr=0.1)
     with pytest.raises(ValueError, match="empty trajectory"):
         tune_gains(model, torch.randn(0, 2, dtype=F64), 0.1, 1, L0=1.0, beta0=0.1, iterations=1, lr=0.1)

@@ -144,3 +144,15 @@ def test_the_neural_feedback_refuses_bad_measurements():
     y[3, 0] = float("nan")
     with pytest.raises(ValueError, match="NaN"):
         obs.observe(y)
+
+
+def test_settings_given_as_text_are_refused():
+    plant = F.LinearSystem(A, B)
+    with pytest.raises(TypeError, match="observer gain L must be a matrix of numbers"):
+        F.LuenbergerObserver(plant, TS, 2, L="abc")
+    with pytest.raises(TypeError, match="poles must be numbers"):
+        F.LuenbergerObserver(plant, TS, 2, ["a", "b", "c", "d"])
+    with pytest.raises(TypeError, match="Q must be a number"):
+        F.KalmanObserver(plant, TS, 2, "abc", 1e-4)
+    with pytest.raises(TypeError, match="R must be a number"):
+        F.ExtendedKalmanObserver(plant, TS, 2, 1e-6, ["x", "y"])

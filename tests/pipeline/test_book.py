@@ -8,6 +8,7 @@ import struct
 import zlib
 from base64 import b64encode
 from pathlib import Path
+from typing import Any
 
 import nbformat
 import pytest
@@ -312,3 +313,28 @@ def test_two_builds_side_by_side_on_one_book_folder(fake_outputs: PipelineSpec, 
     page = (book / "_build" / "html" / "_generated" / "scoreboard.html").read_text()
     assert f"output root <code class=\"docutils literal notranslate\"><span class=\"pre\">{last}</span>" in page
     assert not [p.name for p in book.iterdir() if p.name.startswith((".build-", "_generated."))]  # no scratch left
+
+
+def test_a_stale_claim_is_said_with_the_command_that_refreshes_it(make_pipeline: Any, tmp_path: Path) -> None:
+    """A task rerun would change (here its parameter): the scoreboard marks its claims stale, never current."""
+    from fnnbook import run  # noqa: PLC0415
+
+    from .nbfactory import child_task, leaf_task  # noqa: PLC0415
+
+    pipeline = make_pipeline({"leaf": leaf_task(), "child": child_task()})
+    spec = load_spec(pipeline)
+    assert run(spec, "smoke", progress_bar=False, echo=lambda _: None).ok
+    book = _copy_book(tmp_path)
+    assemble_book(spec, "smoke", book, api=False)
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "stale" not in board.lower()
+    doc = yaml.safe_load(pipeline.read_text())
+    doc["tasks"]["leaf"]["parameters"]["smoke"]["value"] = 7  # the run's input changed: its result is stale
+    pipeline.write_text(yaml.safe_dump(doc, sort_keys=False))
+    spec = load_spec(pipeline)
+    assemble_book(spec, "smoke", book, api=False)
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "`reproduced` *stale*" in board
+    assert "**Stale.** This verdict comes from outputs whose inputs changed since they ran; " \
+           "`fnn-pipeline run --profile smoke leaf` refreshes it." in board
+    assert "2 row(s) show results that are **stale**" not in board and "1 row(s) show results that are **stale**" in board

@@ -107,6 +107,7 @@ def test_parallel_overlaps_independent_tasks_respects_order_and_matches_serial(
     assert report.ok, lines
     assert {o.status for o in report.outcomes} == {"ok"}
     assert lines[0].startswith("running on a local Dask cluster: 2 worker(s), ")
+    assert lines[1].startswith("dashboard: http://127.0.0.1:"), lines[1]  # bokeh is in the lock: a live dashboard
     # the utilisation: the task seconds over 2 workers' wall time, printed and recorded
     assert report.workers == 2 and report.wall > 0
     assert report.busy == pytest.approx(sum(o.seconds for o in report.outcomes))
@@ -376,3 +377,44 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
     assert not _processes_in(tmp_path), "a process of the run (a kernel: cwd is the pipeline's root) outlived it"
     assert not (tmp_path / "outputs" / "smoke" / "leaf").exists()
     assert "\n--- FAILED" in (logs / "leaf.log").read_text()  # by the task itself or, if it was gone, the runner
+
+
+@pytest.mark.parametrize("when", ["imports", "spawn", "spawn+0.5s"])
+def test_ctrl_c_at_any_moment_is_one_line_and_exit_130(make_pipeline: MakePipeline, tmp_path: Path, when: str) -> None:
+    """Ctrl-C while the command imports its modules, as the cluster's first worker process is spawned, and half a
+    second into the spawn: no traceback (before: "RuntimeError: Nanny failed to start." in 126 lines, exit 1,
+    the run not recorded; during imports a KeyboardInterrupt traceback), exit 130, and once the run has begun
+    its tasks are recorded as interrupted."""
+    write_notebook(tmp_path / "notebooks" / "timed.ipynb", TIMED_PARAMS, TIMED_BODY)
+    timed = {**leaf_task(nap=120.0), "notebook": "notebooks/timed.ipynb"}
+    pipeline = make_pipeline({"leaf": timed, "other": {**timed, "claims": [], "parameters": {"smoke": {"nap": 120.0}}}},
+                             parts=[{"title": "P", "tasks": ["leaf", "other"]}])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).parents[2]),
+                                                                      os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, "-m", "fnnbook", "run", "--profile", "smoke", "--pipeline",
+                             str(pipeline), "--no-progress", "--workers", "2"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    if when == "imports":
+        time.sleep(0.3)  # the interpreter is up, the command's imports (dask, papermill) take seconds
+        assert not psutil.Process(proc.pid).children()
+    else:
+        deadline = time.time() + 120
+        while time.time() < deadline and not psutil.Process(proc.pid).children():
+            time.sleep(0.01)  # the first process the cluster starts
+        assert psutil.Process(proc.pid).children(), "the cluster never started a process"
+        time.sleep(0.5 if when == "spawn+0.5s" else 0.0)
+    family = psutil.Process(proc.pid).children(recursive=True)
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the terminal's whole foreground process group
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, out
+    assert "Traceback" not in out and "Nanny failed" not in out, out
+    assert out.strip().splitlines()[-1] == "interrupted", out
+    psutil.wait_procs(family, timeout=15)
+    assert not _processes_in(tmp_path), "a process of the run outlived it"
+    status = tmp_path / "outputs" / "smoke" / STATUS_FILE
+    if when == "imports":
+        assert out.strip() == "interrupted" and not status.exists()
+    else:
+        recorded = json.loads(status.read_text())
+        assert {recorded[t]["message"] for t in ("leaf", "other")} == {"interrupted"}, recorded

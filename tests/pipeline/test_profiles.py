@@ -62,3 +62,25 @@ def test_an_extending_run_runs_what_the_extended_profile_lacks_in_its_folder(mak
 def test_a_bad_profiles_block_is_refused(make_pipeline: MakePipeline, profiles: dict, message: str) -> None:
     with pytest.raises(PipelineError, match=message):
         load_spec(make_pipeline({"leaf": leaf_task(), "child": _why_child()}, profiles=profiles))
+
+
+def test_a_why_whose_task_is_stale_is_shown_as_stale(make_pipeline: MakePipeline, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The paper-side task reran after the why ran: the why's row says stale and names `make why`."""
+    import shutil  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    from fnnbook.book import assemble_book  # noqa: PLC0415
+
+    spec = _pipeline(make_pipeline)
+    assert _run(spec, "why")[0].ok
+    book = tmp_path / "book"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "book", book,
+                    ignore=shutil.ignore_patterns("_build", "_generated", "_toc.yml"))
+    assemble_book(spec, "paper", book, api=False)
+    assert "stale" not in (book / "_generated" / "scoreboard.md").read_text().lower()
+    assert run(spec, "paper", force=True, progress_bar=False, echo=lambda _: None).ok  # leaf reran: child is stale
+    assemble_book(spec, "paper", book, api=False)
+    board = (book / "_generated" / "scoreboard.md").read_text()
+    assert "**Why (stale).** This why comes from outputs whose inputs changed since they ran; `make why` " \
+           "refreshes it." in board
+    assert "1 row(s) show results that are **stale**" in board
