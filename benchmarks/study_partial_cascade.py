@@ -11,7 +11,8 @@ mean N-step error after the first quarter (the start-up). Columns:
 * cascade, tuned gains: ``tune_gains`` on the calibration record (observer fixed, start-up not scored);
 * open loop: the Euler rollout of the model from the same observer's latest estimate (L = 0 after it);
 * EKF, UKF: rollouts from their filtered state, on the same model;
-* and the error of the measured component (position) alone, for the cascade and open loop.
+* and the error of the measured component (position) alone, for the cascade and open loop;
+* the cascade's gains chosen on two calibration records instead of one (the second drawn apart).
 
     .venv/bin/python benchmarks/study_partial_cascade.py [--iterations 300]
 """
@@ -69,12 +70,19 @@ def main() -> None:
     u = forcing(2, T, gen)
     x = simulate(0.5 * torch.randn(2, 2, generator=gen, dtype=F64), u)  # [0] calibration, [1] test
     lost = torch.rand(2, T, generator=gen) < 0.2
+    gen2 = F.make_generator(1)  # a second calibration record, drawn apart so that the others stay as they were
+    u2 = forcing(1, T, gen2)
+    x2 = simulate(0.5 * torch.randn(1, 2, generator=gen2, dtype=F64), u2)
+    lost2 = torch.rand(1, T, generator=gen2) < 0.2
     rows = []
     for N in (10, 25):
         for noise in (0.0, 0.02, 0.05):
             y = x @ C.T + noise * torch.randn(2, T, 1, generator=gen, dtype=F64)
             y[lost] = float("nan")
             settle = T // 4
+            y2 = x2 @ C.T + noise * torch.randn(1, T, 1, generator=gen2, dtype=F64)
+            y2[lost2] = float("nan")
+            y_cal, u_cal = torch.cat([y[:1], y2]), torch.cat([u[:1], u2])
 
             def score(z, k=1):
                 return float(F.n_step_errors(z, x[k], N)[settle:].mean())
@@ -82,8 +90,8 @@ def main() -> None:
             def position(z, k=1):  # the measured component only
                 return float(F.n_step_errors(z[..., :1], x[k, :, :1], N)[settle:].mean())
 
-            def measured_score(z):  # calibration: the measured position N samples later, present samples only
-                e = (z[..., : T - N, :1] - y[0, N:]).pow(2)[..., settle:, :]
+            def measured_score(z, target=y[0]):  # calibration: the measured position N samples later, present ones
+                e = (z[..., : T - N, :1] - target[..., N:, :]).pow(2)[..., settle:, :]
                 return float(e.nan_to_num(0).sum() / (~torch.isnan(e)).sum())
 
             grid = torch.tensor([0.0, 0.25, 0.5, 1.0, 2.0, 4.0], dtype=F64)  # 0: the feedback switched off
@@ -91,6 +99,10 @@ def main() -> None:
             L_hand = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep[g]))])
             tuned = F.tune_gains(model, y[0], TS, N, u=u[0], observer=obs, L0=1.0, beta0=0.05, iterations=60, lr=0.1,
                                  settle=settle)
+            sweep2 = F.cascade_sweep(model, y_cal, TS, N, grid, 0.05, u=u_cal, observer=obs)
+            L_hand2 = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep2[g], y_cal))])
+            tuned2 = F.tune_gains(model, y_cal, TS, N, u=u_cal, observer=obs, L0=1.0, beta0=0.05, iterations=60,
+                                  lr=0.1, settle=settle)
             q_d = 1e-3
             R = max(noise, 0.005) ** 2
             ekf = F.ExtendedKalmanObserver(model, TS, 2, [1e-6, 1e-6, q_d], R, C=C, disturbance=[1], A=A)
@@ -103,6 +115,11 @@ def main() -> None:
                                                                    u=u[1], observer=obs)),
                    "open loop from the observer": score(obs.predict(y[1], N, u[1])),
                    "EKF": score(ekf.predict(y[1], N, u[1])), "UKF": score(ukf.predict(y[1], N, u[1]))}
+            row["two calibration records: hand L"] = L_hand2
+            row["two calibration records: cascade hand / tuned"] = [
+                round(score(F.cascade_predict(model, y[1], TS, N, L_hand2, 0.05, u=u[1], observer=obs)), 4),
+                round(score(F.cascade_predict(model, y[1], TS, N, tuned2.L_tensor, tuned2.beta, u=u[1],
+                                              observer=obs)), 4)]
             row["position only: cascade hand / tuned / open loop"] = [
                 round(position(F.cascade_predict(model, y[1], TS, N, L_hand, 0.05, u=u[1], observer=obs)), 4),
                 round(position(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta, u=u[1],
