@@ -161,8 +161,10 @@ SETTLE_BAND = 2.0
 
 def settling_index(err: Any, band: float = SETTLE_BAND) -> np.ndarray:
     """Where an estimate has settled, read from its per-time error curve ``err`` (T,) or (E, T): the first sample
-    after which the error stays within ``band`` x its steady level (the median over the last half of the record).
-    One index per curve (shape (E,), or (1,) for one curve). A rule on the data, fixed before any why run."""
+    after which the error stays within ``band`` x its steady level (the median over the last half of the record),
+    and at the latest the start of that last half (where the steady level is measured: an error that keeps
+    leaving its band settles nowhere earlier). One index per curve (shape (E,), or (1,) for one curve). A rule on
+    the data, fixed before any why run."""
     err = np.asarray(err, dtype=float)
     err = err[None] if err.ndim == 1 else err
     if err.ndim != 2 or err.shape[1] < 4 or not np.isfinite(err).all() or band <= 1:
@@ -170,7 +172,7 @@ def settling_index(err: Any, band: float = SETTLE_BAND) -> np.ndarray:
     steady = np.median(err[:, err.shape[1] // 2:], axis=1)
     above = err > band * steady[:, None]
     last = np.where(above.any(1), err.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), -1)
-    return last + 1
+    return np.minimum(last + 1, err.shape[1] // 2)
 
 
 #: D3's readings: the paper profile's (ratio and a flat end), the same without the flat end (a curve cut at a

@@ -136,8 +136,10 @@ def test_the_settling_time_is_read_from_the_curve() -> None:
     assert curve[k:].max() <= 2 * np.median(curve[100:]) < curve[k - 1]  # settled from k on, not before
     assert sec4.settling_index(np.full((3, 50), 0.5)).tolist() == [0, 0, 0]  # never out of its band
     spike = np.full(100, 0.1)
-    spike[90] = 5.0  # a late excursion: it settles only after it
-    assert sec4.settling_index(spike)[0] == 91
+    spike[40] = 5.0  # a late excursion: it settles only after it
+    assert sec4.settling_index(spike)[0] == 41
+    spike[99] = 5.0  # out of its band at the very end: settled at the latest where the steady level is measured
+    assert sec4.settling_index(spike)[0] == 50
     with pytest.raises(ValueError):
         sec4.settling_index(np.ones(3))
 
