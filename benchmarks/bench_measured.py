@@ -1,17 +1,24 @@
-"""Partial measurements: ``MeasuredFeedback.predict`` (under no_grad), the cascade with ``C`` and through gaps,
-the EKF and the UKF, on a damped cart of which only the position is measured (T samples, N steps).
+"""Partial measurements and gaps against the full-state cascade, in one run, as ratios.
 
-    .venv/bin/python benchmarks/bench_measured.py [--repeats 5] [--T 500] [--N 20]
+A forced Duffing-like plant's learned model (2-50-50-2 tanh with one input, float64), position only, 20 % of
+the samples lost. Each case runs the same model, T and N as the full-state cascade; the ratio is its time over
+the full-state cascade's. Also: the sequential reference of the observer layer (the former path, a Python loop
+over time), the Newton iterations the batched layer takes, and ``tune_gains`` with an observer on a
+1000-sample record, N = 25, 100 iterations. One torch thread.
+
+    .venv/bin/python benchmarks/bench_measured.py [--repeats 3] [--T 1000] [--N 50] [--loop]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import gaps
 from bench_cascade import best_of
 
 F64 = torch.float64
@@ -19,42 +26,73 @@ F64 = torch.float64
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--T", type=int, default=500)
-    ap.add_argument("--N", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--T", type=int, default=1000)
+    ap.add_argument("--N", type=int, default=50)
+    ap.add_argument("--loop", action="store_true", help="also time the sequential reference (slow at large T)")
+    ap.add_argument("--tune", action="store_true", help="also time tune_gains with an observer (T=1000, N=25, 100 its)")
     args = ap.parse_args()
-    F.seed_everything(0)
+    torch.set_num_threads(1)
     Ts, T, N = 0.02, args.T, args.N
-    model = F.NeuralODE(2, (32, 32), "tanh", n_input=1).double()
+    gen = F.make_generator(0)
+    model = F.init_parameters(F.NeuralODE(2, (50, 50), "tanh", n_input=1).double(), gen)
     A = F.model_jacobian(model, torch.zeros(2, dtype=F64), torch.zeros(1, dtype=F64))
     C = torch.tensor([[1.0, 0.0]], dtype=F64)
-    L = F.place_observer_gain(torch.eye(2, dtype=F64) + Ts * A, Ts * C, [0.8, 0.85])
-    gen = F.make_generator(0)
-    y = torch.randn(T, 1, generator=gen, dtype=F64)
+    L_y = F.place_observer_gain(torch.eye(2, dtype=F64) + Ts * A, Ts * C, [0.8, 0.85])
+    x = 0.3 * torch.randn(T, 2, generator=gen, dtype=F64).cumsum(0) / T ** 0.5
     u = torch.randn(T, 1, generator=gen, dtype=F64)
+    lost = torch.rand(T, generator=gen) < 0.2
+    x_gap = x.clone()
+    x_gap[lost] = float("nan")
+    y = x @ C.T
     y_gap = y.clone()
-    y_gap[torch.rand(T, generator=gen) < 0.3] = float("nan")
-    mf = F.MeasuredFeedback(model, L, C, Ts, A=A)
-    ekf = F.ExtendedKalmanObserver(model, Ts, 2, [1e-6, 1e-6, 1e-3], 1e-3, C=C, disturbance=[1], A=A)
-    ukf = F.UnscentedKalmanObserver(model, Ts, 2, [1e-6, 1e-6, 1e-3], 1e-3, C=C, disturbance=[1], A=A)
+    y_gap[lost] = float("nan")
+    t = torch.cumsum(Ts * (0.5 + torch.rand(T, generator=gen, dtype=F64)), 0)
+    obs = F.MeasuredFeedback(model, L_y, C, Ts, A=A, allow_unstable=True)
+    obs_t = F.MeasuredFeedback(model, L_y, C, None, A=A, allow_unstable=True)
+    h = lambda s: s[..., :1]  # noqa: E731  the same sensor as a function
+    obs_h = F.MeasuredFeedback(model, L_y, h, Ts, x0=torch.zeros(2, dtype=F64), allow_unstable=True)
     cases = {
-        "MeasuredFeedback.predict (no_grad)": lambda: mf.predict(y, N, u),
-        "MeasuredFeedback.predict with autograd on (the former path)": lambda: _with_grad(mf, y, N, u),
-        "cascade_predict with C": lambda: F.cascade_predict(model, y, Ts, N, L, 0.05, u=u, C=C, A=A),
-        "cascade_predict with C, 30 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, L, 0.05, u=u, C=C, A=A),
-        "EKF.predict, 30 % gaps": lambda: ekf.predict(y_gap, N, u),
-        "UKF.predict, 30 % gaps": lambda: ukf.predict(y_gap, N, u),
+        "full state": lambda: F.cascade_predict(model, x, Ts, N, 2.0, 0.05, u=u),
+        "full state, 20 % gaps": lambda: F.cascade_predict(model, x_gap, Ts, N, 2.0, 0.05, u=u),
+        "y = C x": lambda: F.cascade_predict(model, y, Ts, N, 2.0, 0.05, u=u, observer=obs),
+        "y = C x, 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, 2.0, 0.05, u=u, observer=obs),
+        "y = h(x), 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, 2.0, 0.05, u=u, observer=obs_h),
+        "y = C x, 20 % gaps, uneven times": lambda: F.cascade_predict(model, y_gap, None, N, 2.0, 0.05, u=u, t=t,
+                                                                       observer=obs_t),
+        "observer alone (MeasuredFeedback.observe), 20 % gaps": lambda: obs.observe(y_gap, u),
     }
-    out = {name: 1e3 * best_of(fn, args.repeats) for name, fn in cases.items()}
-    print(json.dumps({"T": T, "N": N, "ms": {k: round(v, 1) for k, v in out.items()}}, indent=1))
+    if args.loop:
+        cases["observer, sequential reference (the former path)"] = lambda: obs.observe_loop(y_gap, u)
+    ms = {name: 1e3 * best_of(fn, args.repeats) for name, fn in cases.items()}
+    full = ms["full state"]
+    iters = {}
+    orig = gaps._newton
 
+    def counting(*a, **k):
+        out = orig(*a, **k)
+        iters.setdefault(counting.case, []).append(out[2])
+        return out
 
-def _with_grad(mf, y, N, u):
-    """The former ``predict``: the same steps with autograd recording."""
-    z = mf.observe(y, u).x_hat
-    for j in range(N):
-        z = z + mf.Ts * F.eval_field(mf.f, z, F.feedback.layer.shift_inputs(u, j))
-    return z
+    gaps._newton = counting
+    for counting.case, fn in [("y = C x, 20 % gaps", cases["y = C x, 20 % gaps"]),
+                              ("full state, 20 % gaps", cases["full state, 20 % gaps"])]:
+        fn()
+    gaps._newton = orig
+    report = {"T": T, "N": N, "ms": {k: round(v, 1) for k, v in ms.items()},
+              "ratio to full state": {k: round(v / full, 2) for k, v in ms.items()},
+              "Newton iterations": iters}
+    if args.tune:
+        Tt = 1000
+        start = time.perf_counter()
+        F.tune_gains(model, y_gap[:Tt], Ts, 25, u=u[:Tt], observer=obs, L0=2.0, beta0=0.05, iterations=100, lr=0.1)
+        with_obs = time.perf_counter() - start
+        start = time.perf_counter()
+        F.tune_gains(model, x[:Tt], Ts, 25, u=u[:Tt], L0=2.0, beta0=0.05, iterations=100, lr=0.1)
+        report["tune_gains, T = 1000, N = 25, 100 iterations [s]"] = {
+            "with an observer (y = C x, 20 % gaps)": round(with_obs, 2),
+            "full state": round(time.perf_counter() - start, 2)}
+    print(json.dumps(report, indent=1))
 
 
 if __name__ == "__main__":

@@ -23,7 +23,23 @@ import fnnlib as F
 from fnnbook.rules import sec4
 from fnnlib.results import ClaimResult
 
-__all__ = ["EvaluationSetup", "evaluation_setup", "feedback_ensemble", "field_errors", "judge", "nominal_errors"]
+__all__ = ["CentredFeedback", "EvaluationSetup", "d4_result", "evaluation_setup", "feedback_ensemble", "field_errors", "judge",
+           "nominal_errors", "rate_error_curves", "release_form_loss", "settled_errors"]
+
+
+class CentredFeedback(torch.nn.Module):
+    """A learned feedback with its value at zero error removed: :math:`h(e) - h(0)`.
+
+    The cascade of Sec. 3.3 starts each layer's estimate at its input (:math:`e = 0`), where a learned
+    :math:`h(0)` need not vanish; centred, the first estimate is exact at the input. A usage the paper does not
+    state, tried by the why of D4 against the learned :math:`h` as it is."""
+
+    def __init__(self, h: torch.nn.Module):
+        super().__init__()
+        self.h = h
+
+    def forward(self, e: Tensor) -> Tensor:
+        return self.h(e) - self.h(torch.zeros_like(e[:1]))
 
 
 def feedback_ensemble(members: Sequence[F.NeuralFeedback], seeds: Sequence[int]) -> F.NeuralFeedbackEnsemble:
@@ -111,12 +127,49 @@ def nominal_errors(f: torch.nn.Module, h: torch.nn.Module | None, setup: Evaluat
     return np.array([F.relative_rmse(fhat[e], setup.f_nom) for e in range(E)])
 
 
+def rate_error_curves(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationSetup, E: int) -> dict[str, np.ndarray]:
+    """The per-time change-rate error on the nominal task, per seed (E, T): ``||f_hat(t) - f(t)||`` over the RMS
+    norm of the true rate over the record (so the windowed RMS of a curve is the relative RMSE of
+    :func:`nominal_errors` over that window), for ``f`` alone ("neural_ode") and with ``h`` ("neural_feedback")."""
+    xs = F.stack_members(setup.x_nom, E)
+    with torch.no_grad():
+        alone = _per_seed(F.eval_field(f, xs), E)
+    fb = _per_seed(F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E).observe(xs).f_hat, E)
+    scale = float(torch.linalg.vector_norm(setup.f_nom, dim=-1).pow(2).mean().sqrt())
+    return {k: (torch.linalg.vector_norm(v - setup.f_nom, dim=-1) / scale).numpy()
+            for k, v in (("neural_ode", alone), ("neural_feedback", fb))}
+
+
+def settled_errors(curves: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The relative RMSEs after the feedback's estimate has settled (:func:`fnnbook.rules.sec4.settling_index` on
+    its curve, per seed), over the same window for the neural ODE alone; and the settling index (E,)."""
+    start = sec4.settling_index(curves["neural_feedback"])
+    out = {f"rel_rmse_settled_{k}": np.array([float(np.sqrt(np.mean(c[e, s:] ** 2))) for e, s in enumerate(start)])
+           for k, c in curves.items()}
+    return out | {"settle_index": start}
+
+
+def release_form_loss(f: torch.nn.Module, h: torch.nn.Module, x_cases: Tensor, Ts: float, E: int, *,
+                      skip_seconds: float = 0.5) -> np.ndarray:
+    r"""The feedback's training loss in the release's form, per seed (E,): the mean absolute difference, over the
+    randomized cases ``x_cases`` (C, T, 2), their samples and both components, between the finite-difference rate
+    :math:`(x_{k+1} - x_k) / T_s` and the observer's :math:`\hat f_k = f(x_k) + h(x_k - \hat x_k)`. This is the
+    loss the release logs and stops on (its ``Total_loss``, read in ``spiral_curve/d_FeedbackNN_converge.py``,
+    not copied); the first ``skip_seconds``, which the release fades in, are left out."""
+    xs = F.stack_members(x_cases, E)
+    f_hat = _per_seed(F.NeuralFeedbackObserver(f, h, Ts, 2 * E).observe(xs).f_hat, E)  # (E, C, T, 2)
+    fd = (x_cases[:, 1:] - x_cases[:, :-1]) / Ts
+    k0 = int(round(skip_seconds / Ts))
+    return (f_hat[:, :, k0:-1] - fd[None, :, k0:]).abs().mean(dim=(1, 2, 3)).numpy()
+
+
 def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tensor, setup: EvaluationSetup,
-                 E: int) -> dict[str, np.ndarray]:
+                 E: int, *, beta: float = 0.0) -> dict[str, np.ndarray]:
     """Per seed and level (E, levels): change-rate RMSE and mean ``N``-step error of the neural ODE ``f`` (Euler
-    rollout) and of ``f`` with the neural feedback ``h`` (its cascade), on the levels ``x`` (levels, T, 2)."""
+    rollout) and of ``f`` with the neural feedback ``h`` (its cascade, decayed by ``beta`` along its layers), on
+    the levels ``x`` (levels, T, 2)."""
     xs = F.stack_members(x, E)
-    nf = F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E)
+    nf = F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E, beta=beta)
     with torch.no_grad():
         f_nn = _per_seed(F.eval_field(f, xs), E)
     z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N, method="euler"), E),
@@ -124,6 +177,16 @@ def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tens
     rate = {"neural_ode": f_nn, "neural_feedback": _per_seed(nf.observe(xs).f_hat, E)}
     out = {f"rate_{k}": F.rmse_over_time(v, f_true.expand_as(v)).numpy() for k, v in rate.items()}
     return out | {f"err_N_{k}": F.n_step_errors(v, x, setup.N).mean(-1).numpy() for k, v in z.items()}
+
+
+def d4_result(s8: Mapping[str, np.ndarray], held: Mapping[str, np.ndarray], setup: EvaluationSetup,
+              metric: str = "both") -> ClaimResult:
+    """D4's rule (:func:`fnnbook.rules.sec4.d4`, read in ``metric``) on :func:`field_errors`' numbers for the S8
+    levels (``s8``) and the held-out levels (``held``)."""
+    return sec4.d4(**{f"{k}_{m}": s8[f"{k}_{m}"].T for k in ("rate", "err_N") for m in ("neural_feedback", "neural_ode")},
+                   **{f"heldout_{k}_{m}": held[f"{k}_{m}"].T for k in ("rate", "err_N")
+                      for m in ("neural_feedback", "neural_ode")},
+                   N=setup.N, offsets=setup.offsets.tolist(), metric=metric)
 
 
 def judge(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationSetup, E: int, *,
@@ -134,14 +197,14 @@ def judge(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationSetup, E: int
     rel_nominal, rel_fb = nominal_errors(f, None, setup, E), nominal_errors(f, h, setup, E)
     s8 = field_errors(f, h, setup.x_s8, setup.f_s8, setup, E)
     held = field_errors(f, h, setup.x_held, setup.f_held, setup, E)
+    settled = settled_errors(rate_error_curves(f, h, setup, E))
     numbers: dict[str, Any] = {"rel_rmse_nominal_neural_ode": rel_nominal, "rel_rmse_neural_feedback": rel_fb,
-                               "s8": s8, "held_out": held}
+                               "s8": s8, "held_out": held,
+                               "rel_rmse_settled_nominal_neural_ode": settled["rel_rmse_settled_neural_ode"],
+                               "rel_rmse_settled_neural_feedback": settled["rel_rmse_settled_neural_feedback"],
+                               "settle_seconds": settled["settle_index"] * setup.Ts}
     out = {"D2": sec4.d2(rel_feedback=rel_fb, rel_nominal=rel_nominal, frozen_unchanged=True, factor=factor),
-           "D4": sec4.d4(**{f"{k}_{m}": s8[f"{k}_{m}"].T for k in ("rate", "err_N")
-                            for m in ("neural_feedback", "neural_ode")},
-                         **{f"heldout_{k}_{m}": held[f"{k}_{m}"].T for k in ("rate", "err_N")
-                            for m in ("neural_feedback", "neural_ode")},
-                         N=setup.N, offsets=setup.offsets.tolist())}
+           "D4": d4_result(s8, held, setup)}
     if f_dr is not None:
         numbers["rel_rmse_dr_neural_ode"] = rel_dr = nominal_errors(f_dr, None, setup, E)
         out["D1"] = sec4.d1(rel_dr=rel_dr, rel_nominal=rel_nominal, factor=d1_factor)

@@ -20,7 +20,7 @@ import yaml
 
 from fnnbook.rules import beyond
 from fnnbook.why import Why
-from fnnlib.results import BY_CONSTRUCTION, STATUSES, ClaimResult, Results
+from fnnlib.results import BETTER, BY_CONSTRUCTION, STATUSES, ClaimResult, Results
 
 __all__ = ["NOT_RUN", "SCOREBOARD_TASK", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of",
            "plot_verdicts", "read_claims", "render_scoreboard", "score_rows", "seeds_check", "self_check",
@@ -34,7 +34,8 @@ SCOREBOARD_TASK = "scoreboard"
 
 NOT_RUN = "not run"
 _ID_RE = re.compile(r"^[A-Z]+[0-9]+$")
-_BADGE = {"reproduced": "success", "partly": "warning", "not reproduced": "danger", BY_CONSTRUCTION: "info",
+_BADGE = {"reproduced": "success", BETTER: "primary", "partly": "warning", "not reproduced": "danger",
+          BY_CONSTRUCTION: "info",
           NOT_RUN: "secondary"}
 
 
@@ -60,6 +61,16 @@ class Claim:
         The pipeline task that judges it (``"scoreboard"``: computed by the book).
     notebook : str
         That task's notebook source ("" when none).
+    words : str
+        For a claim with several readings: the name of the reading the paper's words support (the one the
+        scoreboard counts); "" when the claim has one reading.
+    words_sentence : str
+        The paper's sentence that reading rests on (quoted from the paper).
+    strict : str
+        The name of the strict reading, shown beside the counted one, never counted ("" when none).
+    units : str
+        What the claim's units share, where they are not independent experiments (one ensemble trained on
+        shared mini-batches, a network shared by several units); shown beside n ("" when nothing is shared).
     """
 
     id: str
@@ -70,6 +81,10 @@ class Claim:
     settings: str = ""
     task: str = ""
     notebook: str = ""
+    words: str = ""
+    words_sentence: str = ""
+    strict: str = ""
+    units: str = ""
 
 
 @dataclass(frozen=True)
@@ -77,18 +92,21 @@ class ScoreRow:
     """A claim with the verdict measured for it (or "not run").
 
     ``task`` is the task that reported it (or declares it); ``result`` is
-    the claim's result in that task's ``results.json``, if any.
+    the claim's result in that task's ``results.json``, if any.  ``verdict`` is the verdict of the reading the
+    paper's words support (``claim.words``; the result's own verdict for a claim with one reading), the one
+    counted; ``strict`` the strict reading's (``claim.strict``), shown beside it, or None.
     """
 
     claim: Claim
     verdict: str
     task: str | None
     result: ClaimResult | None
+    strict: str | None = None
 
 
 #: fields every claim of the registry must give (non-empty); ``settings`` and ``notebook`` are optional
 CLAIM_FIELDS = ("id", "statement", "section", "figure", "task")
-_OPTIONAL_FIELDS = ("settings", "notebook")
+_OPTIONAL_FIELDS = ("settings", "notebook", "words", "strict", "units")
 
 
 def _text(value: Any, where: str, name: str) -> str:
@@ -108,10 +126,20 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
         raise ValueError(f"{where}: claim ID {values['id']!r} is not letters followed by a number")
     own = _text(entry["settings"], where, "settings") if "settings" in entry else ""
     figure = "" if values["figure"].lower().startswith("none") else values["figure"]
+    words = entry.get("words")
+    if words is not None and (not isinstance(words, Mapping) or set(words) != {"reading", "sentence"}):
+        raise ValueError(f"{where}: 'words' must be a mapping with 'reading' (its name) and 'sentence' (the "
+                         f"paper's words it rests on), got {words!r}")
+    if ("strict" in entry) != (words is not None):
+        raise ValueError(f"{where}: 'words' and 'strict' go together (a claim with two readings names both)")
     return Claim(id=values["id"], group=group, text=values["statement"], figure=figure,
                  section=values["section"], settings=" ".join(p for p in (group_settings, own) if p),
                  task=values["task"],
-                 notebook=_text(entry["notebook"], where, "notebook") if "notebook" in entry else "")
+                 notebook=_text(entry["notebook"], where, "notebook") if "notebook" in entry else "",
+                 words="" if words is None else _text(words["reading"], where, "words.reading"),
+                 words_sentence="" if words is None else _text(words["sentence"], where, "words.sentence"),
+                 strict=_text(entry["strict"], where, "strict") if "strict" in entry else "",
+                 units=_text(entry["units"], where, "units") if "units" in entry else "")
 
 
 def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
@@ -119,7 +147,9 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
 
     The file holds ``groups:``, a list (possibly empty) of ``{name, settings, claims}``; each claim gives ``id``,
     ``statement``, ``section``, ``figure`` and ``task`` (all non-empty), optionally ``settings`` and
-    ``notebook``.
+    ``notebook``; a claim with several readings names ``words`` (``reading``: the reading the paper's words
+    support, counted; ``sentence``: the paper's words it rests on) and ``strict`` (the strict reading's name);
+    ``units`` says what the claim's units share, where they are not independent.
 
     Parameters
     ----------
@@ -190,10 +220,24 @@ def score_rows(
     for claim in claims:
         if claim.id in found:
             task, result = found[claim.id]
-            rows.append(ScoreRow(claim, result.verdict, task, result))
+            rows.append(ScoreRow(claim, reading_verdict(claim, result, claim.words), task, result,
+                                 reading_verdict(claim, result, claim.strict) if claim.strict else None))
         else:
             rows.append(ScoreRow(claim, NOT_RUN, owner.get(claim.id), None))
     return rows
+
+
+def reading_verdict(claim: Claim, result: ClaimResult, name: str) -> str:
+    """The verdict of ``result`` under its reading ``name`` (the result's own verdict when ``name`` is "" or the
+    result has one reading). A result whose readings lack ``name`` is refused (ValueError): the claims file and
+    the rule disagree on what the readings are."""
+    verdicts = result.reading_verdicts()
+    if not name or not verdicts:
+        return result.verdict
+    if name not in verdicts:
+        raise ValueError(f"claim {claim.id}: the claims file names the reading {name!r}, the result has "
+                         f"{sorted(verdicts)}")
+    return verdicts[name]
 
 
 def _number(value: Any) -> str:
@@ -260,7 +304,8 @@ def _figure_label(row: ScoreRow) -> str:
 def verdict_counts(rows: Sequence[ScoreRow]) -> dict[str, dict[str, int]]:
     """Group -> status -> number of claims, groups in order of first appearance.
 
-    A claim counts once, under its primary reading's verdict; "verified by construction" is counted apart.
+    A claim counts once, under the verdict of the reading the paper's words support (:attr:`ScoreRow.verdict`);
+    "verified by construction" is counted apart.
     """
     counts: dict[str, dict[str, int]] = {}
     for row in rows:
@@ -270,7 +315,8 @@ def verdict_counts(rows: Sequence[ScoreRow]) -> dict[str, dict[str, int]]:
 
 
 #: badge colours of sphinx-design (Bootstrap), also used by the verdict figure
-_COLOURS = {"reproduced": "#198754", "partly": "#ffc107", "not reproduced": "#dc3545", BY_CONSTRUCTION: "#0dcaf0",
+_COLOURS = {"reproduced": "#198754", BETTER: "#0d6efd", "partly": "#ffc107", "not reproduced": "#dc3545",
+            BY_CONSTRUCTION: "#0dcaf0",
             NOT_RUN: "#6c757d"}
 
 
@@ -336,16 +382,21 @@ def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str]
             "title": (result and result.title) or short_title(row.claim.text), "ours": ours,
             "paper": (result and result.paper) or row.claim.text,
             "paper_label": f"paper, {row.claim.figure}" if row.claim.figure else "paper",
-            "where": where, "figure": figure, "figure_label": _figure_label(row), "readings": readings_of(result),
+            "where": where, "figure": figure, "figure_label": _figure_label(row), "readings": readings_of(result, row.claim.words),
             "n": units_of(result), "why": why}
 
 
-def readings_of(result: ClaimResult | None) -> str:
-    """The verdict of each reading, the counted one first: ``"strict: partly; as worded: reproduced"``
-    ("" for a claim with one reading)."""
+def readings_of(result: ClaimResult | None, counted: str = "") -> str:
+    """The verdict of each reading, the counted one (``counted``, the paper's words) first and marked:
+    ``"as worded (counted): reproduced; strict: partly"`` ("" for a claim with one reading)."""
     if result is None:
         return ""
-    return "; ".join(f"{name}: {verdict}" for name, verdict in result.reading_verdicts().items())
+    verdicts = result.reading_verdicts()
+    if not verdicts:
+        return ""
+    first = counted if counted in verdicts else result.reading_name
+    order = [first] + [k for k in verdicts if k != first]
+    return "; ".join(f"{k}{' (counted)' if k == first else ''}: {verdicts[k]}" for k in order)
 
 
 def units_of(result: ClaimResult | None) -> int | None:
@@ -421,6 +472,12 @@ def render_scoreboard(
     str
     """
     counts = [f"{sum(r.verdict == v for r in rows)} {v}" for v in (*STATUSES, NOT_RUN)]
+    strict = [r for r in rows if r.strict is not None]
+    if strict:  # the strict readings' count beside the counted one, never in it
+        beside = [(v, sum((r.strict if r.strict is not None else r.verdict) == v for r in rows))
+                  for v in (*STATUSES, NOT_RUN)]
+        counts.append("by the strict readings of " + ", ".join(r.claim.id for r in strict) + ": "
+                      + ", ".join(f"{k} {v}" for v, k in beside if k))
     stale, stale_whys = stale or {}, stale_whys or {}
     shown = []
     for r in rows:

@@ -187,6 +187,14 @@ def _why_axis(name: str, value: Any, *, positive: bool = False) -> list[float]:
 
 
 _WHY_AXIS, _WHY_AXIS_POS = _why_axis, partial(_why_axis, positive=True)
+
+
+def _horizons(name: str, value: Any) -> list[int]:
+    """Prediction horizons: distinct integers >= 1."""
+    values = C.number_list(name, value, minimum=1.0, distinct=True)
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+        raise ValueError(f"{name} must list distinct integers >= 1, got {value!r}")
+    return [int(v) for v in values]
 _SPIRAL_FB = {"L": _GAIN, "beta": _NONNEG, "N": _N1}
 _ODE_FIT = {"hidden": _WIDTHS, "activation": _ACT, "iterations": _N1, "batch_size": _N1, "batch_time": _N2,
             "lr": _POS, "method": _METHOD, "adjoint": _BOOL}
@@ -227,6 +235,7 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                      "fb_iterations": _N1, "fb_lr": _POS, "fb_optimizer": _OPTIMIZER, "refresh_every": _N1,
                      "d1_factor": _POS, "d2_factor": _POS, "d3_ratio": _POS, "d3_flat": _POS,
                      "heldout_flip": _SPIRAL3, "heldout_min_distance": _POS,
+                     "dr_n_samples": _N2, "dr_Ts": _POS, "d4_beta": _SWEEP0,
                      "authors_ode": _choice(*SPIRAL_ODE_NAMES), "authors_dr_ode": _choice(*SPIRAL_ODE_NAMES),
                      "authors_feedback": _choice(*SPIRAL_FEEDBACK_NAMES)},
     "bottle": {"data": _choice("real", "synthetic"), "seeds": _SEEDS2, **_ODE_FIT, **_SPIRAL_FB,
@@ -274,7 +283,13 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                  "after": _SPIRAL3, "steady_window": _POS, "s10_band": _WHY_AXIS_POS, "s10_settle": _WHY_AXIS_POS},
     "why_bottle": {"L_grid": _SWEEP0, "beta_grid": _SWEEP0},
     "cascaded_tanks": {"data": _choice("real", "synthetic"), "synthetic_samples": _N2, "synthetic_noise": _NONNEG,
-                       "seed": _SEED, "n_init": _N1, "arx_max_order": _N1},
+                       "seed": _SEED, "n_init": _N1, "arx_max_order": _N1, "seeds": _SEEDS2, "hidden": _WIDTHS,
+                       "activation": _ACT, "x_center": C.finite, "x_scale": _POS, "u_center": C.finite,
+                       "u_scale": _POS, "rate": _POS, "observer_gain": _vec(2, 0.0), "train_N": _N1,
+                       "train_iterations": _N1, "train_lr": _POS, "L_start": _POS, "beta_start": _NONNEG,
+                       "horizons": _horizons, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0),
+                       "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1, "overflow_gap": _N0,
+                       "series_N": _N1},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
@@ -379,6 +394,10 @@ def _cascaded_tanks(p: Mapping[str, Any]) -> None:
                      how_to_get="Get the benchmark's file with `fnn-pipeline data fetch --tanks` (see data/README.md).")
     else:
         samples = p["synthetic_samples"]
+    _need(max(p["horizons"]) + p["n_init"] < samples and p["train_N"] < samples // 2,
+          f"the horizons (largest {max(p['horizons'])}) after n_init = {p['n_init']} samples and train_N = "
+          f"{p['train_N']} must fit a record of {samples} samples")
+    _need(p["series_N"] in p["horizons"], f"series_N = {p['series_N']} must be one of horizons = {p['horizons']}")
     _need(p["arx_max_order"] + 1 <= p["n_init"] < samples // 2,
           f"n_init (the measured samples a simulation starts from) must be in {p['arx_max_order'] + 1}.."
           f"{samples // 2 - 1} (above arx_max_order = {p['arx_max_order']}, below half a record of {samples}), "

@@ -3,9 +3,12 @@
 A *why* explains one claim's verdict in the paper profile.  It rests on runs, never on prose alone:
 
 * **grids** (:class:`WhyGrid`): the claim's own rule (the function of :mod:`fnnbook.rules` that judges it)
-  applied over the seeds at every point of a grid of settings; each axis (:class:`Axis`) is named for the
-  silence of the paper it probes, with the paper's stated value (``None`` where it states none) and the
-  value the paper profile uses;
+  applied over the seeds at every point of a grid; each axis (:class:`Axis`) is named for the silence of the
+  paper it probes, with the paper's stated value (``None`` where it states none) and the value the paper
+  profile uses. An axis is a *setting* (how the networks are trained or run), a *reading* (how the paper's
+  words are scored: a window, a metric, a threshold) or a *usage* (how the networks are used where the paper
+  does not say: a cascade's decay, its first estimate). A grid is of our networks or of the authors'
+  (``networks``);
 * **the authors' networks** (:class:`AuthorsCheck`): the same rule with the networks of the authors' release
   in place of ours;
 * **readings**: the verdicts of the claim's readings, from the paper-profile result.
@@ -13,12 +16,14 @@ A *why* explains one claim's verdict in the paper profile.  It rests on runs, ne
 From these, :func:`causes` names the causes by a rule fixed here, before any why run (tested in
 ``tests/rules/test_why.py``):
 
-* (a) **reading**: the claim's readings do not all give the same verdict;
-* (b) **open setting**: on some grid the rule holds at one point and fails at another, along an axis whose
-  value the paper does not state;
+* (a) **reading**: the claim's readings do not all give the same verdict, or along a reading or usage axis
+  the rule holds at one point and fails at another;
+* (b) **open setting**: on some grid of our networks the rule holds at one point and fails at another, along
+  a setting axis whose value the paper does not state;
 * (c) **implementation**: with the authors' networks the rule gives a better verdict than with ours;
-* (d) **does not hold where tested**: some grid never lets the rule hold, and the authors' networks (where
-  evaluated) do not reproduce it either.
+* (d) **does not hold where tested**: only when nothing tried lets the claim hold: no point of any grid, ours
+  or the authors', over every setting, reading and usage they vary; no reading of the paper-profile result;
+  and not the authors' networks (where evaluated).
 
 A claim may have several causes, or none (then the why reads "robust": the verdict stands at every point).
 :func:`summary` writes the one line the scoreboard shows under **Why**, from the numbers alone.
@@ -40,9 +45,9 @@ from typing import Any
 import numpy as np
 
 from fnnlib.io import atomic_write
-from fnnlib.results import VERDICTS
+from fnnlib.results import BETTER, VERDICTS
 
-__all__ = ["CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "WhyGrid", "causes", "read_whys",
+__all__ = ["AXIS_KINDS", "CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "WhyGrid", "causes", "read_whys",
            "summary", "write_whys"]
 
 #: the name of a why task's output file
@@ -56,7 +61,13 @@ CAUSES: Mapping[str, str] = dict(
     d="the claim does not hold where it was tested",
 )
 
-_RANK = {v: i for i, v in enumerate(reversed(VERDICTS))}  # not reproduced 0 < partly 1 < reproduced 2
+_RANK = {v: i for i, v in enumerate(reversed(VERDICTS))} | {BETTER: 2}  # not reproduced 0 < partly 1 < reproduced 2
+_HOLDS = ("reproduced", BETTER)  # the verdicts under which a claim holds
+
+#: what an axis varies: a training or running ``setting``; a ``reading`` of the paper's words (how the result is
+#: scored: window, metric, threshold); a ``usage`` of the networks the paper does not state (a cascade's decay,
+#: its first estimate)
+AXIS_KINDS = ("setting", "reading", "usage")
 
 
 def _plain(value: Any) -> Any:
@@ -97,6 +108,8 @@ class Axis:
         The value the paper states, or ``None`` where it states none.
     ours : Any
         The value the paper profile uses (one of ``values`` where possible).
+    kind : str
+        One of :data:`AXIS_KINDS`: ``"setting"`` (default), ``"reading"`` or ``"usage"``.
     """
 
     name: str
@@ -104,10 +117,13 @@ class Axis:
     silence: str
     paper: Any = None
     ours: Any = None
+    kind: str = "setting"
 
     def __post_init__(self) -> None:
         if not self.name or not self.silence:
             raise ValueError("an axis needs a name and the silence it probes")
+        if self.kind not in AXIS_KINDS:
+            raise ValueError(f"axis {self.name!r}: kind {self.kind!r} is not one of {AXIS_KINDS}")
         object.__setattr__(self, "values", tuple(_plain(v) for v in self.values))
         if len(self.values) < 2:
             raise ValueError(f"axis {self.name!r}: a grid axis needs at least 2 values, got {len(self.values)}")
@@ -121,12 +137,12 @@ class Axis:
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "values": list(self.values), "silence": self.silence,
-                "paper": _plain(self.paper), "ours": _plain(self.ours)}
+                "paper": _plain(self.paper), "ours": _plain(self.ours), "kind": self.kind}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Axis:
         return cls(name=data["name"], values=tuple(data["values"]), silence=data["silence"],
-                   paper=data.get("paper"), ours=data.get("ours"))
+                   paper=data.get("paper"), ours=data.get("ours"), kind=data.get("kind", "setting"))
 
 
 @dataclass(frozen=True)
@@ -147,7 +163,10 @@ class WhyGrid:
     title : str
         A few words on what the grid varies (named in the summary where a why has several grids).
     unit : str
-        What one of the ``n`` units is ("seed", "network", "unit"), in the singular.
+        What one of the ``n`` units is ("seed", "network", "unit"), in the singular; where units share
+        training (one ensemble on shared mini-batches) or a network, the unit says so.
+    networks : str
+        Whose networks the grid judges: ``"ours"`` or ``"authors"``.
     """
 
     axes: tuple[Axis, ...]
@@ -157,6 +176,7 @@ class WhyGrid:
     numbers: Mapping[str, Any] = field(default_factory=dict)
     title: str = ""
     unit: str = "seed"
+    networks: str = "ours"
 
     def __post_init__(self) -> None:
         holds = np.asarray(self.holds)
@@ -171,6 +191,8 @@ class WhyGrid:
             raise ValueError(f"n must be at least 1, got {self.n}")
         if not self.rule:
             raise ValueError("a why grid states the rule it applies at each point")
+        if self.networks not in ("ours", "authors"):
+            raise ValueError(f"networks must be 'ours' or 'authors', got {self.networks!r}")
         object.__setattr__(self, "holds", holds)
         object.__setattr__(self, "numbers", {k: _plain(v) for k, v in self.numbers.items()})
 
@@ -179,23 +201,33 @@ class WhyGrid:
         """The rule holds at some point and fails at another."""
         return bool(self.holds.any() and not self.holds.all())
 
-    @property
-    def mixed_on_open_axis(self) -> bool:
-        """Along some axis the paper leaves open, the outcome changes with that axis alone."""
+    def _mixed_along(self, kinds: tuple[str, ...], open_only: bool) -> bool:
         for i, axis in enumerate(self.axes):
-            if axis.open and (self.holds.any(axis=i) != self.holds.all(axis=i)).any():
+            if axis.kind in kinds and (axis.open or not open_only) and \
+                    (self.holds.any(axis=i) != self.holds.all(axis=i)).any():
                 return True
         return False
 
+    @property
+    def mixed_on_open_axis(self) -> bool:
+        """Along some setting axis the paper leaves open, the outcome changes with that axis alone."""
+        return self._mixed_along(("setting",), open_only=True)
+
+    @property
+    def mixed_on_reading_axis(self) -> bool:
+        """Along some reading or usage axis, the outcome changes with that axis alone."""
+        return self._mixed_along(("reading", "usage"), open_only=False)
+
     def to_json(self) -> dict[str, Any]:
         return {"title": self.title, "axes": [a.to_json() for a in self.axes], "holds": self.holds.tolist(),
-                "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers), "unit": self.unit}
+                "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers), "unit": self.unit,
+                "networks": self.networks}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> WhyGrid:
         return cls(axes=tuple(Axis.from_json(a) for a in data["axes"]), holds=np.asarray(data["holds"], bool),
                    n=int(data["n"]), rule=data["rule"], numbers=data.get("numbers") or {},
-                   title=data.get("title", ""), unit=data.get("unit", "seed"))
+                   title=data.get("title", ""), unit=data.get("unit", "seed"), networks=data.get("networks", "ours"))
 
 
 @dataclass(frozen=True)
@@ -213,7 +245,9 @@ class AuthorsCheck:
     networks : str
         Which of the release's networks (file names in its README).
     n : int
-        Independent units behind the verdict (the release has one network per kind, five quadrotor runs).
+        Units behind the verdict (the release has one network per kind, five quadrotor runs).
+    shared : str
+        What those units share, where they are not independent (e.g. 5 units flying 2 MLPs); "" when nothing.
     """
 
     verdict: str
@@ -221,11 +255,12 @@ class AuthorsCheck:
     checks: Mapping[str, bool]
     networks: str
     n: int = 1
+    shared: str = ""
 
     def __post_init__(self) -> None:
         for v in (self.verdict, self.ours):
-            if v not in VERDICTS:
-                raise ValueError(f"unknown verdict {v!r}; verdicts: {', '.join(VERDICTS)}")
+            if v not in _RANK:
+                raise ValueError(f"unknown verdict {v!r}; verdicts: {', '.join(_RANK)}")
         object.__setattr__(self, "checks", {str(k): bool(v) for k, v in self.checks.items()})
 
     @property
@@ -235,12 +270,12 @@ class AuthorsCheck:
 
     def to_json(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "ours": self.ours, "checks": dict(self.checks),
-                "networks": self.networks, "n": int(self.n)}
+                "networks": self.networks, "n": int(self.n), "shared": self.shared}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> AuthorsCheck:
         return cls(verdict=data["verdict"], ours=data["ours"], checks=data["checks"], networks=data["networks"],
-                   n=int(data.get("n", 1)))
+                   n=int(data.get("n", 1)), shared=data.get("shared", ""))
 
 
 @dataclass(frozen=True)
@@ -271,22 +306,38 @@ def causes(*, grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None,
         Reading name -> verdict (the counted reading and the others), from the paper-profile result.
     """
     found: list[Cause] = []
-    if readings and len(set(readings.values())) > 1:
-        found.append(Cause("a", "the readings differ: " + "; ".join(f"{k}: {v}" for k, v in readings.items())))
-    mixed = [g for g in grids if g.mixed_on_open_axis]
+    by_reading = [g for g in grids if g.mixed_on_reading_axis]
+    if (readings and len(set(readings.values())) > 1) or by_reading:
+        parts = ["the readings differ: " + "; ".join(f"{k}: {v}" for k, v in readings.items())] \
+            if readings and len(set(readings.values())) > 1 else []
+        parts += [f"{_title(g)}: holds at {int(g.holds.sum())} of {g.holds.size} points, along "
+                  f"{', '.join(a.name for a in g.axes if a.kind != 'setting')}" for g in by_reading]
+        found.append(Cause("a", "; ".join(parts)))
+    mixed = [g for g in grids if g.networks == "ours" and g.mixed_on_open_axis]
     if mixed:
-        found.append(Cause("b", "; ".join(f"{g.title or _axes_text(g)}: holds at {int(g.holds.sum())} of "
+        found.append(Cause("b", "; ".join(f"{_title(g)}: holds at {int(g.holds.sum())} of "
                                           f"{g.holds.size} points" for g in mixed)))
     if authors is not None and authors.better:
         found.append(Cause("c", f"with the authors' networks ({authors.networks}) the rule reads "
                                 f"{authors.verdict}; with ours, {authors.ours}"))
-    never = [g for g in grids if not g.holds.any()]
-    if never and (authors is None or authors.verdict != "reproduced"):
-        what = "; ".join(f"{g.title or _axes_text(g)}: at none of {g.holds.size} points" for g in never)
+    # (d): nothing tried lets the claim hold -- no grid point (ours or the authors', over every setting, reading
+    # and usage), no reading of the result, not the authors' networks
+    if grids and not any(g.holds.any() for g in grids) \
+            and not any(v in _HOLDS for v in (readings or {}).values()) \
+            and (authors is None or authors.verdict not in _HOLDS):
+        kinds = sorted({a.kind for g in grids for a in g.axes})
+        what = "; ".join(f"{_title(g)}: at none of {g.holds.size} points" for g in grids)
+        what += f" (axes: {', '.join(kinds)})"
+        if readings:
+            what += "; no reading holds (" + "; ".join(f"{k}: {v}" for k, v in readings.items()) + ")"
         if authors is not None:
             what += f"; nor with the authors' networks ({authors.verdict})"
         found.append(Cause("d", what))
     return tuple(found)
+
+
+def _title(grid: WhyGrid) -> str:
+    return grid.title or _axes_text(grid)
 
 
 def _axes_text(grid: WhyGrid) -> str:
@@ -330,6 +381,14 @@ def _grid_line(grid: WhyGrid) -> str:
     return "; ".join(parts)
 
 
+def _plural(unit: str, n: int) -> str:
+    """``seed`` -> ``seeds``; ``seed (one ensemble)`` -> ``seeds (one ensemble)``; unchanged for n = 1."""
+    if n == 1:
+        return unit
+    head, sep, rest = unit.partition(" (")
+    return f"{head}s{sep}{rest}"
+
+
 def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> str:
     """The one line under **Why** on the scoreboard, from the numbers alone.
 
@@ -340,9 +399,10 @@ def summary(grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None) -> st
     """
     named = len(grids) > 1  # several grids: each line says which
     lines = [f"{g.title + ': ' if named and g.title else ''}{_grid_line(g)} "
-             f"({g.n} {g.unit if g.n == 1 else g.unit + 's'} per point)" for g in grids]
+             f"({g.n} {_plural(g.unit, g.n)} per point)" for g in grids]
     if authors is not None:
-        lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours})")
+        shared = f"; n = {authors.n}, {authors.shared}" if authors.shared else ""
+        lines.append(f"with the authors' networks: {authors.verdict} (ours: {authors.ours}{shared})")
     return "; ".join(lines)
 
 
@@ -364,8 +424,8 @@ class Why:
     note: str = ""
 
     def __post_init__(self) -> None:
-        if self.verdict not in VERDICTS:
-            raise ValueError(f"unknown verdict {self.verdict!r}; verdicts: {', '.join(VERDICTS)}")
+        if self.verdict not in _RANK:
+            raise ValueError(f"unknown verdict {self.verdict!r}; verdicts: {', '.join(_RANK)}")
         if not self.grids and self.authors is None:
             raise ValueError(f"why of {self.claim}: it needs a grid or the authors' networks (a run), not prose")
         object.__setattr__(self, "grids", tuple(self.grids))

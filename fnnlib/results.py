@@ -7,6 +7,9 @@ verdict is derived from the checks alone, never set by hand:
 * ``"reproduced"``      every check holds,
 * ``"partly"``          some but not all checks hold,
 * ``"not reproduced"``  no check holds;
+* ``"better than claimed"``  some check fails, and every failed check fails because the measured result beats
+  the claim in the claim's own direction (``better``: e.g. a cost below the paper's band, an error below the
+  one the paper calls "slightly larger"); it is not "reproduced" either;
 * ``"verified by construction"``  the claim has no check, only guarantees: nothing measured could have
   refuted it, so it is never counted as reproduced (the scoreboard counts it apart).
 
@@ -25,6 +28,8 @@ Besides its ``checks``, a claim may carry:
 * ``readings``: the other readings of an ambiguous claim, each a :class:`Reading` with its own checks and
   verdict; the claim's own checks (the reading written first) are the ones counted;
 * ``n``: the number of independent units the comparison rests on;
+* ``better``: for checks that can fail in the claim's own direction, whether the measured result beats the
+  claim there (check name -> bool); they make a failed check read "better than claimed";
 * ``at_paper_setting``: where a claim is judged at a setting other than the paper's stated one, the outcome
   at the stated one (or why it cannot be judged there, with the number).
 
@@ -52,17 +57,19 @@ from typing import Any
 from fnnlib.io import atomic_write
 
 VERDICTS = ("reproduced", "partly", "not reproduced")
+#: the verdict of a claim whose every failed check fails because the result beats the claim in its own direction
+BETTER = "better than claimed"
 #: the status of a claim whose only support holds by construction (no check, some guarantees)
 BY_CONSTRUCTION = "verified by construction"
-#: every status a claim can have: the three verdicts, then :data:`BY_CONSTRUCTION`
-STATUSES = (*VERDICTS, BY_CONSTRUCTION)
+#: every status a claim can have: the three verdicts, :data:`BETTER`, then :data:`BY_CONSTRUCTION`
+STATUSES = (*VERDICTS, BETTER, BY_CONSTRUCTION)
 #: the name of a task's results file in its output folder
 RESULTS_FILENAME = "results.json"
 
 #: the keys of a claim's JSON, in the order they are written; the last four only when given
 _REQUIRED = ("id", "verdict", "rule", "checks", "numbers", "figure")
 _OPTIONAL = ("guarantees", "headline", "paper", "title", "reading", "reading_name", "readings", "n",
-             "at_paper_setting")
+             "at_paper_setting", "better")
 
 
 def _stored_verdict_holds(result: Any, stored: str, what: str) -> Any:
@@ -86,6 +93,16 @@ def verdict_from_checks(checks: Mapping[str, bool]) -> str:
     if any(values):
         return VERDICTS[1]
     return VERDICTS[2]
+
+
+def verdict_with_better(checks: Mapping[str, bool], better: Mapping[str, bool] | None) -> str:
+    """The verdict of ``checks`` (:func:`verdict_from_checks`), or :data:`BETTER` when some check fails and every
+    failed one is marked in ``better`` as failing because the result beats the claim in its own direction."""
+    verdict = verdict_from_checks(checks)
+    failed = [k for k, v in checks.items() if not v]
+    if failed and better and all(better.get(k, False) for k in failed):
+        return BETTER
+    return verdict
 
 
 def _plain(value: Any) -> Any:
@@ -265,6 +282,9 @@ class ClaimResult:
     at_paper_setting : str, optional
         When judged at a setting other than the paper's stated one: the outcome at the stated one, or why it
         cannot be judged there, with the number.
+    better : mapping of str to bool, optional
+        For the checks that can fail in the claim's own direction: whether the measured result beats the claim
+        there (a marked check must fail to be marked True). Every failed check marked True: :data:`BETTER`.
 
     With no checks and non-empty ``guarantees`` the claim is :data:`BY_CONSTRUCTION`.
 
@@ -294,8 +314,16 @@ class ClaimResult:
     readings: Mapping[str, Reading] | None = None
     n: int | None = None
     at_paper_setting: str | None = None
+    better: Mapping[str, bool] | None = None
 
     def __post_init__(self) -> None:
+        if self.better is not None:
+            unknown = sorted(set(self.better) - set(self.checks))
+            held = [k for k, v in self.better.items() if v and self.checks.get(k)]
+            if unknown or held:
+                raise ValueError(f"claim {self.id}: 'better' names checks it does not have ({unknown}) or marks "
+                                 f"checks that hold ({held})")
+            object.__setattr__(self, "better", {k: bool(v) for k, v in self.better.items()})
         if self.checks or not self.guarantees:
             verdict_from_checks(self.checks)  # refuses a claim with neither checks nor guarantees
         if self.readings is not None:
@@ -321,9 +349,10 @@ class ClaimResult:
 
     @property
     def verdict(self) -> str:
-        """``"reproduced"`` (every check holds), ``"partly"`` (some do), ``"not reproduced"`` (none does), or
+        """``"reproduced"`` (every check holds), ``"partly"`` (some do), ``"not reproduced"`` (none does),
+        :data:`BETTER` (every failed check fails in the claim's own direction, :attr:`better`), or
         :data:`BY_CONSTRUCTION` (no check, only guarantees)."""
-        return verdict_from_checks(self.checks) if self.checks else BY_CONSTRUCTION
+        return verdict_with_better(self.checks, self.better) if self.checks else BY_CONSTRUCTION
 
     def reading_verdicts(self) -> dict[str, str]:
         """Reading name -> verdict, the counted one (:attr:`reading_name`) first; empty with one reading."""

@@ -155,8 +155,10 @@ def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[f
                 rel_tol: float = 0.25, min_inside: float = 0.95) -> ClaimResult:
     r"""Q5 (Fig. S14): AdapFNN is comparable to FNN with a slightly larger RMSE; Theorem 2's ball holds.
 
-    Strict reading (counted), paired over runs: AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs,
-    and AdapFNN's mean RMSE >= FNN's. As worded ("comparable"): the first check alone. Guarantee: on every
+    Strict reading, paired over runs: AdapFNN within ``rel_tol`` of FNN in at least S - 1 of S runs,
+    and AdapFNN's mean RMSE >= FNN's. As worded ("comparable"): the first check alone. A check that fails
+    because AdapFNN tracks *better* than FNN (a lower mean RMSE; within the tolerance failing only on runs where
+    AdapFNN is lower) is marked ``better``: the claim's verdict is then "better than claimed". Guarantee: on every
     run, the layer-0 error stays in the ball :math:`\gamma/\lambda_m(L)` for at least ``min_inside`` of the
     steps after the transient, :math:`\gamma` measured on the same run (Theorem 2).
     """
@@ -164,14 +166,18 @@ def q5_adaptive(rmse: Mapping[str, Sequence[float]], theorem2_inside: Sequence[f
     inside = np.asarray(theorem2_inside, dtype=float)
     within = np.abs(v["AdapFNN"] - v["FNN"]) <= rel_tol * v["FNN"]
     S = len(within)
-    comparable = {f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN (>= {S - 1} of {S})": int(within.sum()) >= S - 1}
-    checks = comparable | {
-        f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)": float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
+    within_name = f"{label}: AdapFNN within {100 * rel_tol:g} % of FNN (>= {S - 1} of {S})"
+    larger_name = f"{label}: AdapFNN mean RMSE >= FNN's (slightly larger)"
+    comparable = {within_name: int(within.sum()) >= S - 1}
+    checks = comparable | {larger_name: float(v["AdapFNN"].mean()) >= float(v["FNN"].mean())}
+    lower = v["AdapFNN"] < v["FNN"]
+    better = {within_name: not checks[within_name] and int((within | lower).sum()) >= S - 1,
+              larger_name: not checks[larger_name]}
     guarantees = {f"{label}: Theorem 2 ball holds >= {100 * min_inside:g} % after the transient, every run":
                   bool(inside.size > 0 and (inside >= min_inside).all())}
     numbers = {"within_fraction": float(within.mean()), "mean": {n: float(x.mean()) for n, x in v.items()},
                "theorem2_inside_min": float(inside.min()) if inside.size else None}
-    return ClaimResult("Q5", checks=checks, guarantees=guarantees, numbers=numbers,
+    return ClaimResult("Q5", checks=checks, guarantees=guarantees, numbers=numbers, better=better,
                        reading_name="strict",
                        reading="'performance comparable to the previous feedback neural network, with a slightly "
                                f"larger RMSE' (App. A.9) read as: within {100 * rel_tol:g} % of FNN and a mean RMSE "
@@ -232,34 +238,47 @@ def count_trainable(tensors: Iterable[Tensor]) -> int:
 
 
 #: the authors' training time for the quadrotor's residual model: "around 30 mins to run 50 epochs on a laptop with
-#: 13th Gen Intel(R) Core(TM) i9-13900H" (App. A.6), 14 cores
+#: 13th Gen Intel(R) Core(TM) i9-13900H" (App. A.7), 14 cores
 AUTHORS_SECONDS_50_EPOCHS = 30 * 60.0
+#: "around" 30 minutes read as a band: a factor 2 either way (15 to 60 minutes)
+AROUND_FACTOR = 2.0
 
 
-def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float) -> ClaimResult:
-    """Q6: the linear feedback needs no training; the residual model trains in about the authors' time.
+def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float, *,
+                     around: float = AROUND_FACTOR) -> ClaimResult:
+    """Q6: the linear feedback needs no training; the residual model trains in around the authors' time.
 
-    Check (it fails on slower hardware or a costlier implementation): one model's 50 epochs
-    (``seconds_per_model``, measured here, scaled to 50 epochs) take at most the authors'
-    :data:`AUTHORS_SECONDS_50_EPOCHS`. The hardware differs (theirs: a 14-core laptop CPU), so a pass says the
-    cost is not larger than theirs, not that it matches. Guarantee (construction): the feedback object has no
-    trainable parameter (counted by :func:`count_trainable`).
+    "Around 30 mins" read as the band [30 / ``around``, 30 x ``around``] minutes: the text gives one rounded
+    number for one laptop and no spread, so a factor 2 either way is what "around" can carry (a factor of 2 is
+    the spread of one generation's laptop CPUs on one workload; beyond it the cost is another one). Two
+    checks, one per edge of the band, each failing on a plausible run (a slower machine or a costlier
+    implementation fails the upper edge; a faster one the lower edge). Below the band the measured cost beats
+    the claim in its own direction (cheaper): that check is marked ``better``, so a run below the band reads
+    "better than claimed", not "reproduced". Guarantee (construction): the feedback object has no trainable
+    parameter (counted by :func:`count_trainable`).
     """
-    if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model) or seconds_per_model < 0:
-        raise ValueError(f"bad inputs: {n_trainable_feedback}, {seconds_per_model}")
+    if int(n_trainable_feedback) < 0 or not np.isfinite(seconds_per_model) or seconds_per_model < 0 or around <= 1:
+        raise ValueError(f"bad inputs: {n_trainable_feedback}, {seconds_per_model}, around={around}")
     minutes = AUTHORS_SECONDS_50_EPOCHS / 60
+    lo, hi = AUTHORS_SECONDS_50_EPOCHS / around, AUTHORS_SECONDS_50_EPOCHS * around
+    below = f"one model's 50 epochs not below {lo / 60:g} min (around {minutes:g})"
+    checks = {f"one model's 50 epochs not above {hi / 60:g} min (around {minutes:g})": float(seconds_per_model) <= hi,
+              below: float(seconds_per_model) >= lo}
     return ClaimResult(
         "Q6",
-        checks={f"one model's 50 epochs within the authors' {minutes:g} min": float(seconds_per_model)
-                <= AUTHORS_SECONDS_50_EPOCHS},
+        checks=checks,
+        better={below: float(seconds_per_model) < lo},
         guarantees={"linear feedback has no trainable parameter (counted on the feedback object)":
                     int(n_trainable_feedback) == 0},
         numbers={"trainable_feedback_parameters": int(n_trainable_feedback),
                  "seconds_per_model_50_epochs": float(seconds_per_model),
                  "authors_seconds_50_epochs": AUTHORS_SECONDS_50_EPOCHS,
+                 "band_seconds": [lo, hi],
                  "over_authors": float(seconds_per_model) / AUTHORS_SECONDS_50_EPOCHS},
-        reading=f"'it takes around {minutes:g} mins to run 50 epochs on a laptop' (App. A.6) read as an upper bound "
-                "on the cost a reader pays: one model's 50 epochs here take no longer (on different hardware)",
-        rule=f"one model's 50 epochs (measured, scaled to 50) <= the authors' {minutes:g} min on a 14-core laptop "
-             "CPU (different hardware: a pass says not costlier, not equal); no trainable parameter on the feedback "
-             "object is a guarantee (construction)")
+        reading=f"'it takes around {minutes:g} mins to run 50 epochs on a laptop' (App. A.7) read as the band "
+                f"{lo / 60:g}-{hi / 60:g} min (a factor {around:g} either way: one rounded number, one laptop); "
+                "below it the cost beats the claim (better than claimed), on different hardware",
+        rule=f"one model's 50 epochs (measured, scaled to 50) within {lo / 60:g}-{hi / 60:g} min (the authors' "
+             f"{minutes:g} min on a 14-core laptop CPU, a factor {around:g} either way; different hardware); below "
+             "the band reads better than claimed; no trainable parameter on the feedback object is a guarantee "
+             "(construction)")

@@ -62,19 +62,27 @@ def s1(nominal_rate_rel_rmse: Value, *, tol: float = 0.05) -> ClaimResult:
 
 def s2(*, nominal_rel: Value, test_rel_neural_ode: Value, rate_neural_ode: Value, rate_feedback: Value,
        err_N_neural_ode: Value, err_N_feedback: Value, N: int, degrade_factor: float = 2.0) -> ClaimResult:
-    """S2 (Fig. 4d-f): the neural ODE degrades on the test spiral; the feedback (Eqs. (7)-(8)) fixes the
-    change rate and the ``N``-step error (cascade of Sec. 3.3 against the Euler rollout)."""
+    """S2 (Fig. 4d-f): on the test spiral, where the neural ODE degrades, the feedback (Eqs. (7)-(8)) fixes the
+    change rate and the ``N``-step error (cascade of Sec. 3.3 against the Euler rollout).
+
+    The degradation is the test's premise, fixed by the test spiral the paper picks (its parameters far from
+    the nominal ones): on the paper's settings no plausible run fails it, so it decides nothing. It is shown as a
+    number (``premise_test_over_nominal``: the test relative error over ``degrade_factor`` x the nominal one, per
+    seed, and whether it exceeds 1 in every seed), never a check, and not a guarantee either (a barely trained
+    network, as in a smoke run, need not degrade). The checks are the feedback's two paired wins."""
     scaled = degrade_factor * per_seed(nominal_rel)
     return ClaimResult(
         "S2",
-        checks={"neural_ode_degrades": beats(scaled, test_rel_neural_ode),
-                "feedback_rate_better": beats(rate_feedback, rate_neural_ode),
+        checks={"feedback_rate_better": beats(rate_feedback, rate_neural_ode),
                 f"feedback_N{N}_better": beats(err_N_feedback, err_N_neural_ode)},
         guarantees={},
+        numbers={"premise_test_over_nominal": (per_seed(test_rel_neural_ode) / scaled).tolist(),
+                 "premise_holds_every_seed": bool((per_seed(test_rel_neural_ode) > scaled).all())},
         reading="'significantly different' test model and 'better approximated accuracy ... smaller multi-step "
                 "error' (Fig. 4d-f) read as a degradation by a factor and paired wins of the feedback",
-        rule=f"test relative rate error > {degrade_factor:g}x the nominal one; feedback beats the neural ODE "
-             f"in change-rate RMSE and in mean {N}-step error" + seeds_note(rate_feedback))
+        rule=f"feedback beats the neural ODE in change-rate RMSE and in mean {N}-step error; the premise (test "
+             f"relative rate error > {degrade_factor:g}x the nominal one) is shown, not judged"
+             + seeds_note(rate_feedback))
 
 
 def s3(*, noise_std: Sequence[float], decay: Any, no_decay: Any, neural_ode: Any, judged_std: float) -> ClaimResult:
@@ -144,9 +152,10 @@ def s5(*, ball_x: Value, ball_f: Value, feedback_x: Value, feedback_f: Value, co
     observer (Theorem 1's own setting) stays in both balls after the transient -- the theorem, with gamma
     measured on the same run; the feedback network stays in both balls (i, ii) and inside gamma/L at every
     gain of the sweep (iv) -- Eq. (25) with gamma measured on the same run, so nothing a run could refute.
-    Checks, each a threshold check (holds in >= S-1 of S seeds): the balls are conservative (radius / measured
-    limit >= ``conservative_ratio``, both balls: the theorem does not say by how much); over the L sweep the
-    limit decreases strictly as L grows.
+    Check, a threshold check (holds in >= S-1 of S seeds): the balls are conservative (radius / measured
+    limit >= ``conservative_ratio``, both balls). The paper says "relatively conservative" (App. A.2.1) and no
+    factor: 2 is this project's choice. That the limit decreases as L grows follows from the linear recursion
+    of Eq. (25) (the error's gain 1 - Ts L shrinks as L grows), so it is a guarantee, not a check.
     """
     bx, bf, fx, ff, cx, cf, rx, rf = (per_seed(v) for v in (ball_x, ball_f, feedback_x, feedback_f, continuous_x,
                                                           continuous_f, ratio_x, ratio_f))
@@ -156,18 +165,20 @@ def s5(*, ball_x: Value, ball_f: Value, feedback_x: Value, feedback_f: Value, co
         raise ValueError("S5: L_sweep (increasing), limit_x and ball_x_sweep (one row per gain) must match")
     return ClaimResult(
         "S5",
-        checks={f"conservative_ratio>={conservative_ratio:g}": most_seeds(np.minimum(rx, rf) >= conservative_ratio),
-                "limit_decreases_with_L": most_seeds((lim[1:] < lim[:-1]).all(axis=0))},
-        guarantees={"continuous_x_in_ball (Theorem 1)": every_seed(cx <= bx),
+        checks={f"conservative_ratio>={conservative_ratio:g}": most_seeds(np.minimum(rx, rf) >= conservative_ratio)},
+        guarantees={"limit_decreases_with_L (Eq. (25): the linear recursion)":
+                    most_seeds((lim[1:] < lim[:-1]).all(axis=0)),
+                    "continuous_x_in_ball (Theorem 1)": every_seed(cx <= bx),
                     "continuous_f_in_ball (Theorem 1)": every_seed(cf <= bf),
                     "feedback_x_in_ball (Eq. (25), gamma of the run)": every_seed(fx <= bx),
                     "feedback_f_in_ball (Eq. (25), gamma of the run)": every_seed(ff <= bf),
                     "inside_gamma_over_L_at_every_L (Eq. (25), gamma of the run)":
                     every_seed((lim <= ball_sw).all(axis=0))},
-        reading="Theorem 1 ('the estimation error converges into a ball whose radius shrinks as L grows') read as "
-                "balls that are conservative by a factor and a measured limit that falls as L grows",
+        reading="Theorem 1 and 'the theoretical bounded set is relatively conservative' (App. A.2.1) read as balls "
+                f"at least {conservative_ratio:g}x the measured limit (the factor is this project's choice: the paper "
+                "gives none); the limit falling as L grows is the linear recursion's, a guarantee",
         rule=f"ball / measured limit (max over the last half, after t = 5/lambda_min) >= {conservative_ratio:g} for "
-             "both balls; over the L sweep the limit decreasing. Inside the balls (continuous observer: Theorem 1; "
+             "both balls (the factor is ours). The limit decreasing over the L sweep (Eq. (25)) and inside the balls (continuous observer: Theorem 1; "
              "feedback network and every L of the sweep: Eq. (25)), with gamma measured on each run, are "
              "guarantees in every seed, not checks" + _threshold_note(S))
 

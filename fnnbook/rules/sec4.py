@@ -97,30 +97,46 @@ def d3(*, ratio: Value, trend: Value, ratio_max: float = 0.5, flat: float = 0.1)
              f"by < {flat:.0%} of their mean, each {_in_most(ratio)}" + seeds_note(ratio))
 
 
-def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any) -> list[bool]:
-    """Per level: the neural feedback beats the neural ODE in change rate and in N-step error."""
+#: the metrics D4 can be read in: the change rate Fig. S10 and the release's test compare, the N-step error of
+#: the cascade, or both (the paper profile's strict rule)
+D4_METRICS = ("both", "rate", "err_N")
+
+
+def _both_better(rate_nf: Any, rate_nn: Any, ms_nf: Any, ms_nn: Any, metric: str = "both") -> list[bool]:
+    """Per level: the neural feedback beats the neural ODE in change rate and in N-step error (``metric``: both,
+    or only one of them)."""
+    if metric not in D4_METRICS:
+        raise ValueError(f"D4: metric {metric!r} is not one of {D4_METRICS}")
     arrs = [np.asarray(v, dtype=float) for v in (rate_nf, rate_nn, ms_nf, ms_nn)]
     if len({a.shape for a in arrs}) != 1 or arrs[0].ndim not in (1, 2) or arrs[0].size == 0:
         raise ValueError("D4: one value per level (and per seed) for every metric")
     rows = [a if a.ndim == 2 else a[:, None] for a in arrs]
-    return [beats(rows[0][j], rows[1][j]) and beats(rows[2][j], rows[3][j]) for j in range(rows[0].shape[0])]
+    rate = [beats(rows[0][j], rows[1][j]) for j in range(rows[0].shape[0])]
+    multi = [beats(rows[2][j], rows[3][j]) for j in range(rows[0].shape[0])]
+    return {"both": [a and b for a, b in zip(rate, multi)], "rate": rate, "err_N": multi}[metric]
+
+
+_METRIC_WORDS = {"both": "change-rate RMSE and mean {N}-step error", "rate": "change-rate RMSE",
+                 "err_N": "mean {N}-step error"}
 
 
 def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback: Any, err_N_neural_ode: Any,
        heldout_rate_neural_feedback: Any, heldout_rate_neural_ode: Any, heldout_err_N_neural_feedback: Any,
-       heldout_err_N_neural_ode: Any, N: int, offsets: Any) -> ClaimResult:
+       heldout_err_N_neural_ode: Any, N: int, offsets: Any, metric: str = "both") -> ClaimResult:
     """D4 (Fig. S10): the neural feedback beats the neural ODE at the 12 residual levels of S8 -- which sit next
     to the domain-randomized training cases -- and at held-out levels away from them.
 
     Arrays: one row per level (one column per seed).  Win-type, paired per seed: a level is won when the neural
     feedback beats the neural ODE (:func:`fnnlib.stats.paired_win` over the seeds; one seed: lower) in both the
     change-rate RMSE and the mean ``N``-step error.  ``offsets``: the S8 levels' parameter offsets (one row
-    per level).  Strict reading (counted): every S8 level.  As worded: every S8 level with a residual to
-    correct (:func:`fnnbook.rules.sec3.residual_levels`); the held-out levels as in the strict reading.
+    per level).  Strict reading: every S8 level.  As worded (the one the scoreboard counts, ``claims.yaml``):
+    every S8 level with a residual to correct (:func:`fnnbook.rules.sec3.residual_levels`); the held-out levels
+    as in the strict reading.  ``metric`` (:data:`D4_METRICS`): "both" (the paper profile's rule), or the why's
+    readings "rate" (the change rate Fig. S10 and the release's test compare) and "err_N" (the cascade alone).
     """
-    s8 = _both_better(rate_neural_feedback, rate_neural_ode, err_N_neural_feedback, err_N_neural_ode)
+    s8 = _both_better(rate_neural_feedback, rate_neural_ode, err_N_neural_feedback, err_N_neural_ode, metric)
     held = _both_better(heldout_rate_neural_feedback, heldout_rate_neural_ode, heldout_err_N_neural_feedback,
-                        heldout_err_N_neural_ode)
+                        heldout_err_N_neural_ode, metric)
     live = residual_levels(offsets, len(s8), "D4")
     held_check = {f"all_{len(held)}_heldout_levels": all(held)}
     return ClaimResult(
@@ -133,6 +149,56 @@ def d4(*, rate_neural_feedback: Any, rate_neural_ode: Any, err_N_neural_feedback
         readings={"as worded": Reading(AS_WORDED_LEVELS + "; held-out levels all won",
                                        {f"the_{len(live)}_S8_levels_with_a_residual": all(s8[j] for j in live)}
                                        | held_check)},
-        rule=f"neural feedback below the neural ODE in change-rate RMSE and mean {N}-step error at every S8 "
+        rule=f"neural feedback below the neural ODE in {_METRIC_WORDS[metric].format(N=N)} at every S8 "
              f"level ({sum(s8)} of {len(s8)}) and at every held-out level ({sum(held)} of {len(held)})"
              + seeds_note(np.asarray(rate_neural_feedback, dtype=float).reshape(len(s8), -1)[0]))
+
+
+# ---------------------------------------------------------------- the why's readings of D2 and D3
+#: the band that defines a settled estimate: within 2x its steady level (as S10's band)
+SETTLE_BAND = 2.0
+
+
+def settling_index(err: Any, band: float = SETTLE_BAND) -> np.ndarray:
+    """Where an estimate has settled, read from its per-time error curve ``err`` (T,) or (E, T): the first sample
+    after which the error stays within ``band`` x its steady level (the median over the last half of the record),
+    and at the latest the start of that last half (where the steady level is measured: an error that keeps
+    leaving its band settles nowhere earlier). One index per curve (shape (E,), or (1,) for one curve). A rule on
+    the data, fixed before any why run."""
+    err = np.asarray(err, dtype=float)
+    err = err[None] if err.ndim == 1 else err
+    if err.ndim != 2 or err.shape[1] < 4 or not np.isfinite(err).all() or band <= 1:
+        raise ValueError(f"settling_index: finite (E, T) error curves with T >= 4 and band > 1, got {err.shape}")
+    steady = np.median(err[:, err.shape[1] // 2:], axis=1)
+    above = err > band * steady[:, None]
+    last = np.where(above.any(1), err.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), -1)
+    return np.minimum(last + 1, err.shape[1] // 2)
+
+
+#: D3's readings: the paper profile's (ratio and a flat end), the same without the flat end (a curve cut at a
+#: stopping level is never flat at its end), and the release's own stopping rule (its logged loss below 0.5)
+D3_READINGS = {
+    "falls and ends flat": "the last 10 % of the loss < {ratio_max:g}x the first 10 % and flat (< {flat:.0%} change)",
+    "falls": "the last 10 % of the loss < {ratio_max:g}x the first 10 % (no flat end: a curve cut at a stopping "
+             "level never ends flat)",
+    "reaches the release's stop": "the loss in the release's form (mean absolute change-rate error over the "
+                                  "randomized cases) ends below its stopping level {stop:g}",
+}
+#: the release's stopping level of the feedback training (its logged loss; spiral_curve/d_FeedbackNN_converge.py)
+RELEASE_STOP = 0.5
+
+
+def reading_holds_d3(reading: str, *, ratio: Value, trend: Value, release_final: Value | None,
+                     ratio_max: float = 0.5, flat: float = 0.1, stop: float = RELEASE_STOP) -> bool:
+    """Whether D3 holds under one of :data:`D3_READINGS` (each in >= S-1 of S curves): ``ratio`` and ``trend``
+    from :func:`loss_convergence`; ``release_final``: the last loss in the release's form, per curve (None:
+    that reading cannot be judged, ValueError)."""
+    if reading == "falls and ends flat":
+        return most_seeds(per_seed(ratio) < ratio_max) and most_seeds(np.abs(per_seed(trend)) < flat)
+    if reading == "falls":
+        return most_seeds(per_seed(ratio) < ratio_max)
+    if reading == "reaches the release's stop":
+        if release_final is None:
+            raise ValueError("D3: the release's stopping rule needs the loss in the release's form")
+        return most_seeds(per_seed(release_final) < stop)
+    raise ValueError(f"D3: unknown reading {reading!r}; readings: {list(D3_READINGS)}")

@@ -55,10 +55,10 @@ from fnnlib.systems import Spiral
 
 __all__ = [
     "ALLOWED_GLOBALS", "BOTTLE_ODE_NAMES", "RELEASE_FILES", "RESIDUAL_RUNS", "MLP_RUNS", "SPIRAL_FEEDBACK_NAMES",
-    "SPIRAL_ODE_NAMES", "MAX_PICKLE_BYTES", "PickledModule", "ReleaseError", "UnsafePickleError",
-    "load_release_bottle_ode", "load_release_losses", "load_release_mlp", "load_release_residual",
-    "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module", "release_files",
-    "release_present", "release_spiral",
+    "SPIRAL_LOSS_NAMES", "SPIRAL_ODE_NAMES", "MAX_PICKLE_BYTES", "PickledModule", "ReleaseError", "UnsafePickleError",
+    "load_release_bottle_ode", "load_release_feedback_losses", "load_release_losses", "load_release_mlp",
+    "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module",
+    "release_files", "release_present", "release_spiral",
 ]
 
 #: the largest release pickle read, on disk and unpacked (the release's largest ``.pt`` is 91 KB, 89 KB unpacked);
@@ -95,6 +95,18 @@ RELEASE_FILES: Mapping[str, str] = MappingProxyType({
         "8a50ef9adf8c5284cbbd80d2660399dbc9948d56ca2503db199eca019a94e54a",
     "quadrotor/learning_NODE/log/Nov14_17-21-33_2024_minibatch_adam/loss_record.npy":
         "afedaa8e071c7d51a9f1ace50ce8c5c1d9c6dea8eb4036196882e81f236d1011",
+    "spiral_curve/iteration_ite135.txt":
+        "7b33cb40261bd001d77b3b1bbf944fb71a6b66bebf2355965302f3fa5386effb",
+    "spiral_curve/trained_model/iteration_ite1074.txt":
+        "c65a7e68d115de0741981e6b42a6ddd4549f710201730c4e23c628e26c173d7c",
+    "spiral_curve/trained_model/iteration_ite180.txt":
+        "020794f7eafbe24cc791adbf488f1e59a309160788d015262a60f290e625c140",
+    "spiral_curve/trained_model/iteration_ite477_conver.txt":
+        "7c2a2cb1bcda16a4ffc60eaff731e58d3704c182cc4eb03191918a5c9789fa0d",
+    "spiral_curve/trained_model/iteration_ite492_conver.txt":
+        "8bedae9b0094de64e2409572ed00374fbad30a000a310ba473667ebbc125fef8",
+    "spiral_curve/trained_model/iteration_ite511.txt":
+        "385ae38eba0c5d2d6c08f1c9cd8b303d18c6093db99516eef434975a7afb8db7",
     "spiral_curve/trained_model/FeedbackNN_demo.pt":
         "1edf7a58a2e4fe830b5ce69da430551fc20534145ec5e84809448612f8a743ff",
     "spiral_curve/trained_model/FeedbackNN_ite1074_loss0.483191.pt":
@@ -138,6 +150,9 @@ SPIRAL_ODE_NAMES = _names(_SPIRAL, "Neural_ODE")
 """The spiral neural ODEs: nominal ones (``ite..._loss...``, Fig. 4(c)) and the domain-randomised one (Fig. 5(a))."""
 SPIRAL_FEEDBACK_NAMES = _names(_SPIRAL, "FeedbackNN")
 """The spiral neural feedbacks (Sec. 4, Fig. 5(b))."""
+SPIRAL_LOSS_NAMES = (*_names(_SPIRAL, "iteration_"), "../iteration_ite135.txt")
+"""The loss curves of the release's neural-feedback trainings (Fig. 5(c)): ``iteration_ite<K>[_conver].txt``, one
+per training run, the run that wrote ``FeedbackNN_ite<K>_...pt``; the ite135 curve sits one folder up."""
 BOTTLE_ODE_NAMES = _names(_BOTTLE)
 """The bottle neural ODEs (Sec. 5.1, Fig. 6)."""
 RESIDUAL_RUNS = _names(_RESIDUAL)
@@ -541,3 +556,31 @@ def load_release_losses(data_dir: str | Path, run: str) -> np.ndarray:
     if arr.ndim != 2 or arr.shape[1] != 1 or arr.shape[0] < 1:
         raise ReleaseError(f"{path}: expected one loss per epoch, shape (epochs, 1), got {arr.shape}")
     return arr[:, 0].copy()
+
+
+def load_release_feedback_losses(data_dir: str | Path, name: str) -> np.ndarray:
+    """The logged loss of one of the release's neural-feedback trainings (Fig. 5(c)), float64, shape (K,).
+
+    The file is a printed array of the maximum iterations (2000), zero after the iteration where the training
+    stopped; ``K`` is that iteration (the ``ite<K>`` of its name). The loss logged there is the mean absolute
+    change-rate error over the randomized cases (the release's ``Total_loss``), and the training stops once it
+    falls below 0.5 (read in the release's ``spiral_curve/d_FeedbackNN_converge.py``; not copied). ``name``: one
+    of :data:`SPIRAL_LOSS_NAMES`.
+    """
+    if name not in SPIRAL_LOSS_NAMES:
+        raise ValueError(f"unknown loss curve {name!r}; the release has {list(SPIRAL_LOSS_NAMES)}")
+    key = "spiral_curve/iteration_ite135.txt" if name.startswith("../") else f"{_SPIRAL}/{name}"
+    path = _release_file(data_dir, key)
+    text = path.read_text(encoding="ascii").strip()
+    if not (text.startswith("[") and text.endswith("]")):
+        raise ReleaseError(f"{path}: expected a printed array '[...]'")
+    try:
+        values = np.array([float(v) for v in text[1:-1].split()], dtype=np.float64)
+    except ValueError as exc:
+        raise ReleaseError(f"{path}: not an array of numbers ({exc})") from exc
+    m = re.search(r"ite(\d+)", name)
+    K = int(m.group(1)) if m else 0
+    if not 4 <= K <= values.size or not np.isfinite(values).all() or (values[:K] <= 0).any() or \
+            (values[K:] != 0).any():
+        raise ReleaseError(f"{path}: expected {K} positive losses then zeros, got {values.size} values")
+    return values[:K].copy()

@@ -49,7 +49,7 @@ from fnnlib.feedback.types import VectorField
 def run_cascade(f: VectorField, x: Tensor, L_stack: Sequence[Tensor], Ts: Steps, *, diagonal: bool | None = None,
                 return_all: bool = False, u: Tensor | None = None, rows: int | None = None,
                 first_depth: int = 0) -> Tensor:
-    """The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
+    r"""The layers of the cascade, one per decayed gain ``L_stack[i]`` (as :func:`feedback_layer` takes it).
 
     ``x`` (..., T, n); returns :math:`z^{(N)}` of the same shape, or with
     ``return_all`` every depth stacked, (N+1, ..., T, n), depth 0 being ``x``.

@@ -17,9 +17,10 @@ J_k(\hat x^{new}_k - \hat x_k)`, and solves that time-varying linear recursion w
 (:func:`~fnnlib._scan.varying_recurrence`): one batched network call and one batched Jacobian per
 iteration instead of T sequential calls. For a stable gain the error dynamics contract (Theorem 1, and its
 output-feedback analogue checked by :func:`~fnnlib.feedback.measured.check_output_gain`), so the iterations
-converge in a handful of steps (measured by ``benchmarks/bench_measured.py``); Newton's method on a
-sequence is also exact on its first j steps after j iterations, so it cannot run forever: where it has not
-converged after ``max_iter`` iterations the record is solved in chunks. :func:`layer_loop` is the
+converge in a handful of steps from a good guess (measured by ``benchmarks/bench_measured.py``). From a
+poor guess the linearised recursion can expand over thousands of steps, so long records are solved 1024 rows
+at a time; Newton's method on a sequence is exact on its first j steps after j iterations, so it cannot run
+forever: a chunk that has not converged after ``max_iter`` iterations is solved in pieces of 64 rows. :func:`layer_loop` is the
 sequential reference the tests compare against (to 1e-10 in float64).
 
 Gradients: the solution is found without autograd; one more linearised step at the solution, with the
@@ -134,9 +135,10 @@ def _newton(g: StepMap, x0: Tensor, guess: Tensor, tol: float, max_iter: int,
     """Newton's method on ``x_{k+1} = g_k(x_k)`` from ``guess`` (..., T, n) (its row 0 is ``x0``).
 
     Returns x_0..x_T (..., T+1, n), the Jacobians at rows 0..T-1 when ``need_J`` (for the gradient step),
-    the iterations and whether it converged.
+    the iterations and whether it converged: the step fell below ``tol`` (relative), or it stalled at the
+    rounding floor of the scan (below 1e-12 relative and no longer halving).
     """
-    x = guess
+    x, last = guess, float("inf")
     for it in range(1, max_iter + 1):
         gx, J = _jacobian(g, x)
         b = gx - (J @ x[..., None])[..., 0]
@@ -145,66 +147,78 @@ def _newton(g: StepMap, x0: Tensor, guess: Tensor, tol: float, max_iter: int,
         x = nxt
         if not step < float("inf"):  # NaN or inf: diverged
             return x, None, it, False
-        if step <= tol * max(1.0, float(x.abs().max())):
+        scale = max(1.0, float(x.abs().max()))
+        if step <= tol * scale or (step <= 1e-12 * scale and step > 0.5 * last):
             if need_J:
                 gx, J = _jacobian(g, x)
             else:
                 gx, J = g(x.unsqueeze(-2))[..., 0, :], None
             return torch.cat([x[..., :1, :], gx], dim=-2), J, it, True
+        last = step
     return x, None, max_iter, False
 
 
 def solve_layer(make_step: Callable[[int, int], StepMap], x0: Tensor, T: int, *, guess: Tensor | None = None,
-                tol: float | None = None, max_iter: int = 30, chunk: int = 64) -> tuple[Tensor, int]:
+                tol: float | None = None, max_iter: int = 30, chunk: int = 1024) -> tuple[Tensor, int]:
     r"""Solve :math:`\hat x_{k+1} = g_k(\hat x_k)`, :math:`\hat x_0` = ``x0`` (..., n), for k < T at once.
 
     ``make_step(a, b)`` returns the map of rows ``a..b-1``, (..., b-a, c, n) -> (..., b-a, c, n) (see
-    :func:`layer_step`). ``guess`` (..., T, n) starts the iterations (default: ``x0`` held). Returns
-    :math:`\hat x_0 .. \hat x_T` (..., T+1, n) and the Newton iterations taken (the total over chunks where the
-    whole record did not converge within ``max_iter``). Differentiable (module docstring).
+    :func:`layer_step`). The record is solved ``chunk`` rows at a time, each chunk by Newton's method on its
+    whole sequence from its first state held (or ``guess`` (..., T, n)); the linearisation at a poor guess can
+    expand over thousands of steps, which chunks keep in bounds. A chunk that does not converge in
+    ``max_iter`` iterations is solved in pieces of 64 rows (each exact after at most 64 iterations). Returns
+    :math:`\hat x_0 .. \hat x_T` (..., T+1, n) and the Newton iterations taken (summed over chunks).
+    Differentiable (module docstring).
     """
-    g = make_step(0, T)
     tol = tol if tol is not None else 64 * torch.finfo(x0.dtype).eps
     need_J = torch.is_grad_enabled()
     with torch.no_grad():
         x0d = x0.detach()
-        probe = g(x0d[..., None, None, :].expand(*x0d.shape[:-1], T, 1, x0d.shape[-1]))
+        probe = make_step(0, 1)(x0d[..., None, None, :])
         lead = torch.broadcast_shapes(x0d.shape[:-1], probe.shape[:-3])
         start = x0d.expand(*lead, x0d.shape[-1])
-        guess = (start.unsqueeze(-2).expand(*lead, T, start.shape[-1]) if guess is None
-                 else guess.detach().expand(*lead, T, start.shape[-1]))
-        guess = torch.cat([start.unsqueeze(-2), guess[..., 1:, :]], dim=-2)
-        full, J, iters, ok = _newton(g, start, guess, tol, max_iter, need_J)
-        if not ok:
-            full, J, iters = _chunked(make_step, start, T, tol, chunk, need_J)
+        rows, Js, iters = [start.unsqueeze(-2)], [], 0
+        for a in range(0, T, chunk):
+            b = min(a + chunk, T)
+            hint = None if guess is None else guess.detach().expand(*lead, T, start.shape[-1])[..., a:b, :]
+            full, J, it = _solve_chunk(make_step, start, a, b, hint, tol, max_iter, need_J)
+            iters += it
+            rows.append(full[..., 1:, :])
+            Js.append(J)
+            start = full[..., -1, :]
+        full = torch.cat(rows, dim=-2)
     if not need_J:
         return full, iters
+    J = torch.cat(Js, dim=-3)
     xs = full[..., :-1, :]
-    gx = g(xs.unsqueeze(-2))[..., 0, :]  # with autograd: the parameters, gains, measurements and inputs
+    gx = make_step(0, T)(xs.unsqueeze(-2))[..., 0, :]  # with autograd: the parameters, gains, data
     b = gx - (J @ xs[..., None])[..., 0]
     return varying_recurrence(J, b, x0.expand(*lead, x0.shape[-1])), iters
 
 
-def _chunked(make_step: Callable[[int, int], StepMap], x0: Tensor, T: int, tol: float, chunk: int,
-             need_J: bool) -> tuple[Tensor, Tensor | None, int]:
-    """Newton over consecutive chunks of ``chunk`` rows, each started from the end of the previous one.
-
-    Each chunk converges in at most ``chunk`` iterations (Newton on a sequence is exact on its first j steps
-    after j iterations), so this always ends.
-    """
-    start, rows, Js, iters = x0, [x0.unsqueeze(-2)], [], 0
-    for a in range(0, T, chunk):
-        b = min(a + chunk, T)
-        guess = start.unsqueeze(-2).expand(*start.shape[:-1], b - a, start.shape[-1])
-        full, J, it, ok = _newton(make_step(a, b), start, guess, tol, b - a + 2, need_J)
+def _solve_chunk(make_step: Callable[[int, int], StepMap], start: Tensor, a: int, b: int, hint: Tensor | None,
+                 tol: float, max_iter: int, need_J: bool, piece: int = 64) -> tuple[Tensor, Tensor | None, int]:
+    """Rows ``a..b-1`` from ``start``: Newton on the whole chunk, else in pieces of ``piece`` rows."""
+    guess = start.unsqueeze(-2).expand(*start.shape[:-1], b - a, start.shape[-1]) if hint is None else hint
+    guess = torch.cat([start.unsqueeze(-2), guess[..., 1:, :]], dim=-2)
+    full, J, it, ok = _newton(make_step(a, b), start, guess, tol, max_iter, need_J)
+    if ok:
+        return full, J, it
+    if b - a <= piece:
+        full, J, it2, ok = _newton(make_step(a, b), start, guess, tol, b - a + 4, need_J)
         if not ok:
-            raise FloatingPointError(f"the layer's recursion overflowed between samples {a} and {b}: the estimate "
-                                     "diverges (an unstable gain or model through a long gap?)")
-        iters += it
-        rows.append(full[..., 1:, :])
-        Js.append(J)
-        start = full[..., -1, :]
-    return torch.cat(rows, dim=-2), (torch.cat(Js, dim=-3) if need_J else None), iters
+            raise FloatingPointError(f"the layer's recursion does not settle between samples {a} and {b}: the "
+                                     "estimate diverges (an unstable gain or model through a long gap?)")
+        return full, J, it + it2
+    rows, Js = [start.unsqueeze(-2)], []
+    for p in range(a, b, piece):
+        q = min(p + piece, b)
+        part, Jp, itp = _solve_chunk(make_step, start, p, q, None, tol, q - p + 4, need_J, piece)
+        it += itp
+        rows.append(part[..., 1:, :])
+        Js.append(Jp)
+        start = part[..., -1, :]
+    return torch.cat(rows, dim=-2), (torch.cat(Js, dim=-3) if need_J else None), it
 
 
 def layer_loop(f: VectorField, z: Tensor, L: Tensor, dt: Tensor | float, x0: Tensor, *, mask: Tensor | None = None,

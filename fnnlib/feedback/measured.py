@@ -184,7 +184,7 @@ class MeasuredFeedback:
     @torch.no_grad()
     def predict(self, y: Tensor, N: int, u: Tensor | None = None, *, t: Tensor | None = None,
                 mask: Tensor | None = None) -> Tensor:
-        """N-step predictions of the state (..., T, n) from every sample: row k rolls the model out (Euler, along
+        r"""N-step predictions of the state (..., T, n) from every sample: row k rolls the model out (Euler, along
         the record's own steps) from the observer's latest estimate, :math:`\hat x_{k+1}` (it has seen
         :math:`y_k`), to :math:`t_{k+N}`. The open-loop baseline of the cascade; with ``L = 0`` after the observer
         the cascade equals it."""

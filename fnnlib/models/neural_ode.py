@@ -38,7 +38,7 @@ def mlp(n_in: int, n_out: int, hidden: Sequence[int], activation: str) -> nn.Seq
 
 
 def init_parameters(module: nn.Module, generator: torch.Generator) -> nn.Module:
-    """Initialise every ``nn.Linear`` of ``module`` from ``generator`` (torch's default law, uniform in
+    r"""Initialise every ``nn.Linear`` of ``module`` from ``generator`` (torch's default law, uniform in
     :math:`\pm 1/\sqrt{fan_{in}}` for weights and biases), leaving torch's global random state untouched.
     Returns ``module``."""
     with torch.no_grad():

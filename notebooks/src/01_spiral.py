@@ -259,8 +259,9 @@ fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
 # some: *partly*, none: *not reproduced*). "A beats B" means: lower in at least all seeds but one, and the
 # 90 % Student-t interval of the mean paired difference below 0 (`fnnlib.stats.paired_win`).
 # - **S1**: the trained change rate on the nominal trajectory has relative RMSE $\le 5\%$ in every seed.
-# - **S2**: (i) the neural ODE degrades: twice its nominal relative change-rate RMSE beats (is below) its
-#   relative RMSE on the test spiral; (ii) the feedback beats the neural ODE in change-rate RMSE; (iii) and in mean $N$-step error.
+# - **S2**: (i) the feedback beats the neural ODE in change-rate RMSE; (ii) and in mean $N$-step error. The test's
+#   premise, that the neural ODE degrades on the test spiral (relative RMSE above twice the nominal one), is
+#   fixed by the chosen test spiral: it is shown as a number, not judged.
 # - **S3**: (i) at every noise level $> 0$ of the sweep, the cascade with decay beats the one without;
 #   (ii) at the judged level `noise_std` the decayed cascade beats the open-loop neural ODE; (iii) decay's
 #   relative gain is larger there than without noise.
@@ -272,10 +273,10 @@ claims = [
     sec3.s1(s1_rel).replace(
         numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},
         figure=fig_c, headline=F.headline_number("nominal change-rate relative RMSE", s1_rel)),
-    sec3.s2(nominal_rel=s1_rel, test_rel_neural_ode=s2["test_rate_rel_rmse_neural_ode"],
-            rate_neural_ode=rate_nn, rate_feedback=rate_fb, err_N_neural_ode=e_nn_m,
-            err_N_feedback=e_fb_m, N=N).replace(
-        numbers=s2, figure=fig_def,
+    (r2 := sec3.s2(nominal_rel=s1_rel, test_rel_neural_ode=s2["test_rate_rel_rmse_neural_ode"],
+                   rate_neural_ode=rate_nn, rate_feedback=rate_fb, err_N_neural_ode=e_nn_m,
+                   err_N_feedback=e_fb_m, N=N)).replace(
+        numbers=s2 | dict(r2.numbers), figure=fig_def,
         headline=F.headline_number(f"N={N} error, feedback / neural ODE",
                                    [f / n for f, n in zip(e_fb_m, e_nn_m)]))]
 

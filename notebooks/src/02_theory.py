@@ -78,10 +78,11 @@ print(f"{S} networks (seeds {seeds}) from the spiral task")
 # \gamma/\lambda_m$ and (ii) $\max_{t \ge t_{tr}}\|\tilde f\| \le \gamma\lambda_M/\lambda_m + \gamma$.
 # The feedback network of Eqs. (7)-(8) inside both balls (i)-(ii), and over `L_sweep` the measured limit of
 # $\|\tilde x\|$ inside $\gamma/L$ at every gain (iv), are Eq. (25) with $\gamma$ measured on the same run: they
-# are *guarantees* too (every seed), not checks. *Checks* (`fnnbook.rules.sec3.s5`), which a run could fail:
-# (iii) *conservative*: for both balls, radius / measured limit $\ge$ `conservative_ratio` for the feedback
-# network, the measured limit being the maximum over the last half of the run; (v) over `L_sweep` the measured
-# limit decreases as $L$ grows.
+# are *guarantees* too (every seed), not checks; so is (v) the measured limit decreasing as $L$ grows over
+# `L_sweep`, which the linear recursion of Eq. (25) implies. The *check* (`fnnbook.rules.sec3.s5`), which a run
+# could fail: (iii) *conservative*: for both balls, radius / measured limit $\ge$ `conservative_ratio` for the
+# feedback network, the measured limit being the maximum over the last half of the run. The paper says
+# "relatively conservative" and gives no factor: `conservative_ratio` = 2 is this project's choice.
 #
 # **Over seeds.** Each quantity above is measured per seed (its own $\gamma$, balls, limits). Every check is a
 # *threshold* check (a property of one run), so it holds when it holds in at least $S-1$ of the $S$ seeds

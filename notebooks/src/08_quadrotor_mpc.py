@@ -374,6 +374,7 @@ def merged(r, **fields):
         checks={k: v for c in costs for k, v in r[c].checks.items()},
         guarantees={k: v for c in costs for k, v in (r[c].guarantees or {}).items()},
         readings=rules.join_readings(r[c] for c in costs),
+        better={k: v for c in costs for k, v in (r[c].better or {}).items()} or None,
         numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
             k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()} for k, rows in context_rows}},
         **fields)

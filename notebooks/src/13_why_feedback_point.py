@@ -58,7 +58,7 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnbook.feedback_eval import evaluation_setup, judge
+from fnnbook.feedback_eval import evaluation_setup, judge, release_form_loss
 from fnnlib.io import atomic_write
 
 # %% [markdown]
@@ -100,6 +100,14 @@ results, numbers = judge(f_ens, h_ens, setup, len(seeds), loss=hist.member_loss,
                          ratio_max=d3_ratio, flat=d3_flat)
 for c in results.values():
     print(f"{c.id}: {c.verdict:15s} {c.checks}")
+
+# %% [markdown]
+# The trained feedbacks' final loss in the release's own form (the mean absolute change-rate error over the
+# randomized cases, on which the release stops its training at 0.5): a reading of D3 the why tries.
+
+# %%
+numbers["release_form_final"] = release_form_loss(f_ens, h_ens, X_dr, dr_Ts, len(seeds))
+print("release-form loss at the end, per seed:", np.round(numbers["release_form_final"], 3).tolist())
 
 # %%
 point = {"change": change, "recipe": {k: getattr(recipe, k) for k in

@@ -177,6 +177,7 @@ else:
         verdict, checks = joined(a, a["units"], q)
         ours_verdict, _ = joined(judged["ours"], judged["units"], q)
         authors[q] = AuthorsCheck(verdict=verdict, ours=ours_verdict, checks=checks, n=S,
+                                  shared=f"the {S} units share the release's 2 MLPs: 2 independent MLPs",
                                   networks=f"the {S} residual runs of learning_NODE (epoch 50) and the 2 MLPs of "
                                            "learning_MLP (epoch 500), MLP k mod 2 for unit k")
         print(f"{q}: authors' networks {verdict}, ours {ours_verdict}; failing with theirs: "

@@ -448,3 +448,31 @@ def test_the_loaders_are_on_fnnlib_flat_face() -> None:
     import fnnlib
 
     assert fnnlib.load_release_spiral_ode is load_release_spiral_ode and fnnlib.UnsafePickleError is UnsafePickleError
+
+
+def test_a_feedback_loss_curve_is_cut_at_its_iteration_and_checked(tmp_path: Path, monkeypatch) -> None:
+    key = "spiral_curve/trained_model/iteration_ite5.txt"
+    path = _place(tmp_path, key)
+    path.write_text("[3.0 2.0 1.0 0.7 0.45 0.0\n 0.0 0.0]")
+    _pin(monkeypatch, tmp_path, key)
+    monkeypatch.setattr(release, "SPIRAL_LOSS_NAMES", ("iteration_ite5.txt",))
+    assert release.load_release_feedback_losses(tmp_path, "iteration_ite5.txt").tolist() == [3.0, 2.0, 1.0, 0.7, 0.45]
+    path.write_text("[3.0 2.0 1.0 0.7 0.45 0.3 0.0 0.0]")  # a loss after the stop: not the layout
+    _pin(monkeypatch, tmp_path, key)
+    with pytest.raises(release.ReleaseError, match="positive losses then zeros"):
+        release.load_release_feedback_losses(tmp_path, "iteration_ite5.txt")
+    with pytest.raises(ValueError, match="unknown loss curve"):
+        release.load_release_feedback_losses(tmp_path, "iteration_ite6.txt")
+
+
+@real
+def test_real_feedback_loss_curves_end_where_their_networks_were_saved() -> None:
+    """Each curve stops at the iteration of its FeedbackNN_ite<K> network, below the stopping level 0.5, at the
+    loss recorded in that network's file name."""
+    saved = {n.split("_")[1]: _recorded_loss(n) for n in release.SPIRAL_FEEDBACK_NAMES if "_loss" in n}
+    assert len(release.SPIRAL_LOSS_NAMES) == 6
+    for name in release.SPIRAL_LOSS_NAMES:
+        curve = release.load_release_feedback_losses(DATA, name)
+        ite = name.rsplit("/", 1)[-1].split("_")[1].removesuffix(".txt")
+        assert len(curve) == int(ite.removeprefix("ite")) and curve[-1] < 0.5 < curve[0]
+        assert abs(curve[-1] - saved[ite]) < 1e-5

@@ -105,7 +105,11 @@ def test_chunked_fallback_when_newton_does_not_converge():
     steps = gaps.layer_step(f, meas.y, L, 0.01, mask=meas.mask)
     full, _ = gaps.solve_layer(lambda a, b: (lambda xx: gaps.layer_step(f, meas.y[a:b], L, 0.01,
                                                                         mask=meas.mask[a:b])(xx)[2]),
-                               x0, 200, max_iter=3)  # forced fallback
+                               x0, 200, max_iter=3)  # forced fallback: pieces of 64 rows
+    torch.testing.assert_close(full[:-1], ref.x_hat, rtol=1e-10, atol=1e-10)
+    full, _ = gaps.solve_layer(lambda a, b: (lambda xx: gaps.layer_step(f, meas.y[a:b], L, 0.01,
+                                                                        mask=meas.mask[a:b])(xx)[2]),
+                               x0, 200, chunk=50)  # chunks
     torch.testing.assert_close(full[:-1], ref.x_hat, rtol=1e-10, atol=1e-10)
     assert steps is not None
 
@@ -150,3 +154,15 @@ def test_cascade_with_an_observer_is_its_layer_then_the_paper_cascade():
     open_loop = obs.predict(y, 6, u)
     zero = F.cascade_predict(f, y, TS, 6, 0.0, u=u, observer=obs)
     torch.testing.assert_close(zero, open_loop, rtol=0, atol=1e-10)
+
+
+def test_a_long_record_is_solved_in_chunks_and_equals_the_reference():
+    """Beyond 1024 samples the record is solved a chunk at a time (a poor guess's linearisation can expand
+    over thousands of steps); the result is still the sequential loop's."""
+    g = torch.Generator().manual_seed(5)
+    T_long = 2500
+    u = torch.randn(1, T_long, 1, generator=g, dtype=F64)
+    y = 0.3 * torch.randn(1, T_long, 1, generator=g, dtype=F64).cumsum(1) / T_long ** 0.5
+    y[torch.rand(1, T_long, generator=g) < 0.2] = float("nan")
+    obs = F.MeasuredFeedback(Duffing(), _gain(), C, TS, allow_unstable=True)
+    torch.testing.assert_close(obs.observe(y, u).x_hat, obs.observe_loop(y, u).x_hat, rtol=0, atol=1e-10)

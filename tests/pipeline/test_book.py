@@ -119,7 +119,8 @@ def test_assemble_and_build_with_warnings_as_errors(fake_outputs: PipelineSpec, 
     assert toc["parts"][2]["chapters"] == [{"file": "_generated/scoreboard"}, {"file": "paper_vs_release"}]
     assert (book / "_generated" / "alpha" / "figures" / "fig4c.png").is_file()
     scoreboard = (book / "_generated" / "scoreboard.md").read_text()
-    assert "3 claims, 1 reproduced, 0 partly, 0 not reproduced, 0 verified by construction, 2 not run." in scoreboard
+    assert ("3 claims, 1 reproduced, 0 partly, 0 not reproduced, "
+            "0 better than claimed, 0 verified by construction, 2 not run.") in scoreboard
     assert (book / "_generated" / "verdicts.png").read_bytes()[:4] == b"\x89PNG"
 
     copied = nbformat.read(book / "_generated" / "alpha" / "alpha.ipynb", as_version=4)

@@ -9,7 +9,7 @@ import pytest
 from fnnbook.scoreboard import (NOT_RUN, SCOREBOARD_TASK, Claim, headline_of, plot_verdicts, read_claims,
                                render_scoreboard, score_rows, self_check, short_title, verdict_counts,
                                with_scoreboard_claims)
-from fnnlib.results import BY_CONSTRUCTION, ClaimResult, GuaranteeFailed, Reading, Results, headline_number
+from fnnlib.results import BETTER, BY_CONSTRUCTION, ClaimResult, GuaranteeFailed, Reading, Results, headline_number
 
 
 def _results(task: str, *claims: ClaimResult) -> dict[str, Results]:
@@ -102,7 +102,8 @@ def test_scoreboard_lists_verdicts_and_not_run(claims_file: Path) -> None:
     page = render_scoreboard(rows, profile="smoke", pages={"spiral": "spiral/spiral.ipynb"},
                              figures={"spiral": "spiral"}, summary_figure="verdicts.png")
     assert page.startswith("# Scoreboard\n")
-    assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 0 verified by construction, 2 not run." in page
+    assert ("3 claims, 0 reproduced, 1 partly, 0 not reproduced, "
+            "0 better than claimed, 0 verified by construction, 2 not run.") in page
     assert "```{image} verdicts.png" in page  # the verdicts per section, under the counts
     assert ":::{warning}" in page  # not the paper profile
     lines = page.splitlines()
@@ -154,9 +155,10 @@ def test_row_shows_both_readings_n_and_the_paper_setting_the_count_uses_the_firs
     s2 = ClaimResult("S2", checks={}, guarantees={"algebra of Eq. (25)": True}, rule="r")
     rows = score_rows(read_claims(claims_file), _results("spiral", s1, s2))
     page = render_scoreboard(rows, profile="paper", pages={})
-    assert "3 claims, 0 reproduced, 1 partly, 0 not reproduced, 1 verified by construction, 1 not run." in page
+    assert ("3 claims, 0 reproduced, 1 partly, 0 not reproduced, 0 better than claimed, 1 verified by construction, "
+            "1 not run.") in page
     row, body = _row_lines(page, "S1")
-    assert "{bdg-warning}`partly` strict: partly; as worded: reproduced]{.sb-verdict}" in row
+    assert "{bdg-warning}`partly` strict (counted): partly; as worded: reproduced]{.sb-verdict}" in row
     assert "**1 of 2 (n = 3)**" in row and "at 4 N: cannot be judged (needs 5.2 N of thrust)" in row
     assert "**Reading (strict, counted).** both a and b" in body and 'Reading "as worded"** (reproduced' in body
     row2, body2 = _row_lines(page, "S2")
@@ -181,8 +183,10 @@ def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) ->
     results = _results("t", ClaimResult("S1", checks={"a": True}, numbers={}, rule="r"))
     rows = score_rows(read_claims(claims_file), results)
     assert verdict_counts(rows) == {
-        "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, BY_CONSTRUCTION: 0, NOT_RUN: 1},
-        "Beyond the paper": {"reproduced": 0, "partly": 0, "not reproduced": 0, BY_CONSTRUCTION: 0, NOT_RUN: 1}}
+        "Spiral (Sec. 3-4)": {"reproduced": 1, "partly": 0, "not reproduced": 0, BETTER: 0, BY_CONSTRUCTION: 0,
+                              NOT_RUN: 1},
+        "Beyond the paper": {"reproduced": 0, "partly": 0, "not reproduced": 0, BETTER: 0, BY_CONSTRUCTION: 0,
+                             NOT_RUN: 1}}
     png = plot_verdicts(rows, tmp_path / "verdicts.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -190,28 +194,24 @@ def test_verdict_figure_counts_per_section(claims_file: Path, tmp_path: Path) ->
 def test_self_check_flags_a_verdict_not_from_its_checks() -> None:
     claims = [Claim(id="S1", group="g", text="t", figure=""), Claim(id="B3", group="g", text="t", figure="")]
     good = ClaimResult("S1", checks={"a": True}, numbers={}, rule="r")
-    assert self_check(claims, _results("task", good)).verdict == "reproduced"
+    assert self_check(claims, _results("task", good)).verdict == BY_CONSTRUCTION
     assert self_check(claims, _results("task", good)).guarantees["verdicts_follow_checks"] is True
     forged = good.to_json() | {"checks": {"a": False}}  # verdict says reproduced, checks say otherwise
     with pytest.raises(ValueError, match=r"claim 'S1': verdict 'reproduced' is not the one its checks imply"):
         Results.from_json({"task": "task", "profile": "smoke", "claims": [forged]})  # refused as it is read
     with pytest.raises(GuaranteeFailed, match=r"not in the claims file \['X9'\]"):
         self_check(claims, _results("task", good.replace(id="X9")))
-    assert self_check(claims, {}).checks["results_found"] is False
-    assert self_check(claims, {}).verdict == "not reproduced"
+    assert self_check(claims, {}).checks == {} and self_check(claims, {}).numbers["tasks_with_results"] == 0
 
 
-def test_self_check_b3_fails_when_a_declared_claim_has_no_result() -> None:
-    """B3's checks can fail on a plausible run: a task that did not run (e.g. data missing)."""
+def test_self_check_b3_is_bookkeeping_verified_by_construction() -> None:
+    """B3 is bookkeeping: no check decides it; a task that did not run is shown (claims_not_reported), not judged."""
     claims = [Claim(id=i, group="g", text="t", figure="") for i in ("S1", "O1", "B3")]
     good = ClaimResult("S1", checks={"a": True}, numbers={}, rule="r")
     result = self_check(claims, _results("spiral", good), {"spiral": ["S1"], "bottle": ["O1"]})
-    assert result.verdict == "partly"
-    assert result.checks == {"results_found": True, "every_declared_claim_reported": False}
+    assert result.verdict == BY_CONSTRUCTION and result.checks == {}
     assert result.numbers["claims_not_reported"] == ["O1"]
     assert set(result.guarantees) == {"ids_known", "verdicts_follow_checks"}
-    passing = self_check(claims, _results("spiral", good), {"spiral": ["S1"]})
-    assert passing.verdict == "reproduced"
 
 
 def test_the_scoreboard_adds_b2_then_b3_over_everything() -> None:
@@ -223,3 +223,47 @@ def test_the_scoreboard_adds_b2_then_b3_over_everything() -> None:
     assert own.claim("B3").numbers == {"tasks_with_results": 2, "claims_reported": 2, "claims_listed": 3,
                                        "claims_not_reported": []}
     assert SCOREBOARD_TASK not in with_scoreboard_claims(claims[:1], _results("spiral", s1), "smoke")
+
+
+def test_the_tally_counts_the_reading_of_the_paper_words_and_shows_the_strict_one_beside(tmp_path: Path) -> None:
+    path = tmp_path / "claims.yaml"
+    path.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        words: {reading: as worded, sentence: "
+                                   "'the words'}\n        strict: strict", 1))
+    claims = read_claims(path)
+    assert claims[0].words == "as worded" and claims[0].words_sentence == "the words" and claims[0].strict == "strict"
+    s1 = ClaimResult("S1", checks={"strict a": True, "strict b": False}, rule="r", reading="both a and b",
+                     reading_name="strict", readings={"as worded": Reading("a only", {"a": True})})
+    rows = score_rows(claims, _results("spiral", s1))
+    assert rows[0].verdict == "reproduced" and rows[0].strict == "partly"  # counted: the words; strict beside
+    assert verdict_counts(rows)["Spiral (Sec. 3-4)"]["reproduced"] == 1
+    page = render_scoreboard(rows, profile="paper", pages={})
+    assert "1 reproduced, 0 partly" in page and "by the strict readings of S1: 1 partly" in page
+    row, body = _row_lines(page, "S1")
+    assert "{bdg-success}`reproduced` as worded (counted): reproduced; strict: partly" in row
+    assert "The paper's words" in body and '"the words"' in body
+    # the claims file and the rule must agree on the readings' names
+    with pytest.raises(ValueError, match="names the reading"):
+        score_rows(claims, _results("spiral", s1.replace(readings={"other": Reading("x", {"a": True})})))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        strict: strict", 1))
+    with pytest.raises(ValueError, match="go together"):
+        read_claims(bad)
+
+
+def test_better_than_claimed_is_a_verdict_of_its_own(claims_file: Path) -> None:
+    s1 = ClaimResult("S1", checks={"cost within the band (upper)": True, "cost within the band (lower)": False},
+                     rule="r", better={"cost within the band (lower)": True})
+    rows = score_rows(read_claims(claims_file), _results("spiral", s1))
+    assert rows[0].verdict == BETTER
+    page = render_scoreboard(rows, profile="paper", pages={})
+    assert "1 better than claimed" in page and "`better than claimed`" in page
+
+
+def test_a_row_says_what_its_units_share(tmp_path: Path) -> None:
+    path = tmp_path / "claims.yaml"
+    path.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        units: one ensemble, shared batches", 1))
+    claims = read_claims(path)
+    assert claims[0].units == "one ensemble, shared batches"
+    s1 = ClaimResult("S1", checks={"a": True}, rule="r", n=5)
+    page = render_scoreboard(score_rows(claims, _results("spiral", s1)), profile="paper", pages={})
+    assert "**Units:** n = 5. one ensemble, shared batches" in _row_lines(page, "S1")[1]

@@ -46,7 +46,8 @@ CALLS = {
                                                    "neural_ode": np.full(9, 0.05), "drag": np.full(9, 0.10)},
                                         per_seed={"feedback": np.full(5, 0.03) + 0.001 * np.arange(5),
                                                   "neural_ode": np.full(5, 0.05)}),
-    "o2": lambda: bottle.o2(acc_rmse_feedback=0.5, acc_rmse_neural_ode=1.0, error_feedback=0.03, travel=1.0),
+    "o2": lambda: bottle.o2(acc_rmse_feedback=0.5, acc_rmse_neural_ode=1.0, error_feedback=0.03, travel=1.0,
+                            error_per_throw=[0.03] * 9),
     "q1_convergence": lambda: quadrotor.q1_convergence(np.outer(np.exp(-np.linspace(0, 10, 51)), np.ones(5)) + 0.01),
     "q2_prediction": lambda: quadrotor.q2_prediction([{"p": 0.02, "v": 0.03, "Theta": 0.05, "omega": 0.08 + k / 1e3}
                                                       for k in range(5)],
@@ -55,7 +56,7 @@ CALLS = {
     "q4_prediction": lambda: quadrotor.q4_prediction({k: v for k, v in paper_like().items() if k in quadrotor.SIX},
                                                      units=range(len(paper_like()["FNN"])), label="6 N"),
     "q5_adaptive": lambda: quadrotor.q5_adaptive(paper_like(), [1.0] * S, label="6 N"),
-    "q6_training_cost": lambda: quadrotor.q6_training_cost(0, 120.0),
+    "q6_training_cost": lambda: quadrotor.q6_training_cost(0, 1500.0),
     "b1": lambda: beyond.b1({"spiral": GOOD}),
     "b2": lambda: beyond.b2({"S1": headline_number("e", [1.0] * 5), "O1": headline_number("e", [2.0] * 5)}),
     "b3": lambda: beyond.b3({"S1", "B3"}, [ClaimResult("S1", checks={"a": True}, rule="r")], tasks_with_results=1,

@@ -65,3 +65,21 @@ def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -
         assert all(torch.equal(a, b) for a, b in zip(ens.member(m).parameters(), alone.parameters()))
     with pytest.raises(TypeError, match="NeuralFeedback"):
         feedback_ensemble([F.NeuralODE(2, (8,), "relu")], [0])
+
+
+def test_the_settled_window_the_centred_feedback_and_the_release_form_loss() -> None:
+    from fnnbook.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss, settled_errors
+
+    s = evaluation_setup(notebook_presets("neural_feedback") | SMALL)
+    f, h = networks(2)
+    curves = rate_error_curves(f, h, s, 2)
+    assert curves["neural_feedback"].shape == (2, 60)
+    # the whole window's RMS of a curve is the relative RMSE of nominal_errors
+    assert np.allclose(np.sqrt((curves["neural_feedback"] ** 2).mean(1)), nominal_errors(f, h, s, 2), rtol=1e-4)
+    settled = settled_errors(curves)
+    assert settled["settle_index"].shape == (2,) and settled["rel_rmse_settled_neural_ode"].shape == (2,)
+    e = torch.randn(4, 4)
+    assert torch.allclose(CentredFeedback(h)(torch.zeros(1, 4)), torch.zeros(1, 4))  # h(0) removed
+    assert torch.allclose(CentredFeedback(h)(e) - h(e), -h(torch.zeros(1, 4)).expand(4, 4))
+    loss = release_form_loss(f, h, s.x_s8, 0.01, 2, skip_seconds=0.1)
+    assert loss.shape == (2,) and (loss > 0).all()

@@ -117,3 +117,41 @@ def test_loss_convergence_reads_the_first_and_last_tenth() -> None:
                                                                  "last_window_flat": False}  # still falling
     with pytest.raises(ValueError, match="loss curve"):
         sec4.loss_convergence([1.0, np.nan, 0.5, 0.4])
+
+
+def test_d4_in_each_metric_reads_only_that_metric() -> None:
+    lose_multi = d4_numbers(err_N_neural_feedback=np.full(12, 0.3))  # rate won everywhere, N-step lost
+    assert sec4.d4(**lose_multi).verdict == "partly"  # held-out levels still won in both
+    assert sec4.d4(**lose_multi, metric="rate").checks["all_12_S8_levels"] is True
+    assert sec4.d4(**lose_multi, metric="err_N").checks["all_12_S8_levels"] is False
+    assert "change-rate RMSE at every" in sec4.d4(**lose_multi, metric="rate").rule
+    with pytest.raises(ValueError, match="metric"):
+        sec4.d4(**d4_numbers(), metric="loss")
+
+
+def test_the_settling_time_is_read_from_the_curve() -> None:
+    t = np.arange(200)
+    curve = 0.01 + np.exp(-t / 10.0)  # a transient that decays onto a floor of 0.01
+    k = int(sec4.settling_index(curve)[0])
+    assert curve[k:].max() <= 2 * np.median(curve[100:]) < curve[k - 1]  # settled from k on, not before
+    assert sec4.settling_index(np.full((3, 50), 0.5)).tolist() == [0, 0, 0]  # never out of its band
+    spike = np.full(100, 0.1)
+    spike[40] = 5.0  # a late excursion: it settles only after it
+    assert sec4.settling_index(spike)[0] == 41
+    spike[99] = 5.0  # out of its band at the very end: settled at the latest where the steady level is measured
+    assert sec4.settling_index(spike)[0] == 50
+    with pytest.raises(ValueError):
+        sec4.settling_index(np.ones(3))
+
+
+def test_the_readings_of_d3_each_fail_on_their_own_numbers() -> None:
+    ratio, falling = [0.1] * 5, [-0.3] * 5  # fell by 10x, still falling at the end (cut at a stopping level)
+    kw = dict(ratio=ratio, trend=falling, release_final=[0.45] * 5)
+    assert not sec4.reading_holds_d3("falls and ends flat", **kw)
+    assert sec4.reading_holds_d3("falls", **kw)
+    assert sec4.reading_holds_d3("reaches the release's stop", **kw)
+    assert not sec4.reading_holds_d3("reaches the release's stop", **kw | {"release_final": [0.6] * 5})
+    assert not sec4.reading_holds_d3("falls", **kw | {"ratio": [0.9] * 5})
+    with pytest.raises(ValueError, match="release's form"):
+        sec4.reading_holds_d3("reaches the release's stop", ratio=ratio, trend=falling, release_final=None)
+    assert set(sec4.D3_READINGS) == {"falls and ends flat", "falls", "reaches the release's stop"}

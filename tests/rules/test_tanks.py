@@ -12,23 +12,35 @@ NOISY = [0.15, 0.10, 0.25, 0.08, 0.30]   # lower in 2 of 5 seeds against LOSE: n
 
 
 def test_b4_reproduced_when_feedback_wins_at_every_horizon() -> None:
-    r = b4({N: {"feedback": WIN, "open_loop": LOSE} for N in (1, 5, 10, 25, 50)})
-    assert r.verdict == "reproduced" and len(r.checks) == 5 and r.n == 5
-    assert list(r.checks) == [f"N={N}: feedback beats open loop" for N in (1, 5, 10, 25, 50)]
+    errors = {N: {"feedback": WIN, "open_loop": LOSE} for N in (5, 10, 25, 50)} | {1: {"feedback": WIN, "open_loop": WIN}}
+    r = b4(errors)
+    assert r.verdict == "reproduced" and len(r.checks) == 4 and r.n == 5
+    assert list(r.checks) == [f"N={N}: feedback beats open loop" for N in (5, 10, 25, 50)]
+    assert r.guarantees == {"N=1: feedback equals open_loop (the observer alone, no layer after it)": True}
     assert r.headline.n == 5 and r.headline.value == pytest.approx(sum(w / l for w, l in zip(WIN, LOSE)) / 5)
 
 
 def test_b4_partly_when_feedback_loses_at_long_horizons() -> None:
-    errors = {1: {"feedback": WIN, "open_loop": LOSE}, 5: {"feedback": WIN, "open_loop": LOSE},
+    errors = {2: {"feedback": WIN, "open_loop": LOSE}, 5: {"feedback": WIN, "open_loop": LOSE},
               25: {"feedback": LOSE, "open_loop": WIN}, 50: {"feedback": NOISY, "open_loop": LOSE}}
     r = b4(errors)
     assert r.verdict == "partly"
-    assert r.checks == {"N=1: feedback beats open loop": True, "N=5: feedback beats open loop": True,
+    assert r.checks == {"N=2: feedback beats open loop": True, "N=5: feedback beats open loop": True,
                         "N=25: feedback beats open loop": False, "N=50: feedback beats open loop": False}
 
 
 def test_b4_not_reproduced_when_feedback_never_wins() -> None:
-    assert b4({N: {"feedback": LOSE, "open_loop": WIN} for N in (1, 10)}).verdict == "not reproduced"
+    assert b4({N: {"feedback": LOSE, "open_loop": WIN} for N in (2, 10)}).verdict == "not reproduced"
+
+
+def test_n1_is_a_guarantee_not_a_check() -> None:
+    """At N = 1 both predictions are the observer's: a difference there means the run itself is wrong."""
+    from fnnlib.results import GuaranteeFailed  # noqa: PLC0415
+
+    same = {1: {"tuned": WIN, "hand": WIN}}
+    assert b6(same).verdict == "verified by construction" and not b6(same).checks
+    with pytest.raises(GuaranteeFailed, match="N=1"):
+        b6({1: {"tuned": WIN, "hand": LOSE}, 5: {"tuned": WIN, "hand": LOSE}})
 
 
 def test_b5_wins_and_loses() -> None:
@@ -40,9 +52,9 @@ def test_b5_wins_and_loses() -> None:
 
 
 def test_b6_per_horizon() -> None:
-    r = b6({1: {"tuned": WIN, "hand": LOSE}, 50: {"tuned": LOSE, "hand": WIN}})
+    r = b6({5: {"tuned": WIN, "hand": LOSE}, 50: {"tuned": LOSE, "hand": WIN}})
     assert r.verdict == "partly"
-    assert r.checks == {"N=1: tuned gains beat hand gains": True, "N=50: tuned gains beat hand gains": False}
+    assert r.checks == {"N=5: tuned gains beat hand gains": True, "N=50: tuned gains beat hand gains": False}
 
 
 @pytest.mark.parametrize(("call", "match"), [

@@ -85,3 +85,43 @@ def test_several_grids_are_named_and_the_unit_is_the_grids_own() -> None:
     assert line.startswith("as written: holds at every noise_std (0.001, 0.003, 0.01, 0.03) (5 units per point)")
     assert "; as flown: fails at every noise_std (0.001, 0.003, 0.01, 0.03) (1 network per point)" in line
     assert summary([a]).startswith("holds at every")  # one grid: no name
+
+
+WINDOW = Axis("window", ("whole record", "after settling"), "the window Fig. 5b's accuracy is scored over",
+              ours="whole record", kind="reading")
+DECAY = Axis("beta", (0.0, 0.1), "the cascade's decay in Sec. 4 is not stated", ours=0.0, kind="usage")
+
+
+def test_d_stands_only_when_every_reading_and_usage_fails_with_ours_and_the_authors() -> None:
+    never = grid([False] * 4)
+    # another grid of ours holds at a reading point: no (d), and the reading axis that decides it is (a)
+    by_window = grid([[False, True]] * 4, axes=(NOISE, WINDOW))
+    assert letters(grids=[never, by_window]) == "a"
+    # a usage point where it holds (the decayed cascade): no (d)
+    by_decay = grid([False, True], axes=(DECAY,))
+    assert "d" not in letters(grids=[never, by_decay])
+    # the authors' networks hold under some reading: no (d)
+    theirs = WhyGrid(axes=(WINDOW,), holds=np.array([False, True]), n=1, rule="r", unit="network",
+                     networks="authors")
+    assert "d" not in letters(grids=[never, theirs])
+    # a reading of the paper-profile result holds: no (d)
+    assert "d" not in letters(grids=[never], readings={"strict": "partly", "as worded": "reproduced"})
+    # every reading, usage and setting fails, ours and the authors': (d), naming the kinds tried
+    all_fail = grid([[False, False]] * 4, axes=(NOISE, WINDOW))
+    theirs_fail = WhyGrid(axes=(WINDOW,), holds=np.array([False, False]), n=1, rule="r", unit="network",
+                          networks="authors")
+    same = AuthorsCheck(verdict="not reproduced", ours="not reproduced", checks={"x": False}, networks="theirs")
+    found = causes(grids=[all_fail, theirs_fail], authors=same)
+    assert [c.letter for c in found] == ["d"]
+    assert "reading" in found[0].evidence and "nor with the authors' networks" in found[0].evidence
+
+
+def test_an_authors_grid_mixed_on_an_open_setting_is_not_b_and_kinds_round_trip() -> None:
+    theirs = WhyGrid(axes=(NOISE,), holds=np.array([True, False, False, False]), n=1, rule="r",
+                     networks="authors")
+    assert "b" not in letters(grids=[theirs])
+    g = grid([[False, True]] * 4, axes=(NOISE, WINDOW))
+    back = WhyGrid.from_json(json.loads(json.dumps(g.to_json())))
+    assert back.axes[1].kind == "reading" and back.networks == "ours"
+    with pytest.raises(ValueError, match="kind"):
+        Axis("x", (1, 2), "s", kind="guess")

@@ -1,0 +1,62 @@
+"""The cascaded tanks chapter's measures: the N-step output RMSE, the free run through an observer, and the
+overflow episodes with the error during and after each."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import fnnlib as F
+from fnnbook.tanks_eval import episode_errors, free_run, n_step_output_rmse, overflow_episodes
+
+C = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
+
+
+def test_n_step_rmse_pairs_row_k_with_sample_k_plus_n() -> None:
+    y = torch.arange(10, dtype=torch.float64)[:, None]
+    x_pred = torch.zeros(10, 2, dtype=torch.float64)
+    x_pred[:, 1] = torch.arange(10, dtype=torch.float64) + 3  # row k predicts y[k + 3] exactly
+    assert n_step_output_rmse(x_pred, y, 3, C) == 0.0
+    assert n_step_output_rmse(x_pred, y, 2, C, skip=4) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="N must be"):
+        n_step_output_rmse(x_pred, y, 10, C)
+    x_pred[5, 1] = float("nan")
+    with pytest.raises(ValueError, match="diverged"):
+        n_step_output_rmse(x_pred, y, 3, C)
+
+
+def test_free_run_sees_only_the_first_samples() -> None:
+    """A linear plant and its exact model: the free run equals the simulation from the estimate, whatever the
+    record holds after the first samples."""
+    A = torch.tensor([[-0.1, 0.0], [0.1, -0.1]], dtype=torch.float64)
+    model = lambda t, x, u: x @ A.T + torch.cat([u, torch.zeros_like(u)], -1)  # noqa: E731
+    Ts, T = 1.0, 60
+    u = torch.ones(T, 1, dtype=torch.float64)
+    x = torch.zeros(T, 2, dtype=torch.float64)
+    x[0] = torch.tensor([1.0, 2.0])
+    for k in range(T - 1):  # Euler, as the observer steps the model
+        x[k + 1] = x[k] + Ts * model(0.0, x[k:k + 1], u[k:k + 1])[0]
+    y = x[:, 1:].clone()
+    L = F.place_observer_gain(torch.eye(2, dtype=torch.float64) + Ts * A, Ts * C, [0.3, 0.4])
+    obs = F.MeasuredFeedback(model, L, C, Ts, A=A, x0=x[0])
+    y_bad = y.clone()
+    y_bad[10:] += 50.0
+    np.testing.assert_allclose(free_run(obs, y_bad, u, 10, C), y[:, 0].numpy(), atol=1e-8)
+    with pytest.raises(ValueError, match="n_init"):
+        free_run(obs, y, u, 0, C)
+
+
+def test_overflow_episodes_and_their_errors() -> None:
+    s = [False, True, True, False, False, True, False, False, False, True]
+    eps = overflow_episodes(s)
+    assert eps == [(1, 3), (5, 6), (9, 10)]
+    y = np.zeros(10)
+    y_hat = np.array([0, 1, 1, 2, 2, 3, 0, 0, np.nan, 4], dtype=float)
+    out = episode_errors(y_hat, y, eps, after=2)
+    assert out[0] == {"start": 1, "samples": 2, "during": 1.0, "after": 2.0}
+    assert out[1]["after"] == 0.0 and out[2]["after"] is None  # the record ends with the last episode
+    assert overflow_episodes([False, False]) == []
+    assert overflow_episodes(s, gap=2) == [(1, 6), (9, 10)]
+    with pytest.raises(ValueError, match="after"):
+        episode_errors(y_hat, y, eps, after=0)
