@@ -289,7 +289,8 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                        "train_iterations": _N1, "train_lr": _POS, "L_start": _POS, "beta_start": _NONNEG,
                        "horizons": _horizons, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0),
                        "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1, "overflow_gap": _N0,
-                       "series_N": _N1},
+                       "series_N": _N1, "baseline_starts": partial(C.some_of, choices=("free", "encoder")),
+                       "baseline_horizon": _N1},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
@@ -397,6 +398,8 @@ def _cascaded_tanks(p: Mapping[str, Any]) -> None:
     _need(max(p["horizons"]) + p["n_init"] < samples and p["train_N"] < samples // 2,
           f"the horizons (largest {max(p['horizons'])}) after n_init = {p['n_init']} samples and train_N = "
           f"{p['train_N']} must fit a record of {samples} samples")
+    _need(p["n_init"] + p["baseline_horizon"] <= samples, f"baseline_horizon = {p['baseline_horizon']} after n_init = "
+          f"{p['n_init']} samples must fit a record of {samples} samples")
     _need(p["series_N"] in p["horizons"], f"series_N = {p['series_N']} must be one of horizons = {p['horizons']}")
     _need(p["arx_max_order"] + 1 <= p["n_init"] < samples // 2,
           f"n_init (the measured samples a simulation starts from) must be in {p['arx_max_order'] + 1}.."
