@@ -291,6 +291,10 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                        "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1, "overflow_gap": _N0,
                        "series_N": _N1, "baseline_starts": partial(C.some_of, choices=("free", "encoder")),
                        "baseline_horizon": _N1},
+    "why_tanks": {"L_grid": _vec(minimum=0.0), "beta_grid": _vec(minimum=0.0),
+                  "windows": partial(C.some_of, choices=("all", "outside_overflow")),
+                  "first_estimates": partial(C.some_of, choices=("first_level", "least_squares")),
+                  "b5_starts": partial(C.some_of, choices=("free", "encoder")), "b5_horizons": _vec(minimum=1.0)},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
@@ -504,6 +508,14 @@ def _why_bottle(p: Mapping[str, Any]) -> None:
     _need(min(p["L_grid"]) > 0, f"L_grid must list gains > 0 (L = 0 is the open loop, judged anyway), got {p['L_grid']}")
 
 
+def _why_tanks(p: Mapping[str, Any]) -> None:
+    _why_grid(p, "L_grid", "beta_grid", "windows", "first_estimates", "b5_starts", "b5_horizons")
+    _need(min(p["L_grid"]) > 0, f"L_grid must list gains > 0 (L = 0 is the open loop, judged anyway), got {p['L_grid']}")
+    _need(all(float(h).is_integer() for h in p["b5_horizons"]), f"b5_horizons must list whole samples, got {p['b5_horizons']}")
+    _need("all" in p["windows"] and "first_level" in p["first_estimates"],
+          "windows must hold 'all' and first_estimates 'first_level' (the chapter's own point, checked against its numbers)")
+
+
 def _why_beyond(p: Mapping[str, Any]) -> None:
     _why_grid(p, "objectives", "min_seeds_grid")
     _need(all(float(k).is_integer() for k in p["min_seeds_grid"]),
@@ -518,6 +530,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
     "why_sec3": _why_sec3,
     "why_bottle": _why_bottle, "why_beyond": _why_beyond, "cascaded_tanks": _cascaded_tanks,
+    "why_tanks": _why_tanks,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

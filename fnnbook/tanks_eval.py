@@ -19,7 +19,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["DIVERGED", "capped", "depths", "episode_errors", "free_run", "kalman_n_step", "n_step_output_rmse",
+__all__ = ["DIVERGED", "LEVEL", "capped", "judged_again", "load_trained", "one_member", "outside_overflow",
+           "save_trained", "depths", "episode_errors", "free_run", "kalman_n_step", "n_step_output_rmse",
            "no_feedback", "overflow_episodes", "run_seeds"]
 
 
@@ -32,7 +33,8 @@ def _signal(name: str, v: Any) -> np.ndarray:
     return a
 
 
-def n_step_output_rmse(x_pred: Tensor, y: Tensor, N: int, C: Tensor, *, skip: int = 0) -> float:
+def n_step_output_rmse(x_pred: Tensor, y: Tensor, N: int, C: Tensor, *, skip: int = 0,
+                       keep: np.ndarray | None = None) -> float:
     """RMSE of :math:`C \\hat x_{k+N|k}` against :math:`y_{k+N}` over the start times ``k`` from ``skip`` to
     ``T - N - 1``.
 
@@ -48,6 +50,8 @@ def n_step_output_rmse(x_pred: Tensor, y: Tensor, N: int, C: Tensor, *, skip: in
         The measurement.
     skip : int
         Start times left out (those an estimate needs to settle, or the simulation's initial samples).
+    keep : array of bool, shape (T,), optional
+        The target samples scored (a window of the record); by default all of them.
     """
     y = _signal("y", y)
     if x_pred.ndim != 2 or x_pred.shape[0] != y.size:
@@ -56,6 +60,8 @@ def n_step_output_rmse(x_pred: Tensor, y: Tensor, N: int, C: Tensor, *, skip: in
         raise ValueError(f"N must be an integer in 1..{y.size - skip - 1}, got {N!r}")
     y_hat = (x_pred.detach().to(C.dtype) @ C.T)[:, 0].numpy()
     err = y_hat[skip:y.size - N] - y[skip + N:]
+    if keep is not None:
+        err = err[np.asarray(keep, dtype=bool).reshape(-1)[skip + N:]]
     if not np.isfinite(err).all():
         raise ValueError(f"the N={N} predictions hold non-finite values (a diverged prediction)")
     return float(np.sqrt(np.mean(err ** 2)))
@@ -146,6 +152,22 @@ def _aligned(x_pred: Tensor, N: int, C: Tensor) -> np.ndarray:
     return out
 
 
+LEVEL = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
+"""The measurement of one member, :math:`y = C x` with :math:`C = [0, 1]` (the lower level)."""
+
+
+def one_member(s: Mapping[str, Any], seed: int) -> Any:
+    """An untrained one-member field of ``seed`` with the chapter's settings ``s``."""
+    return _field(s, [seed])
+
+
+def _field(s: Mapping[str, Any], members: Sequence[int]) -> Any:
+    from fnnlib.models.scaled import ScaledField  # noqa: PLC0415
+
+    return ScaledField(2, 1, s["hidden"], s["activation"], list(members), x_center=s["x_center"], x_scale=s["x_scale"],
+                       u_center=s["u_center"], u_scale=s["u_scale"], rate=s["rate"])
+
+
 def _blocks(M: Tensor, E: int) -> Tensor:
     """``E`` copies of ``M`` on the diagonal of a block matrix: one member's gain or measurement, stacked."""
     return torch.block_diag(*([M] * E))
@@ -179,7 +201,8 @@ def depths(model: Any, observer: Any, y: Tensor, u: Tensor, Ts: float, L: Tensor
                            return_all=True)
 
 
-def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]) -> tuple[dict[int, dict[str, Any]], dict[str, float]]:
+def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
+              ) -> tuple[dict[int, dict[str, Any]], dict[str, float], dict[str, Any]]:
     """Everything the chapter measures, for every seed: the trainings on the estimation record, then, on the
     validation record, the free runs, the N-step table, the gains and the overflow episodes.
 
@@ -189,13 +212,12 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]) -> tuple[dic
     ``rate``, ``x_center``, ``x_scale``, ``u_center``, ``u_scale``, ``observer_gain``, ``train_N``,
     ``train_iterations``, ``train_lr``, ``L_start``, ``beta_start``, ``horizons``, ``hand_L_grid``,
     ``hand_beta_grid``, ``kf_q``, ``kf_qd_grid``, ``kf_r``, ``n_init``, ``overflow_after``, ``overflow_gap``,
-    ``series_N``, ``baseline_starts``, ``baseline_horizon``. Returns the per-seed results and the seconds
-    of each stage (over all seeds).
+    ``series_N``, ``baseline_starts``, ``baseline_horizon``. Returns the per-seed results, the seconds
+    of each stage (over all seeds) and the trained ensembles (what :func:`save_trained` stores).
     """
     import time  # noqa: PLC0415
 
     import fnnlib as F  # noqa: PLC0415
-    from fnnlib.models.scaled import ScaledField  # noqa: PLC0415
 
     f64 = torch.float64
     seeds = [int(v) for v in seeds]
@@ -205,9 +227,8 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]) -> tuple[dic
     Ts, skip = rec.Ts, int(s["n_init"])
     L_obs = _blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E)  # (2E, E): Eq. (7)'s gain per member
 
-    def field(members: Sequence[int]) -> ScaledField:
-        return ScaledField(2, 1, s["hidden"], s["activation"], list(members), x_center=s["x_center"],
-                           x_scale=s["x_scale"], u_center=s["u_center"], u_scale=s["u_scale"], rate=s["rate"])
+    def field(members: Sequence[int]) -> Any:
+        return _field(s, members)
 
     def observer(model: Any, y: Tensor) -> Any:  # the first estimate: both tanks at the first measured level
         return F.MeasuredFeedback(model, L_obs, CE, Ts, x0=y[0, 0].repeat(2 * E), allow_unstable=True)
@@ -244,7 +265,62 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]) -> tuple[dic
             out[e]["n_step"][N]["no_feedback_free_run"] = capped(F.simulation_rmse, b["series"][N:], rec.y_val[N:],
                                                                  skip=skip)
         out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]], "no_feedback": b["loss"]}
-    return {seed: out[e] for e, seed in enumerate(seeds)}, clock
+    trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L,
+               "tuned_beta": [float(v) for v in torch.as_tensor(tuned.beta).reshape(-1).expand(E)],
+               "hand": [out[e]["gains"]["hand"] for e in range(E)]}
+    return {seed: out[e] for e, seed in enumerate(seeds)}, clock, trained
+
+
+def save_trained(path: Any, trained: Mapping[str, Any]) -> None:
+    """The chapter's trained ensembles, gains and seeds, for the pages that judge them again (never retrain)."""
+    torch.save({k: (v.state_dict() if isinstance(v, torch.nn.Module) else v) for k, v in trained.items()}, path)
+
+
+def load_trained(path: Any, s: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`save_trained`'s file, the ensembles rebuilt with the chapter's settings ``s``."""
+    data = torch.load(path, weights_only=True)
+    for k in ("observer_trained", "no_feedback"):
+        m = _field(s, data["seeds"])
+        m.load_state_dict(data[k])
+        data[k] = m
+    return data
+
+
+def outside_overflow(rec: Any, s: Mapping[str, Any]) -> np.ndarray:
+    """The validation samples (T,) neither in an overflow episode nor in the ``overflow_after`` samples after one."""
+    keep = np.ones(rec.y_val.shape[0], dtype=bool)
+    for a, b in overflow_episodes(rec.saturated("val").numpy(), gap=int(s["overflow_gap"])):
+        keep[a:b + int(s["overflow_after"])] = False
+    return keep
+
+
+def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, first: str, keep: np.ndarray | None,
+                 grid: Sequence[tuple[float, float]] = ()) -> dict[str, dict[int, list[float]]]:
+    """The N-step errors per seed of the trained ensemble on the validation record, for the open loop, the tuned
+    and the hand gains and each fixed ``(L, beta)`` of ``grid`` (named ``"L=.., beta=.."``), with the observer's
+    first estimate ``first`` (``"first_level"``: both tanks at the first measured level, the chapter's;
+    ``"least_squares"``: :math:`C^+ y_0`, the upper tank empty) and the target samples ``keep``.
+    Returns ``{predictor: {N: [one RMSE per seed]}}``."""
+    import fnnlib as F  # noqa: PLC0415
+
+    model, seeds = trained["observer_trained"], trained["seeds"]
+    E, f64, skip = len(seeds), torch.float64, int(s["n_init"])
+    C = torch.tensor([[0.0, 1.0]], dtype=f64)
+    yv = rec.y_val.expand(-1, E)
+    x0 = {"first_level": yv[0, 0].repeat(2 * E), "least_squares": None}[first]
+    obs = F.MeasuredFeedback(model, _blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E), _blocks(C, E),
+                             rec.Ts, x0=x0, allow_unstable=True)
+    two = lambda v: torch.as_tensor(v, dtype=f64).reshape(-1).repeat_interleave(2)  # noqa: E731  per member -> per state
+    rows = {"open_loop": (torch.zeros(2 * E, dtype=f64), torch.zeros(2 * E, dtype=f64)),
+            "tuned": (torch.as_tensor(trained["tuned_L"], dtype=f64), two(trained["tuned_beta"])),
+            "hand": (two([h["L"] for h in trained["hand"]]), two([h["beta"] for h in trained["hand"]]))}
+    rows |= {f"L={L:g}, beta={b:g}": (torch.full((2 * E,), float(L), dtype=f64), torch.full((2 * E,), float(b), dtype=f64))
+             for L, b in grid}
+    Ns = [int(N) for N in s["horizons"]]
+    d = depths(model, obs, yv, rec.u_val, rec.Ts, torch.stack([v[0] for v in rows.values()]),
+               torch.stack([v[1] for v in rows.values()]), max(Ns))
+    return {name: {N: [capped(n_step_output_rmse, d[N - 1, g, :, 2 * e:2 * e + 2], rec.y_val, N, C, skip=skip, keep=keep)
+                       for e in range(E)] for N in Ns} for g, name in enumerate(rows)}
 
 
 def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor) -> dict[str, Any]:

@@ -156,7 +156,8 @@ settings = {k: globals()[k] for k in (
     "hidden", "activation", "rate", "x_center", "x_scale", "u_center", "u_scale", "observer_gain", "train_N",
     "train_iterations", "train_lr", "L_start", "beta_start", "horizons", "hand_L_grid", "hand_beta_grid", "kf_q",
     "kf_qd_grid", "kf_r", "n_init", "overflow_after", "overflow_gap", "series_N", "baseline_starts", "baseline_horizon")}
-runs, seconds = TE.run_seeds(rec, seeds, settings)
+runs, seconds, trained = TE.run_seeds(rec, seeds, settings)
+TE.save_trained(out / "tanks_models.pt", trained)  # the pages that judge these models again load them
 print("seconds over the seeds: " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()))
 print("no-feedback baseline per seed: " + "; ".join(
     f"{k}: {r['no_feedback']['start']} (estimation free run " + ", ".join(

@@ -112,3 +112,35 @@ def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
     with pytest.raises(ValueError, match="members"):
         F.tune_gains(both, rec.y_est.expand(-1, 2), rec.Ts, 4, u=rec.u_est, L0=0.01, beta0=0.1, iterations=1,
                      lr=0.01, members=3)
+
+
+def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() -> None:
+    from fnnbook.tanks_eval import outside_overflow
+    y = torch.zeros(10, 1, dtype=torch.float64)
+    x_pred = torch.zeros(10, 2, dtype=torch.float64)
+    x_pred[4, 1] = 3.0  # row 4 predicts target 5 (N = 1) wrongly
+    keep = np.ones(10, dtype=bool)
+    assert n_step_output_rmse(x_pred, y, 1, C) > 0
+    keep[5] = False
+    assert n_step_output_rmse(x_pred, y, 1, C, keep=keep) == 0.0
+    rec = F.tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
+    s = {"overflow_gap": 3, "overflow_after": 7}
+    eps = overflow_episodes(rec.saturated("val").numpy(), gap=3)
+    out = outside_overflow(rec, s)
+    for a, b in eps:
+        assert not out[a:b + 7].any()
+    assert out.sum() == 400 - len(set().union(*[range(a, min(b + 7, 400)) for a, b in eps]))
+
+
+def test_trained_ensembles_load_as_saved(tmp_path) -> None:
+    from fnnbook.tanks_eval import load_trained, one_member, save_trained
+    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
+    from fnnbook.tanks_eval import _field
+    m = _field(s, [3, 4])
+    save_trained(tmp_path / "m.pt", {"seeds": [3, 4], "observer_trained": m, "no_feedback": _field(s, [3, 4]),
+                                     "tuned_L": [0.1] * 4, "tuned_beta": [0.2, 0.3], "hand": []})
+    back = load_trained(tmp_path / "m.pt", s)
+    x, u = torch.rand(3, 4, dtype=torch.float64), torch.rand(3, 1, dtype=torch.float64)
+    torch.testing.assert_close(back["observer_trained"](0.0, x, u), m(0.0, x, u))
+    torch.testing.assert_close(back["observer_trained"].member(1)(0.0, x[:, 2:], u), one_member(s, 4)(0.0, x[:, 2:], u))
+    assert back["tuned_beta"] == [0.2, 0.3]
