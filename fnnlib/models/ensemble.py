@@ -33,7 +33,8 @@ class NeuralODEEnsemble(nn.Module):
         One of ``ACTIVATIONS``.
     seeds : sequence of int
         One seed per member: member ``e`` starts from the weights ``NeuralODE(n_state, hidden,
-        activation)`` gets after ``seed_everything(seeds[e])`` (inside :func:`~fnnlib.seeding.seeded`: the caller's random state is left alone).
+        activation)`` gets after ``seed_everything(seeds[e])`` (inside :func:`~fnnlib.seeding.seeded`: the
+        caller's random state is left alone).
     """
 
     #: batches up to this size take the batched-matmul path, larger ones a loop over the members
