@@ -1,9 +1,9 @@
 # %% [markdown]
 # # Why B1 and B2 stand where they stand: the tuning objective, and the claims without a seed spread
 #
-# **B1** (gains tuned from data beat the hand-tuned ones, `tuned_gains`) reads *partly* in the paper
-# profile: on the bottle the tuned $(L, \beta)$ beat neither the hand-tuned gains nor the open loop. What
-# the tuner minimises is a choice of ours (the paper tunes by hand): `tuned_gains` descends on the judged
+# **B1** (gains tuned from data beat the hand-tuned ones, `tuned_gains`, each given the same budget of
+# evaluations on the same training data) is judged per setting; on the bottle, what the tuner minimises is a
+# choice of ours (the paper tunes by hand): `tuned_gains` descends on the judged
 # metric itself, the 0.5 s ($N = 500$) position error on training throws. Here the same networks, start
 # values, tuning throws, iterations and step size tune on the **one-step** error ($N = 1$, the whole state,
 # `tune_gains`'s own loss), on a **multi-step** error ($N$ = `multi_step_N`) and on the judged error, and
