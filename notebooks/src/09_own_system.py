@@ -184,8 +184,8 @@ print(f"{len(seeds)} pendulum runs in {pendulum_seconds:.1f} s")
 # The spiral task's neural ODE (loaded, not retrained) on its test spiral with noise of std
 # `spiral_noise_std`, once per network of the spiral task (its seeds, loaded, not retrained: the units of
 # this setting), with the noise drawn from the network's seed. The hand-picked gains come from the same
-# 3 x 3 sweep on the tuning data; the paper's $L = 20$, $\beta = 0.02$ are reported beside them. The gains
-# are tuned on a test spiral started elsewhere (`spiral_tune_x0`, its first `spiral_tune_samples` samples)
+# sweep on the tuning data, at the same budget; the paper's $L = 20$, $\beta = 0.02$ are reported beside
+# them. The gains are tuned on a test spiral started elsewhere (`spiral_tune_x0`, its first `spiral_tune_samples` samples)
 # with its own noise, and evaluated on the S3 trajectory.
 
 # %%
