@@ -49,8 +49,8 @@ spiral_noise_std = None
 spiral_L = None
 spiral_beta = None
 spiral_tune_iterations = 36
-hand_L_grid = [1.0, 2.5, 6.0, 15.0, 35.0, 80.0]
-hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.3, 1.0]
+hand_L_grid = [0.3, 1.0, 2.0, 4.0, 8.0, 16.0]
+hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.2, 0.5]
 
 # %%
 import fnnlib as F
@@ -98,9 +98,10 @@ print(f"hand-picked gain: noise amplification {F.noise_amplification(L_hand, Ts,
 # tuner `tune_iterations` (pendulum) and `spiral_tune_iterations` (spiral) Adam steps, the sweep its
 # `len(hand_L_grid) x len(hand_beta_grid)` grid points, equal (`b1_budget` refuses anything else). One
 # evaluation is one pass of the cascade over the tuning data; the tuner's pass also gives it the gradient,
-# which the sweep does not get. The grid spans the gains the tuner can reach: $L$ from 1 to 80 (the tuner's
-# $L$ lies in $(0, 1/T_s)$: 50 on the pendulum, 100 on the spiral), $\beta$ from 0 to 1; whether each tuned
-# gain lies inside it is reported (`b1_coverage`).
+# which the sweep does not get. The grid spans the region the tuned gains reach on these tuning data: $L$
+# from 0.3 to 16, $\beta$ from 0 to 0.5 (in the paper profile every tuned entry of $L$ lies between 0.3 and
+# 16, every tuned $\beta$ below 0.1); whether each unit's tuned gains lie inside it is reported
+# (`b1_coverage`). The tuner fits one gain per state (a diagonal $L$), the sweep a scalar $L$ times $I$.
 
 # %%
 def hand_sweep(model, y, Ts_, N_, u=None) -> F.GainSweep:
