@@ -63,7 +63,7 @@ data: venv
 
 # -n auto: one pytest-xdist worker per core; the smoke pipeline still runs once (tests/conftest.py)
 test: venv
-	$(PY) -m pytest -n auto
+	$(PY) -m pytest -n auto --durations=25
 
 # Rebuild notebooks/NN_<name>.ipynb from its source notebooks/src/NN_<name>.py (jupytext's percent format),
 # keeping the cell ids; tests/test_notebook_sources.py checks that the committed notebooks match.

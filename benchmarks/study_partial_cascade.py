@@ -12,7 +12,11 @@ mean N-step error after the first quarter (the start-up). Columns:
 * open loop: the Euler rollout of the model from the same observer's latest estimate (L = 0 after it);
 * EKF, UKF: rollouts from their filtered state, on the same model;
 * and the error of the measured component (position) alone, for the cascade and open loop;
-* the cascade's gains chosen on two calibration records instead of one (the second drawn apart).
+* the cascade's gains chosen on two calibration records instead of one (the second drawn apart);
+* guarded: the same candidates kept only where they beat the feedback switched off (L = 0, i.e. open loop from
+  the observer) on the calibration record beyond the spread over its windows (``fnnlib.choose_gain``);
+* eight more test records (drawn apart): each estimator's mean over them and on how many of them the cascade is
+  no worse than open loop (one test record is one unit; the plant's records differ in their forcing).
 
     .venv/bin/python benchmarks/study_partial_cascade.py [--iterations 300]
 """
@@ -74,6 +78,10 @@ def main() -> None:
     u2 = forcing(1, T, gen2)
     x2 = simulate(0.5 * torch.randn(1, 2, generator=gen2, dtype=F64), u2)
     lost2 = torch.rand(1, T, generator=gen2) < 0.2
+    gen3 = F.make_generator(2)  # eight more test records, drawn apart
+    u8 = forcing(8, T, gen3)
+    x8 = simulate(0.5 * torch.randn(8, 2, generator=gen3, dtype=F64), u8)
+    lost8 = torch.rand(8, T, generator=gen3) < 0.2
     rows = []
     for N in (10, 25):
         for noise in (0.0, 0.02, 0.05):
@@ -93,6 +101,9 @@ def main() -> None:
             def measured_score(z, target=y[0]):  # calibration: the measured position N samples later, present ones
                 e = (z[..., : T - N, :1] - target[..., N:, :]).pow(2)[..., settle:, :]
                 return float(e.nan_to_num(0).sum() / (~torch.isnan(e)).sum())
+
+            def per_start(z, target=y[0]):  # calibration: squared error of the measured position, per start
+                return (z[..., : T - N, :1] - target[..., N:, :]).pow(2).sum(-1)[..., settle:]
 
             grid = torch.tensor([0.0, 0.25, 0.5, 1.0, 2.0, 4.0], dtype=F64)  # 0: the feedback switched off
             sweep = F.cascade_sweep(model, y[0], TS, N, grid, 0.05, u=u[0], observer=obs)
@@ -115,6 +126,29 @@ def main() -> None:
                                                                    u=u[1], observer=obs)),
                    "open loop from the observer": score(obs.predict(y[1], N, u[1])),
                    "EKF": score(ekf.predict(y[1], N, u[1])), "UKF": score(ukf.predict(y[1], N, u[1]))}
+            z_tuned_cal = F.cascade_predict(model, y[0], TS, N, tuned.L_tensor, tuned.beta, u=u[0], observer=obs)
+            g_hand = F.choose_gain(per_start(sweep))
+            g_tuned = F.choose_gain(torch.stack([per_start(sweep[0]), per_start(z_tuned_cal)]))
+            L_guard = float(grid[g_hand.index])
+            row["guarded: hand L, tuned kept"] = [L_guard, bool(g_tuned.index)]
+            row["guarded: cascade hand / tuned"] = [
+                round(score(F.cascade_predict(model, y[1], TS, N, L_guard, 0.05, u=u[1], observer=obs)), 4),
+                round(score(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta, u=u[1], observer=obs)
+                            if g_tuned.index else obs.predict(y[1], N, u[1])), 4)]
+            y8 = x8 @ C.T + noise * torch.randn(8, T, 1, generator=gen3, dtype=F64)
+            y8[lost8] = float("nan")
+
+            def per_record(z):
+                return F.n_step_errors(z, x8, N)[..., settle:].mean(-1)
+
+            ol8 = per_record(obs.predict(y8, N, u8))
+            eight = {"open loop": ol8,
+                     "hand": per_record(F.cascade_predict(model, y8, TS, N, L_hand, 0.05, u=u8, observer=obs)),
+                     "tuned": per_record(F.cascade_predict(model, y8, TS, N, tuned.L_tensor, tuned.beta, u=u8,
+                                                           observer=obs)),
+                     "EKF": per_record(ekf.predict(y8, N, u8))}
+            row["eight test records: mean (records no worse than open loop)"] = {
+                k: [round(float(v.mean()), 4), int((v <= ol8 + 1e-12).sum())] for k, v in eight.items()}
             row["two calibration records: hand L"] = L_hand2
             row["two calibration records: cascade hand / tuned"] = [
                 round(score(F.cascade_predict(model, y[1], TS, N, L_hand2, 0.05, u=u[1], observer=obs)), 4),

@@ -26,7 +26,7 @@ from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write, file_sha256
 
 if TYPE_CHECKING:
-    from fnnbook.runner import Plan
+    from fnnbook.plan import Plan
 
 __all__ = ["deferring_interrupts", "execute", "execute_task", "ignoring_interrupts"]
 

@@ -44,7 +44,7 @@ from fnnbook.kernel import cpu_count, stop_kernels
 from fnnbook.layout import logs_dir, mark_killed, measured_seconds, staging_dir
 from fnnbook.outcome import (Action, Decision, Interrupted, Status, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line)
-from fnnbook.runner import Plan
+from fnnbook.plan import Plan
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["TASK_MEMORY", "blocking_interrupts", "UNMEASURED_SECONDS", "WORKERS_IGNORE_CTRL_C", "default_workers", "local_cluster",

@@ -40,7 +40,7 @@ from fnnbook.spec import PipelineSpec, Task
 from fnnlib.io import file_sha256
 
 if TYPE_CHECKING:
-    from fnnbook.runner import Plan
+    from fnnbook.plan import Plan
 
 __all__ = ["code_digest", "data_inputs", "environment", "fingerprint", "imported_modules", "inputs_of",
            "is_up_to_date", "product_files", "stale_reason", "stored"]

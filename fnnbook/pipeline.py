@@ -20,7 +20,8 @@ from fnnbook.layout import STATUS_FILE, clear_stale, holding, logs_dir, staging_
 from fnnbook.outcome import (Action, Decision, Interrupted, RunReport, TaskOutcome, blocked, blocked_by, interrupted,
                              progress_line, summary, utilisation_line)
 from fnnbook.fingerprint import NO_EARLIER_RUN
-from fnnbook.runner import Plan, check, decide
+from fnnbook.plan import Plan
+from fnnbook.runner import check, decide
 from fnnbook.spec import PipelineError, PipelineSpec
 
 __all__ = ["run", "run_here"]

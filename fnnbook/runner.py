@@ -9,11 +9,8 @@ either way.
 
 from __future__ import annotations
 
-import dataclasses
 import os
-import uuid
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +21,7 @@ from fnnbook.kernel import KERNEL, TASK_THREADS, cpu_count, kill_kernels, task_t
 from fnnbook.layout import STATUS_FILE, logs_dir, mark_killed, read_status, staging_dir, write_status
 from fnnbook.outcome import Action, Decision, RunReport, Status, TaskOutcome, blocked, blocked_by, summary
 from fnnbook.params import FINGERPRINT_FILE, check_task_parameters, read_parameters, resolve_parameters
+from fnnbook.plan import Plan, run_name
 from fnnbook.preflight import check_grid_upstream, check_task_values
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
@@ -33,47 +31,6 @@ __all__ = ["FINGERPRINT_FILE", "KERNEL", "STATUS_FILE", "TASK_THREADS", "Action"
            "RunReport", "Status", "TaskOutcome", "check", "cpu_count", "decide", "execute", "execute_task",
            "is_up_to_date", "kill_kernels", "stale_reason", "logs_dir", "mark_killed", "product_files", "read_status",
            "staging_dir", "summary", "task_threads", "write_status"]
-
-
-@dataclass(frozen=True)
-class Plan:
-    """What a run would execute: checked parameters and input fingerprints.
-
-    Attributes
-    ----------
-    profile : str
-    order : tuple of str
-        Selected tasks and their upstream tasks, upstream first.
-    selected : tuple of str
-        The tasks asked for (all when none were named).
-    parameters : mapping of str to dict
-        Task -> parameters papermill injects.
-    fingerprints : mapping of str to str
-        Task -> sha256 over its inputs (:mod:`fnnbook.fingerprint`); no absolute path enters it.
-    inputs : mapping of str to dict
-        Task -> each part of its fingerprint (notebook, parameters, the modules it imports, the environment,
-        the data it reads, its upstream fingerprints), kept in the run record to name a rerun's trigger.
-    missing_data : mapping of str to str
-        Task -> why it cannot run here (its data files are missing); such a
-        task and its dependants are "not run", the rest runs.
-    run : str
-        This run's name: its staging folder ``.staging/<run>/`` is its own.
-    """
-
-    profile: str
-    order: tuple[str, ...]
-    selected: tuple[str, ...]
-    parameters: Mapping[str, dict[str, Any]]
-    fingerprints: Mapping[str, str]
-    missing_data: Mapping[str, str] = dataclasses.field(default_factory=dict)
-    run: str = dataclasses.field(default_factory=lambda: run_name())
-    inputs: Mapping[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
-
-
-
-def run_name() -> str:
-    """A name no other run has: this process's id and a random part."""
-    return f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
 
 
 def _known_claims(claims_file: Path) -> set[str] | None:

@@ -22,6 +22,8 @@ from fnnlib.feedback import (
     TunedGains,
     GainSweep,
     sweep_gains,
+    GainChoice,
+    choose_gain,
     cascade_forward,
     noise_amplification,
     tune_gains,
@@ -112,7 +114,7 @@ from fnnlib.observers import UnscentedKalmanObserver
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
     "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
-    "tune_gains", "GainSweep", "sweep_gains",
+    "tune_gains", "GainSweep", "sweep_gains", "GainChoice", "choose_gain",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
     "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",

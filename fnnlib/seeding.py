@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import random
+from collections.abc import Iterator
 
 import numpy as np
 import torch
@@ -27,3 +29,18 @@ def make_generator(seed: int) -> torch.Generator:
     g = torch.Generator()
     g.manual_seed(int(seed))
     return g
+
+
+@contextlib.contextmanager
+def seeded(seed: int) -> Iterator[None]:
+    """Within the block, Python's, NumPy's and torch's global generators start from ``seed``; after it, each is
+    back where it was. The library builds its networks from a given seed this way (torch's layers draw their
+    initial weights from the global generator), so that building one leaves the caller's random state alone."""
+    py, nps, ts = random.getstate(), np.random.get_state(), torch.random.get_rng_state()
+    try:
+        seed_everything(seed)
+        yield
+    finally:
+        random.setstate(py)
+        np.random.set_state(nps)
+        torch.random.set_rng_state(ts)

@@ -57,8 +57,8 @@ __all__ = [
     "ALLOWED_GLOBALS", "BOTTLE_ODE_NAMES", "RELEASE_FILES", "RESIDUAL_RUNS", "MLP_RUNS", "SPIRAL_FEEDBACK_NAMES",
     "SPIRAL_LOSS_NAMES", "SPIRAL_ODE_NAMES", "MAX_PICKLE_BYTES", "PickledModule", "ReleaseError", "UnsafePickleError",
     "load_release_bottle_ode", "load_release_feedback_losses", "load_release_losses", "load_release_mlp",
-    "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "read_pickled_module",
-    "release_files", "release_present", "release_spiral",
+    "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "present_loss_names",
+    "read_pickled_module", "release_files", "release_present", "release_spiral",
 ]
 
 #: the largest release pickle read, on disk and unpacked (the release's largest ``.pt`` is 91 KB, 89 KB unpacked);
@@ -224,6 +224,19 @@ def release_present(data_dir: str | Path | None, under: str = "") -> bool:
     """
     files = release_files(data_dir, under)
     return bool(files) and all(v == "ok" for v in files.values())
+
+
+def _loss_key(name: str) -> str:
+    return "spiral_curve/iteration_ite135.txt" if name.startswith("../") else f"{_SPIRAL}/{name}"
+
+
+def present_loss_names(data_dir: str | Path | None) -> tuple[str, ...]:
+    """The names of :data:`SPIRAL_LOSS_NAMES` whose curve is in ``<data_dir>/release/`` with its published SHA-256.
+
+    A data directory may hold only some of the release's curves (the one at ``spiral_curve/iteration_ite135.txt``
+    is the one the paper's Fig. 5(c) draws); a why reads those present and says how many.
+    """
+    return tuple(n for n in SPIRAL_LOSS_NAMES if release_present(data_dir, _loss_key(n)))
 
 
 def _key(folder: str, name: str, choices: Sequence[str], what: str) -> str:
@@ -569,8 +582,7 @@ def load_release_feedback_losses(data_dir: str | Path, name: str) -> np.ndarray:
     """
     if name not in SPIRAL_LOSS_NAMES:
         raise ValueError(f"unknown loss curve {name!r}; the release has {list(SPIRAL_LOSS_NAMES)}")
-    key = "spiral_curve/iteration_ite135.txt" if name.startswith("../") else f"{_SPIRAL}/{name}"
-    path = _release_file(data_dir, key)
+    path = _release_file(data_dir, _loss_key(name))
     text = path.read_text(encoding="ascii").strip()
     if not (text.startswith("[") and text.endswith("]")):
         raise ReleaseError(f"{path}: expected a printed array '[...]'")

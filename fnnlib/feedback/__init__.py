@@ -40,10 +40,12 @@ from fnnlib.feedback.rollout import rollout_predict
 from fnnlib.feedback.tuning import (
     DEFAULT_TUNE_RECIPE,
     CascadeGains,
+    GainChoice,
     GainSweep,
     TunedGains,
     TuneRecipe,
     cascade_forward,
+    choose_gain,
     prediction_loss,
     sweep_gains,
     tune_gains,
@@ -52,7 +54,7 @@ from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
 __all__ = ["DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
            "check_measurements", "model_jacobian", "output_jacobian", "MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
-           "noise_amplification", "prediction_loss", "sweep_gains", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_predict", "cascade_predict_loop",
+           "noise_amplification", "prediction_loss", "sweep_gains", "choose_gain", "GainChoice", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_predict", "cascade_predict_loop",
            "cascade_sweep", "check_N", "check_beta", "check_betas", "check_gain", "decay_factors", "decayed_gains", "eval_field",
            "feedback_layer", "gain_batch", "gain_compact", "gain_matrix", "observe_gains", "rollout_predict",
            "run_cascade", "spectral_radius"]

@@ -434,3 +434,66 @@ def sweep_gains(cost: Callable[[float, float], float], L_grid, beta_grid) -> Gai
     if not math.isfinite(table[i][j]):
         raise ValueError("sweep_gains: no pair of the grid has a finite cost")
     return GainSweep(Ls[i], betas[j], table[i][j], Ls, betas, table)
+
+
+@dataclass(frozen=True)
+class GainChoice:
+    """What :func:`choose_gain` kept: ``index`` (the candidate kept), ``best`` (the candidate of lowest mean
+    error), ``improvement`` (the mean over the windows of the reference's error minus ``best``'s), ``se`` (its
+    standard error over the windows), ``windows`` (how many), and ``means`` (each candidate's mean error)."""
+
+    index: int
+    best: int
+    improvement: float
+    se: float
+    windows: int
+    means: tuple[float, ...]
+
+
+def choose_gain(errors: Tensor, *, reference: int = 0, windows: int = 8, z: float = 2.0) -> GainChoice:
+    r"""Keep a feedback gain only where it earns its place on the tuning record, else the reference.
+
+    A gain chosen by the lowest error on a noisy tuning record can lose to the feedback switched off on the
+    next record: its gain on the tuning record was the noise's. The rule: cut the start times into ``windows``
+    consecutive windows (the N-step errors of nearby start times are correlated, windows much less so), take
+    each candidate's mean error per window, and keep the candidate of lowest overall mean only when its paired
+    improvement over ``reference`` (e.g. ``L = 0``: the open-loop rollout from the observer, the first layer)
+    exceeds ``z`` standard errors over the windows. Otherwise keep ``reference``.
+
+    Parameters
+    ----------
+    errors : Tensor, shape (K, T) or (K, B, T)
+        Each candidate's error per start time on the *tuning* data (per record with B), NaN where its target
+        is missing (such start times are left out of every window's mean).
+    reference : int
+        The candidate kept unless another one beats it beyond the spread.
+    windows : int
+        Windows per record (>= 2).
+    z : float
+        How many standard errors the improvement must exceed (>= 0).
+    """
+    e = torch.as_tensor(errors, dtype=torch.float64)
+    if e.ndim == 2:
+        e = e[:, None]
+    if e.ndim != 3 or e.shape[0] < 1:
+        raise ValueError(f"errors must be (K, T) or (K, B, T), one row per candidate; got shape {tuple(e.shape)}")
+    K, B, T = e.shape
+    if not 0 <= int(reference) < K:
+        raise ValueError(f"reference must index one of the {K} candidates, got {reference}")
+    if int(windows) < 2 or T < int(windows):
+        raise ValueError(f"need 2 <= windows <= T start times per record; got windows={windows}, T={T}")
+    if not (math.isfinite(z) and z >= 0):
+        raise ValueError(f"z must be finite and >= 0, got {z}")
+    if bool(torch.isinf(e).any()) or bool(torch.isnan(e).all(-1).any()):
+        raise ValueError("errors must be finite where given (NaN marks a missing target), with some per record")
+    cuts = torch.linspace(0, T, int(windows) + 1).round().long().tolist()
+    per = torch.stack([e[..., a:b].nanmean(-1) for a, b in zip(cuts[:-1], cuts[1:])], -1).reshape(K, -1)
+    if bool(torch.isnan(per).any()):
+        raise ValueError("a window holds no present target: use fewer windows")
+    means = per.mean(-1)
+    best = int(means.argmin())
+    d = per[int(reference)] - per[best]
+    imp = float(d.mean())
+    se = float(d.std(unbiased=True) / math.sqrt(d.numel()))
+    keep = best if best != int(reference) and imp > z * se else int(reference)
+    return GainChoice(keep, best, imp, se, int(d.numel()), tuple(float(m) for m in means))

@@ -8,7 +8,7 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.models.neural_ode import ACTIVATIONS, NeuralODE
-from fnnlib.seeding import seed_everything
+from fnnlib.seeding import seeded
 
 
 class NeuralODEEnsemble(nn.Module):
@@ -33,7 +33,8 @@ class NeuralODEEnsemble(nn.Module):
         One of ``ACTIVATIONS``.
     seeds : sequence of int
         One seed per member: member ``e`` starts from the weights ``NeuralODE(n_state, hidden,
-        activation)`` gets after ``seed_everything(seeds[e])``.
+        activation)`` gets after ``seed_everything(seeds[e])`` (inside :func:`~fnnlib.seeding.seeded`: the
+        caller's random state is left alone).
     """
 
     #: batches up to this size take the batched-matmul path, larger ones a loop over the members
@@ -49,8 +50,8 @@ class NeuralODEEnsemble(nn.Module):
         self.n_state, self.hidden, self.activation, self.seeds = int(n_state), tuple(hidden), activation, seeds
         members = []
         for s in seeds:
-            seed_everything(s)
-            members.append(NeuralODE(n_state, hidden, activation))
+            with seeded(s):
+                members.append(NeuralODE(n_state, hidden, activation))
         self._stack(members)
 
     @classmethod

@@ -24,7 +24,7 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.models.neural_ode import ACTIVATIONS, mlp
-from fnnlib.seeding import seed_everything
+from fnnlib.seeding import seeded
 
 __all__ = ["ScaledField"]
 
@@ -81,8 +81,8 @@ class ScaledField(nn.Module):
             self.register_buffer(name, t)
         nets = []
         for s in seeds:
-            seed_everything(s)
-            nets.append(mlp(n + m, n, self.hidden, activation).double())
+            with seeded(s):
+                nets.append(mlp(n + m, n, self.hidden, activation).double())
         linears = [[mod for mod in net if isinstance(mod, nn.Linear)] for net in nets]
         self.weights = nn.ParameterList([nn.Parameter(torch.stack([ls[i].weight.detach().T for ls in linears]))
                                          for i in range(len(linears[0]))])  # (E, in, out)

@@ -6,19 +6,27 @@ torque is ``+c u`` about ``z_B`` (see :mod:`fnnlib.systems.quadrotor`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import torch
 from torch import Tensor
 
-if TYPE_CHECKING:
-    from fnnlib.systems.quadrotor import QuadrotorParams
+__all__ = ["Arms", "allocation_inverse", "allocation_matrix"]
 
-__all__ = ["allocation_inverse", "allocation_matrix"]
+
+class Arms(Protocol):
+    """What the allocation reads of a vehicle (:class:`fnnlib.systems.quadrotor.QuadrotorParams` has both): the
+    moment arm ``d = l / sqrt(2)`` in m and the torque coefficient ``c`` in m."""
+
+    @property
+    def moment_arm(self) -> float: ...
+
+    @property
+    def torque_coeff(self) -> float: ...
 
 
 def allocation_matrix(
-    params: QuadrotorParams, *, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
+    params: Arms, *, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
 ) -> Tensor:
     """Control allocation ``C`` of Eq. (27): ``[T, tau_x, tau_y, tau_z] = C u``.
 
@@ -41,7 +49,7 @@ def allocation_matrix(
 
 
 def allocation_inverse(
-    params: QuadrotorParams, *, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
+    params: Arms, *, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
 ) -> Tensor:
     """``C^{-1}``: motor thrusts from ``[T, tau]``, ``u = C^{-1} [T, tau]``.
 

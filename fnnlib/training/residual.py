@@ -17,6 +17,7 @@ from fnnlib.metrics import relative_rmse
 from fnnlib.models import ACTIVATIONS
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
 from fnnlib.quadrotor_presets import PAPER_RESIDUAL_RECIPE
+from fnnlib.seeding import seeded
 from fnnlib.systems.quadrotor import STATE_GROUPS, Quadrotor
 from fnnlib.training.external import InputRecipe, InputTrainHistory, make_segments, rollout, train_with_inputs
 
@@ -120,8 +121,8 @@ def train_residual_ensemble(seeds: Sequence[int], train: Flights, recipe: Residu
         raise ValueError(f"validation flights have Ts = {val.Ts}, training flights Ts = {train.Ts}; they must match")
     members = []
     for s in seeds:
-        torch.manual_seed(int(s))
-        members.append(AeroResidual(recipe.hidden, recipe.activation).to(dtype))
+        with seeded(int(s)):
+            members.append(AeroResidual(recipe.hidden, recipe.activation).to(dtype))
     E = len(members)
     ens = EnsembleResidual(members).to(dtype)
     step = closed_loop_step(ens, controller, plant, Ts=train.Ts, substeps=substeps, members=E)

@@ -368,14 +368,15 @@ if authors is not None:
 
 # %%
 def release_curves():
-    """The release's loss curves, or None (with a printed line) where they are not all in data_dir."""
-    keys = [("spiral_curve/" if n.startswith("../") else "spiral_curve/trained_model/") + n.removeprefix("../")
-            for n in release.SPIRAL_LOSS_NAMES]
-    if not all(release.release_present(data_dir, k) for k in keys):
-        print(f"the release's loss curves are not read: not all in data_dir = {data_dir!r} (fnn-pipeline data fetch "
-              "--release)")
+    """The release's loss curves present in data_dir (its published SHA-256), or None (with a printed line)."""
+    names = release.present_loss_names(data_dir)
+    missing = [n for n in release.SPIRAL_LOSS_NAMES if n not in names]
+    if missing:
+        print(f"{len(missing)} of the release's {len(release.SPIRAL_LOSS_NAMES)} loss curves are not in "
+              f"data_dir = {data_dir!r}: {missing}")
+    if not names:
         return None
-    return {name: release.load_release_feedback_losses(data_dir, name) for name in release.SPIRAL_LOSS_NAMES}
+    return {name: release.load_release_feedback_losses(data_dir, name) for name in names}
 
 
 # %%

@@ -465,13 +465,25 @@ def test_a_feedback_loss_curve_is_cut_at_its_iteration_and_checked(tmp_path: Pat
         release.load_release_feedback_losses(tmp_path, "iteration_ite6.txt")
 
 
+def test_present_loss_names_are_the_curves_there_with_their_published_digest(tmp_path: Path) -> None:
+    assert release.present_loss_names(tmp_path) == ()
+    key = "spiral_curve/iteration_ite135.txt"
+    _place(tmp_path, key).write_text("[1.0 0.4 0.0]")  # there, but not the published file
+    assert release.present_loss_names(tmp_path) == ()
+    if DATA and (Path(DATA) / "release" / key).is_file():
+        _place(tmp_path, key).write_bytes((Path(DATA) / "release" / key).read_bytes())
+        assert release.present_loss_names(tmp_path) == ("../iteration_ite135.txt",)
+
+
 @real
 def test_real_feedback_loss_curves_end_where_their_networks_were_saved() -> None:
     """Each curve stops at the iteration of its FeedbackNN_ite<K> network, below the stopping level 0.5, at the
     loss recorded in that network's file name."""
     saved = {n.split("_")[1]: _recorded_loss(n) for n in release.SPIRAL_FEEDBACK_NAMES if "_loss" in n}
     assert len(release.SPIRAL_LOSS_NAMES) == 6
-    for name in release.SPIRAL_LOSS_NAMES:
+    present = release.present_loss_names(DATA)  # a data directory may hold only some curves (ours: ite135)
+    assert present, "no loss curve of the release in the data directory"
+    for name in present:
         curve = release.load_release_feedback_losses(DATA, name)
         ite = name.rsplit("/", 1)[-1].split("_")[1].removesuffix(".txt")
         assert len(curve) == int(ite.removeprefix("ite")) and curve[-1] < 0.5 < curve[0]
