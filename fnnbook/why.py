@@ -390,7 +390,8 @@ def _axes_text(grid: WhyGrid) -> str:
 def _ranges(axis: Axis, ok: np.ndarray, keep: np.ndarray | None = None, *, short: bool = False) -> str:
     """Where along a 1-D axis the rule holds, in words: ``holds for noise_std <= 0.003, fails at 0.01 and
     above``; ``holds at 4, 6, fails at 5``. Only the values where ``keep`` is true (the feasible ones) are
-    read; ``short`` writes a line that holds (or fails) throughout as ``holds at all 12 level values``."""
+    read; ``short`` writes a line of more than 4 values that holds (or fails) throughout as ``holds at all 12
+    level values``."""
     keep = np.ones(len(axis.values), bool) if keep is None else np.asarray(keep, bool)
     vals = [v for v, k in zip(axis.values, keep) if k]
     ok = np.asarray([o for o, k in zip(ok, keep) if k], bool)
@@ -401,7 +402,7 @@ def _ranges(axis: Axis, ok: np.ndarray, keep: np.ndarray | None = None, *, short
         return f"{'holds' if held else 'fails'} at {axis.name} = {_text(vals[0])}"
     if not failed or not held:
         word = "holds" if not failed else "fails"
-        if short:
+        if short and len(vals) > 4:
             return f"{word} at all {len(vals)} {axis.name} values"
         return f"{word} at every {axis.name} ({', '.join(_text(v) for v in vals)})"
     if numeric and vals == sorted(vals):
