@@ -137,16 +137,30 @@ def _relative_paths(text: str, paths: list[str], root: Path) -> str:
     return text
 
 
-def _copy_for_book(src: Path, dst: Path, root: Path) -> None:
-    """Copy an executed notebook for the book: defaults hidden, code folded, paths relative.
+def _shown_path(path: str, root: Path, output_root: Path) -> str:
+    """A path as a page shows it: relative to the repository inside it, ``<output root>/...`` inside the
+    output root, else unchanged (a relative path is read from the repository, where the runner starts)."""
+    p = Path(path) if os.path.isabs(path) else root / path
+    p = Path(os.path.normpath(p))
+    for base, prefix in ((Path(os.path.normpath(root)), ""), (Path(os.path.normpath(output_root)), "<output root>")):
+        if p == base or base in p.parents:
+            rel = os.path.relpath(p, base)
+            return f"{prefix}/{rel}" if prefix else rel
+    return path
+
+
+def _copy_for_book(src: Path, dst: Path, root: Path, *, out_dir: Path | None = None,
+                   output_root: Path | None = None) -> None:
+    """Copy an executed notebook for the book: defaults hidden, code folded, no path of the machine shown.
 
     * The cell of default parameters is removed: papermill's injected cell
       right after it shows the values the run used, so the defaults would
       only mislead a reader.
     * Long and plotting code cells are folded (:func:`_fold`).
-    * The paths papermill injected (``out_dir``, ``data_dir``,
-      ``upstream_dirs``) and the repository root are written relative to
-      the repository ``root``, wherever they appear (sources, outputs).
+    * The paths papermill injected, wherever they appear (sources, outputs): ``data_dir`` reads ``DATA_DIR``
+      (the data directory given to the run), ``out_dir`` the task's output folder (``out_dir``, not the
+      staging folder it ran in), and the other paths (``upstream_dirs``) relative to the repository ``root``
+      or as ``<output root>/...``; the repository root itself is written relative.
     """
     import nbformat
 
@@ -157,11 +171,22 @@ def _copy_for_book(src: Path, dst: Path, root: Path) -> None:
             cell.metadata["tags"] = [*tags, "remove-cell"]
         _fold(cell)
     params = nb.metadata.get("papermill", {}).get("parameters", {})
-    paths = [str(root)]
-    for value in params.values():
+    output_root = output_root if output_root is not None else root / "outputs"
+    shown: dict[str, str] = {}
+    for key, value in params.items():
         values = value.values() if isinstance(value, dict) else [value]
-        paths += [v for v in values if isinstance(v, str)]
-    dst.write_text(_relative_paths(nbformat.writes(nb), paths, root), encoding="utf-8")
+        for v in (v for v in values if isinstance(v, str) and "/" in v):  # a path, never a bare word
+            if key == "data_dir":
+                shown[v] = "DATA_DIR"
+            elif key == "out_dir" and out_dir is not None:
+                shown[v] = _shown_path(str(out_dir), root, output_root)
+            elif key.endswith("_dir") or key.endswith("_dirs"):
+                shown[v] = _shown_path(v, root, output_root)
+    text = nbformat.writes(nb)
+    for old in sorted(shown, key=len, reverse=True):
+        for a, b in ((old, shown[old]), (json.dumps(old)[1:-1], json.dumps(shown[old])[1:-1])):
+            text = text.replace(a, b)
+    dst.write_text(_relative_paths(text, [str(root)], root), encoding="utf-8")
 
 
 def _not_run_page(title: str, why: str, rerun: str) -> str:
@@ -284,7 +309,8 @@ def _assemble(spec: PipelineSpec, profile: str, book: Path, aside: Path, claims:
                 pages[name] = f"{name}/{name}.md"
                 notes[name] = f"not run: {why}"
                 continue
-            _copy_for_book(out / f"{name}.ipynb", target / f"{name}.ipynb", spec.root)
+            _copy_for_book(out / f"{name}.ipynb", target / f"{name}.ipynb", spec.root, out_dir=out,
+                           output_root=spec.output_root)
             if (out / "figures").is_dir():
                 shutil.copytree(out / "figures", target / "figures")
             if (out / RESULTS_FILENAME).is_file():

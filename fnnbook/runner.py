@@ -120,7 +120,6 @@ def check(
                 fingerprints=fingerprints, missing_data=missing_data, run=run, inputs=inputs)
 
 
-
 def _check_release(spec: PipelineSpec, task: Task, params: Mapping[str, Any]) -> None:
     """A release file the task reads that is there with another SHA-256 than the published one: an error now, not
     inside the notebook (a missing file is no error: the task then judges our networks only)."""

@@ -289,7 +289,12 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
                        "train_iterations": _N1, "train_lr": _POS, "L_start": _POS, "beta_start": _NONNEG,
                        "horizons": _horizons, "hand_L_grid": _vec(minimum=0.0), "hand_beta_grid": _vec(minimum=0.0),
                        "kf_q": _vec(2, 0.0), "kf_qd_grid": _vec(minimum=0.0), "kf_r": _POS, "overflow_after": _N1, "overflow_gap": _N0,
-                       "series_N": _N1},
+                       "series_N": _N1, "baseline_starts": partial(C.some_of, choices=("free", "encoder")),
+                       "baseline_horizon": _N1},
+    "why_tanks": {"L_grid": _vec(minimum=0.0), "beta_grid": _vec(minimum=0.0),
+                  "windows": partial(C.some_of, choices=("all", "outside_overflow")),
+                  "first_estimates": partial(C.some_of, choices=("first_level", "least_squares")),
+                  "b5_starts": partial(C.some_of, choices=("free", "encoder")), "b5_horizons": _vec(minimum=1.0)},
     "why_beyond": {"objectives": partial(C.some_of, choices=("one_step", "multi_step", "judged")),
                    "multi_step_N": _N1, "min_seeds_grid": partial(C.number_list, minimum=2.0, distinct=True)},
 })
@@ -397,6 +402,8 @@ def _cascaded_tanks(p: Mapping[str, Any]) -> None:
     _need(max(p["horizons"]) + p["n_init"] < samples and p["train_N"] < samples // 2,
           f"the horizons (largest {max(p['horizons'])}) after n_init = {p['n_init']} samples and train_N = "
           f"{p['train_N']} must fit a record of {samples} samples")
+    _need(p["n_init"] + p["baseline_horizon"] <= samples, f"baseline_horizon = {p['baseline_horizon']} after n_init = "
+          f"{p['n_init']} samples must fit a record of {samples} samples")
     _need(p["series_N"] in p["horizons"], f"series_N = {p['series_N']} must be one of horizons = {p['horizons']}")
     _need(p["arx_max_order"] + 1 <= p["n_init"] < samples // 2,
           f"n_init (the measured samples a simulation starts from) must be in {p['arx_max_order'] + 1}.."
@@ -514,6 +521,14 @@ def _why_bottle(p: Mapping[str, Any]) -> None:
     _need(min(p["L_grid"]) > 0, f"L_grid must list gains > 0 (L = 0 is the open loop, judged anyway), got {p['L_grid']}")
 
 
+def _why_tanks(p: Mapping[str, Any]) -> None:
+    _why_grid(p, "L_grid", "beta_grid", "windows", "first_estimates", "b5_starts", "b5_horizons")
+    _need(min(p["L_grid"]) > 0, f"L_grid must list gains > 0 (L = 0 is the open loop, judged anyway), got {p['L_grid']}")
+    _need(all(float(h).is_integer() for h in p["b5_horizons"]), f"b5_horizons must list whole samples, got {p['b5_horizons']}")
+    _need("all" in p["windows"] and "first_level" in p["first_estimates"],
+          "windows must hold 'all' and first_estimates 'first_level' (the chapter's own point, checked against its numbers)")
+
+
 def _why_beyond(p: Mapping[str, Any]) -> None:
     _why_grid(p, "objectives", "min_seeds_grid")
     _need(all(float(k).is_integer() for k in p["min_seeds_grid"]),
@@ -528,6 +543,7 @@ RELATIONS: Mapping[str, Callable[[Mapping[str, Any]], None]] = MappingProxyType(
     "why_quadrotor_point": _why_quadrotor_point, "why_quadrotor": _aggregate,
     "why_sec3": _why_sec3,
     "why_bottle": _why_bottle, "why_beyond": _why_beyond, "cascaded_tanks": _cascaded_tanks,
+    "why_tanks": _why_tanks,
 })
 """Per notebook: the checks of values that depend on each other, run after each value passed its own check."""
 

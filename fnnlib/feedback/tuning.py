@@ -60,12 +60,22 @@ class CascadeGains(nn.Module):
         Upper bound of the gain's eigenvalues; at most :math:`2/T_s` (Eq. (25)).
     eps : float
         The :math:`\varepsilon` of the full parametrization.
+    members : int
+        The state is ``members`` equal blocks (the stacked members of an ensemble,
+        :class:`~fnnlib.models.scaled.ScaledField`), each with a decay rate of its own: :math:`\beta` is then
+        (members,), block ``e`` decays as :math:`L_e e^{-\beta_e i}`. Diagonal gains only, so that the blocks
+        never mix and each is tuned as it would be alone.
     """
 
     def __init__(self, n: int, Ts: float, *, L0: float | Tensor, beta0: float, full: bool = False,
-                 L_max: float | None = None, eps: float = 1e-3):
+                 L_max: float | None = None, eps: float = 1e-3, members: int = 1):
         super().__init__()
         self.n, self.Ts, self.full, self.eps = int(n), check_positive(Ts, name="Ts"), bool(full), float(eps)
+        if isinstance(members, bool) or int(members) != members or members < 1 or self.n % int(members):
+            raise ValueError(f"members must be an integer >= 1 dividing n = {self.n}, got {members!r}")
+        self.members = int(members)
+        if self.members > 1 and self.full:
+            raise ValueError("members > 1 needs a diagonal gain (a full gain would mix the members' blocks)")
         self.L_max = 1.0 / self.Ts if L_max is None else check_positive(L_max, name="L_max")
         if self.L_max * self.Ts > 2.0:
             raise ValueError(f"L_max = {self.L_max} allows rho(I - Ts L) >= 1 (Eq. (25)); it must be <= 2/Ts")
@@ -81,7 +91,8 @@ class CascadeGains(nn.Module):
             self.raw_L = nn.Parameter(torch.diag((p - self.eps).sqrt()))
         else:
             self.raw_L = nn.Parameter(torch.log(s / (1 - s)))  # logit
-        self.raw_beta = nn.Parameter(torch.tensor(_inverse_softplus(beta0), dtype=torch.float64))
+        raw_beta = torch.tensor(_inverse_softplus(beta0), dtype=torch.float64)
+        self.raw_beta = nn.Parameter(raw_beta if self.members == 1 else raw_beta.repeat(self.members))
 
     def L(self) -> Tensor:
         """The base gain: (n,) diagonal, or (n, n) symmetric for ``full``; float64."""
@@ -93,18 +104,21 @@ class CascadeGains(nn.Module):
         return 0.5 * (G + G.T)
 
     def beta(self) -> Tensor:
-        """The decay rate, softplus of its raw parameter (float64 scalar)."""
+        """The decay rate, softplus of its raw parameter (float64 scalar; (members,) with ``members > 1``)."""
         return TF.softplus(self.raw_beta)
 
     def L_stack(self, N: int, dtype: torch.dtype) -> list[Tensor]:
         r"""Eq. (11) with gradients: :math:`L_i = L e^{-\beta i}`, ``i = 0 .. N-1``, in ``dtype``."""
         L, beta = self.L(), self.beta()
+        if self.members > 1:  # each block's own decay rate, on its n / members states
+            beta = beta.repeat_interleave(self.n // self.members)
         return [(L * torch.exp(-beta * i)).to(dtype) for i in range(int(N))]
 
     def values(self) -> dict:
-        """The current ``L`` (list) and ``beta`` (float) as plain values."""
+        """The current ``L`` (list) and ``beta`` (float; a list of one per member with ``members > 1``)."""
         with torch.no_grad():
-            return {"L": self.L().tolist(), "beta": float(self.beta())}
+            beta = self.beta()
+            return {"L": self.L().tolist(), "beta": float(beta) if self.members == 1 else beta.tolist()}
 
 
 def cascade_forward(f: VectorField, x: Tensor, Ts: float, N: int, gains: CascadeGains, *, u: Tensor | None = None,
@@ -150,7 +164,8 @@ class TuneRecipe:
     first layer's observer (partial measurements; off by default: on noisy records it fits the noise of the
     tuning record, measured by ``benchmarks/study_partial_cascade.py``); ``settle``: the first start
     times not scored (an observer's start-up transient, where any large gain helps and which a prediction
-    made after it never meets). Checked in ``__post_init__``; replace a field with
+    made after it never meets); ``members``: the state is that many stacked members of an ensemble, each tuned
+    as it would be alone (:class:`CascadeGains`; their losses add, their gradients never mix). Checked in ``__post_init__``; replace a field with
     ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
     own-system chapter.
     """
@@ -164,6 +179,7 @@ class TuneRecipe:
     train_model: bool = False
     tune_observer: bool = False
     settle: int = 0
+    members: int = 1
 
     def __post_init__(self):
         L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
@@ -180,6 +196,8 @@ class TuneRecipe:
             check_positive(self.L_max, name="TuneRecipe.L_max")
         if isinstance(self.settle, bool) or not isinstance(self.settle, int) or self.settle < 0:
             raise ValueError(f"TuneRecipe.settle must be an integer >= 0, got {self.settle!r}")
+        if isinstance(self.members, bool) or not isinstance(self.members, int) or self.members < 1:
+            raise ValueError(f"TuneRecipe.members must be an integer >= 1, got {self.members!r}")
         for name in ("full", "train_model", "tune_observer"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"TuneRecipe.{name} must be a bool, got {getattr(self, name)!r}")
@@ -199,7 +217,7 @@ class TunedGains:
 
     gains: CascadeGains
     L: list
-    beta: float
+    beta: float | list
     loss: list[float] = field(default_factory=list)
     seconds: float = 0.0
     observer: MeasuredFeedback | None = None
@@ -219,7 +237,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
                L0: float | Tensor | None = None, beta0: float | None = None, iterations: int | None = None,
                lr: float | None = None, u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
                train_model: bool | None = None, tune_observer: bool | None = None, settle: int | None = None,
-               recipe: TuneRecipe | None = None,
+               members: int | None = None, recipe: TuneRecipe | None = None,
                objective: Objective | None = None, mask: Tensor | None = None,
                observer: MeasuredFeedback | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
@@ -255,6 +273,10 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         With an ``observer``: also descend on its output gain (:class:`TuneRecipe`).
     settle : int
         Start times not scored at the beginning of each record (:class:`TuneRecipe`).
+    members : int
+        The state (and the outputs) are that many stacked members of an ensemble, e.g. a
+        :class:`~fnnlib.models.scaled.ScaledField` of several seeds with a block-diagonal observer: each member
+        gets its own gains and decay rate (:class:`TuneRecipe`); the result's ``beta`` is then a list.
     recipe : TuneRecipe, optional
         All of ``L0 .. tune_observer`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
     objective : callable, optional
@@ -269,7 +291,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         that of the predicted outputs. The result's ``observer`` is the one used (tuned with ``tune_observer``).
     """
     recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
-                     train_model=train_model, tune_observer=tune_observer, settle=settle)
+                     train_model=train_model, tune_observer=tune_observer, settle=settle, members=members)
     if objective is not None and not callable(objective):
         raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
     meas, dt, N, n = measured(f, y, Ts, N, t=t, u=u, mask=mask, observer=observer)
@@ -280,7 +302,8 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         raise ValueError(f"the tuning data need more than N + settle = {N + recipe.settle} samples per trajectory, "
                          f"got {x.shape[-2]}")
     L0 = recipe.L0 if isinstance(recipe.L0, (int, float)) else torch.tensor(recipe.L0, dtype=torch.float64)
-    gains = CascadeGains(n, longest(dt), L0=L0, beta0=recipe.beta0, full=recipe.full, L_max=recipe.L_max)
+    gains = CascadeGains(n, longest(dt), L0=L0, beta0=recipe.beta0, full=recipe.full, L_max=recipe.L_max,
+                         members=recipe.members)
     params = list(gains.parameters())
     obs_gain = None
     if observer is not None:
@@ -395,7 +418,7 @@ class GainSweep:
     every pair (``len(L_grid)`` rows by ``len(beta_grid)`` columns; ``inf`` where the cost was not finite)."""
 
     L: float
-    beta: float
+    beta: float | list
     cost: float
     L_grid: list[float]
     beta_grid: list[float]

@@ -60,3 +60,87 @@ def test_overflow_episodes_and_their_errors() -> None:
     assert overflow_episodes(s, gap=2) == [(1, 6), (9, 10)]
     with pytest.raises(ValueError, match="after"):
         episode_errors(y_hat, y, eps, after=0)
+
+
+def _ensemble_setup(E: int):
+    from fnnlib.models.scaled import ScaledField
+    rec = F.tanks_records("synthetic", n_samples=80, seed=0, noise_std=0.02)
+    kw = dict(x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
+    return rec, (lambda seeds: ScaledField(2, 1, [8], "tanh", seeds, **kw))
+
+
+def test_depths_are_the_cascade_and_the_open_loop_at_every_horizon() -> None:
+    """One cascade of depth N gives every shorter horizon: entry N'-1 equals cascade_predict at N' (a gain) and
+    the observer's open-loop predict (L = 0)."""
+    from fnnbook.tanks_eval import depths
+    rec, field = _ensemble_setup(1)
+    model = field([0])
+    obs = F.MeasuredFeedback(model, torch.tensor([[0.02], [0.15]], dtype=torch.float64), C, rec.Ts,
+                             x0=rec.y_val[0, 0].repeat(2), allow_unstable=True)
+    L = torch.tensor([[0.0, 0.0], [0.03, 0.03]], dtype=torch.float64)
+    beta = torch.tensor([[0.0, 0.0], [0.2, 0.2]], dtype=torch.float64)
+    d = depths(model, obs, rec.y_val, rec.u_val, rec.Ts, L, beta, 6)
+    assert d.shape == (6, 2, rec.y_val.shape[0], 2)
+    for N in (1, 3, 6):
+        torch.testing.assert_close(d[N - 1, 0], obs.predict(rec.y_val, N, rec.u_val))
+        ref = F.cascade_predict(model, rec.y_val, rec.Ts, N, 0.03, 0.2, u=rec.u_val, observer=obs)
+        torch.testing.assert_close(d[N - 1, 1], ref)
+
+
+def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
+    """tune_gains(members=E) on a stacked field with a block-diagonal observer gives each member the model,
+    gains and decay rate it gets alone (losses add, gradients never mix)."""
+    from fnnbook.tanks_eval import _blocks
+    rec, field = _ensemble_setup(2)
+    Lo = torch.tensor([[0.02], [0.15]], dtype=torch.float64)
+
+    def tune(seeds):
+        E = len(seeds)
+        m = field(seeds)
+        y = rec.y_est.expand(-1, E).contiguous()
+        obs = F.MeasuredFeedback(m, _blocks(Lo, E), _blocks(C, E), rec.Ts, x0=y[0, 0].repeat(2 * E),
+                                 allow_unstable=True)
+        return m, F.tune_gains(m, y, rec.Ts, 4, u=rec.u_est, observer=obs, L0=0.01, beta0=0.1, iterations=3,
+                               lr=0.01, train_model=True, members=E)
+    both, tb = tune([0, 1])
+    for e, seed in enumerate((0, 1)):
+        one, t1 = tune([seed])
+        np.testing.assert_allclose(tb.L[2 * e:2 * e + 2], t1.L, rtol=1e-7)
+        assert tb.beta[e] == pytest.approx(t1.beta, rel=1e-7)
+        for a, b in zip(both.member(e).parameters(), one.parameters()):
+            torch.testing.assert_close(a, b, rtol=1e-6, atol=1e-9)
+    with pytest.raises(ValueError, match="members"):
+        F.tune_gains(both, rec.y_est.expand(-1, 2), rec.Ts, 4, u=rec.u_est, L0=0.01, beta0=0.1, iterations=1,
+                     lr=0.01, members=3)
+
+
+def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() -> None:
+    from fnnbook.tanks_eval import outside_overflow
+    y = torch.zeros(10, 1, dtype=torch.float64)
+    x_pred = torch.zeros(10, 2, dtype=torch.float64)
+    x_pred[4, 1] = 3.0  # row 4 predicts target 5 (N = 1) wrongly
+    keep = np.ones(10, dtype=bool)
+    assert n_step_output_rmse(x_pred, y, 1, C) > 0
+    keep[5] = False
+    assert n_step_output_rmse(x_pred, y, 1, C, keep=keep) == 0.0
+    rec = F.tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
+    s = {"overflow_gap": 3, "overflow_after": 7}
+    eps = overflow_episodes(rec.saturated("val").numpy(), gap=3)
+    out = outside_overflow(rec, s)
+    for a, b in eps:
+        assert not out[a:b + 7].any()
+    assert out.sum() == 400 - len(set().union(*[range(a, min(b + 7, 400)) for a, b in eps]))
+
+
+def test_trained_ensembles_load_as_saved(tmp_path) -> None:
+    from fnnbook.tanks_eval import load_trained, one_member, save_trained
+    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
+    from fnnbook.tanks_eval import _field
+    m = _field(s, [3, 4])
+    save_trained(tmp_path / "m.pt", {"seeds": [3, 4], "observer_trained": m, "no_feedback": _field(s, [3, 4]),
+                                     "tuned_L": [0.1] * 4, "tuned_beta": [0.2, 0.3], "hand": []})
+    back = load_trained(tmp_path / "m.pt", s)
+    x, u = torch.rand(3, 4, dtype=torch.float64), torch.rand(3, 1, dtype=torch.float64)
+    torch.testing.assert_close(back["observer_trained"](0.0, x, u), m(0.0, x, u))
+    torch.testing.assert_close(back["observer_trained"].member(1)(0.0, x[:, 2:], u), one_member(s, 4)(0.0, x[:, 2:], u))
+    assert back["tuned_beta"] == [0.2, 0.3]
