@@ -144,3 +144,21 @@ def test_trained_ensembles_load_as_saved(tmp_path) -> None:
     torch.testing.assert_close(back["observer_trained"](0.0, x, u), m(0.0, x, u))
     torch.testing.assert_close(back["observer_trained"].member(1)(0.0, x[:, 2:], u), one_member(s, 4)(0.0, x[:, 2:], u))
     assert back["tuned_beta"] == [0.2, 0.3]
+
+
+def test_the_baseline_start_is_chosen_on_the_estimation_record_only() -> None:
+    """The no-feedback baseline keeps the start whose free run of the estimation record is best: the validation
+    record changes its score, never the choice."""
+    import dataclasses
+
+    from fnnbook.tanks_eval import LEVEL, no_feedback, one_member
+    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+             n_init=5, baseline_horizon=10, baseline_starts=["free", "encoder"], train_iterations=3, train_lr=0.01,
+             observer_gain=[0.02, 0.15])
+    a = no_feedback(rec, 0, s, one_member(s, 0), LEVEL)
+    bad = dataclasses.replace(rec, y_val=rec.y_val.flip(0) + 3.0)
+    b = no_feedback(bad, 0, s, one_member(s, 0), LEVEL)
+    assert a["start"] == b["start"] and a["estimation_free_run"] == b["estimation_free_run"]
+    assert a["start"] == min(a["estimation_free_run"], key=a["estimation_free_run"].get)
+    assert a["free_run"] != b["free_run"]  # the validation record is what it is scored on
