@@ -71,6 +71,10 @@ class Claim:
     units : str
         What the claim's units share, where they are not independent experiments (one ensemble trained on
         shared mini-batches, a network shared by several units); shown beside n ("" when nothing is shared).
+    shared : str
+        Where the units behind the claim's own headline and rule are not independent, what they share in a
+        few words ("one ensemble"); the headline then says so beside its n and spread ("" when they are
+        independent: a claim whose only shared units are another check's leaves it empty).
     """
 
     id: str
@@ -85,6 +89,7 @@ class Claim:
     words_sentence: str = ""
     strict: str = ""
     units: str = ""
+    shared: str = ""
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,7 @@ class ScoreRow:
 
 #: fields every claim of the registry must give (non-empty); ``settings`` and ``notebook`` are optional
 CLAIM_FIELDS = ("id", "statement", "section", "figure", "task")
-_OPTIONAL_FIELDS = ("settings", "notebook", "words", "strict", "units")
+_OPTIONAL_FIELDS = ("settings", "notebook", "words", "strict", "units", "shared")
 
 
 def _text(value: Any, where: str, name: str) -> str:
@@ -132,6 +137,8 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
                          f"paper's words it rests on), got {words!r}")
     if ("strict" in entry) != (words is not None):
         raise ValueError(f"{where}: 'words' and 'strict' go together (a claim with two readings names both)")
+    if "shared" in entry and "units" not in entry:
+        raise ValueError(f"{where}: 'shared' names what the units share; 'units' must explain it")
     return Claim(id=values["id"], group=group, text=values["statement"], figure=figure,
                  section=values["section"], settings=" ".join(p for p in (group_settings, own) if p),
                  task=values["task"],
@@ -139,7 +146,8 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
                  words="" if words is None else _text(words["reading"], where, "words.reading"),
                  words_sentence="" if words is None else _text(words["sentence"], where, "words.sentence"),
                  strict=_text(entry["strict"], where, "strict") if "strict" in entry else "",
-                 units=_text(entry["units"], where, "units") if "units" in entry else "")
+                 units=_text(entry["units"], where, "units") if "units" in entry else "",
+                 shared=_text(entry["shared"], where, "shared") if "shared" in entry else "")
 
 
 def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
@@ -149,7 +157,8 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
     ``statement``, ``section``, ``figure`` and ``task`` (all non-empty), optionally ``settings`` and
     ``notebook``; a claim with several readings names ``words`` (``reading``: the reading the paper's words
     support, counted; ``sentence``: the paper's words it rests on) and ``strict`` (the strict reading's name);
-    ``units`` says what the claim's units share, where they are not independent.
+    ``units`` says what the claim's units share, where they are not independent; ``shared`` (with ``units``)
+    names it in a few words where the claim's own units share training, shown beside its headline's n.
 
     Parameters
     ----------
@@ -269,14 +278,17 @@ def short_title(text: str, words: int = 9) -> str:
     return " ".join(parts[:words]) + (" …" if len(parts) > words else "") if parts else ""
 
 
-def headline_of(result: ClaimResult | None) -> tuple[str, str]:
+def headline_of(result: ClaimResult | None, shared: str = "") -> tuple[str, str]:
     """The headline number of a result as ``(name, "value ± spread unit (n = k seeds)")``.
 
     Uses the result's ``headline`` (see :func:`fnnlib.results.headline_number`).
     A result without one (written before the field existed) shows how many
     of its checks hold instead of guessing a number from ``numbers``;
-    ``("", "")`` when there is no result.
+    ``("", "")`` when there is no result. ``shared`` (the claim's :attr:`Claim.shared`) marks units that
+    are not independent: ``(n = 5 seeds, one ensemble: not independent)``, so that the spread is not read
+    as that of independent runs.
     """
+    mark = f", {shared}: not independent" if shared else ""
     if result is None:
         return "", ""
     head = result.headline
@@ -287,13 +299,13 @@ def headline_of(result: ClaimResult | None) -> tuple[str, str]:
         if head.unit:
             text += f" {head.unit}"
         if result.n is not None:
-            text += f" (n = {result.n})"
+            text += f" (n = {result.n}{mark})"
         elif head.n:
-            text += f" (n = {head.n} seeds)"
+            text += f" (n = {head.n} seeds{mark})"
         return head.name, text
     if not result.checks:
         return "guarantees holding", f"{len(result.guarantees or {})} (no check could fail)"
-    n = f" (n = {result.n})" if result.n is not None else ""
+    n = f" (n = {result.n}{mark})" if result.n is not None else ""
     return "checks holding", f"{sum(result.checks.values())} of {len(result.checks)}{n}"
 
 
@@ -368,7 +380,7 @@ def _summary(row: ScoreRow, pages: Mapping[str, str], figures: Mapping[str, str]
              notes: Mapping[str, str], why: dict[str, Any] | None = None) -> dict[str, Any]:
     """What the template shows of a row beside the claim and its result: its summary cells and its figure."""
     result = row.result
-    name, value = headline_of(result)
+    name, value = headline_of(result, row.claim.shared)
     ours = f"{_inline(name)}: **{_inline(value)}**" if name else (_inline(value) or "—")
     if result is None and row.task in notes:
         ours = _inline(notes[row.task])

@@ -270,7 +270,7 @@ VALUE_CHECKS: Mapping[str, Mapping[str, Check]] = MappingProxyType({
     "quick_start": {"T": _N2, "Ts": _POS, "N": _N1, "noise_std": _POS, "drop": _fraction,
                     "train_iterations": _N1, "tune_iterations": _N1},
     "tuned_gains": {"bottle_tune_throws": _N1, "bottle_tune_iterations": _N1, "bottle_tune_lr": _POS,
-                    "bottle_hand_throws": _N1, "bottle_hand_L_grid": _vec(minimum=0.0),
+                    "bottle_hand_L_grid": _vec(minimum=0.0),
                     "bottle_hand_beta_grid": _vec(minimum=0.0), "quad_tune_cases": _N1,
                     "quad_L_grid": _vec(minimum=0.0), "quad_beta_grid": _vec(minimum=0.0),
                     "quad_hand_L_grid": _vec(minimum=0.0), "quad_hand_beta_grid": _vec(minimum=0.0)},
@@ -447,6 +447,11 @@ def _own_system(p: Mapping[str, Any]) -> None:
             for beta in p["hand_beta_grid"]:
                 for Ts, N in ((p["Ts"], p["N"]), (p["spiral_Ts"], p["spiral_N"])):
                     C.stable_gain("hand_L_grid", L, n=2, Ts=Ts, N=N, beta=beta)
+    points = len(p["hand_L_grid"]) * len(p["hand_beta_grid"])
+    _need(p["tune_iterations"] == p["spiral_tune_iterations"] == points,
+          "B1 gives the tuned and the hand gains the same budget of evaluations: tune_iterations and "
+          f"spiral_tune_iterations must equal the hand grid's {points} points, got {p['tune_iterations']}, "
+          f"{p['spiral_tune_iterations']}")
 
 
 def _quick_start(p: Mapping[str, Any]) -> None:
@@ -484,6 +489,14 @@ def _tuned_gains(p: Mapping[str, Any]) -> None:
     checked there); here every gain of a grid must be > 0 (``sweep_gains`` refuses the rest)."""
     for name in ("bottle_hand_L_grid", "quad_L_grid", "quad_hand_L_grid"):
         _need(min(p[name]) > 0, f"{name} must list gains > 0, got {p[name]}")
+    bottle_points = len(p["bottle_hand_L_grid"]) * len(p["bottle_hand_beta_grid"])
+    _need(p["bottle_tune_iterations"] == bottle_points,
+          "B1 gives the tuned and the hand gains the same budget of evaluations: bottle_tune_iterations must "
+          f"equal the bottle hand grid's {bottle_points} points, got {p['bottle_tune_iterations']}")
+    tuned, hand = (len(p[f"quad_{h}L_grid"]) * len(p[f"quad_{h}beta_grid"]) for h in ("", "hand_"))
+    tuned *= p["quad_tune_cases"]  # one flight per grid point and validation case
+    _need(tuned == hand, f"B1 gives the tuned and the hand gains the same budget of evaluations: the quadrotor's "
+                         f"tuning flies {tuned} flights (grid points x quad_tune_cases), its hand grid has {hand} points")
 
 
 def _why_quadrotor_point(p: Mapping[str, Any]) -> None:

@@ -167,6 +167,13 @@ class WhyGrid:
         training (one ensemble on shared mini-batches) or a network, the unit says so.
     networks : str
         Whose networks the grid judges: ``"ours"`` or ``"authors"``.
+    feasible : ndarray of bool, optional
+        Which points can judge the claim at all (same shape as ``holds``; ``None``: every point). A point is
+        infeasible where no model can do what the claim compares, by a bound computed from the system, never
+        picked (e.g. a thrust bound below what the vehicle needs to follow the reference). Infeasible points
+        stay in ``holds`` and the figure, but no count, summary or cause uses them.
+    infeasible : str
+        Why the excluded points are excluded, with the number that decides it (required when any is).
     """
 
     axes: tuple[Axis, ...]
@@ -177,6 +184,8 @@ class WhyGrid:
     title: str = ""
     unit: str = "seed"
     networks: str = "ours"
+    feasible: np.ndarray | None = None
+    infeasible: str = ""
 
     def __post_init__(self) -> None:
         holds = np.asarray(self.holds)
@@ -193,18 +202,50 @@ class WhyGrid:
             raise ValueError("a why grid states the rule it applies at each point")
         if self.networks not in ("ours", "authors"):
             raise ValueError(f"networks must be 'ours' or 'authors', got {self.networks!r}")
+        feasible = np.ones(shape, bool) if self.feasible is None else np.asarray(self.feasible)
+        if feasible.shape != shape or feasible.dtype != bool:
+            raise ValueError(f"feasible must be booleans of the grid's shape {shape}, got {feasible.dtype} "
+                             f"{feasible.shape}")
+        if not feasible.any():
+            raise ValueError("a why grid needs at least one feasible point")
+        if not feasible.all() and not self.infeasible:
+            raise ValueError("a grid that excludes points says why (infeasible), with the number that decides it")
         object.__setattr__(self, "holds", holds)
+        object.__setattr__(self, "feasible", feasible)
         object.__setattr__(self, "numbers", {k: _plain(v) for k, v in self.numbers.items()})
 
     @property
+    def held(self) -> int:
+        """Feasible points where the rule holds."""
+        return int((self.holds & self.feasible).sum())
+
+    @property
+    def counted(self) -> int:
+        """Feasible points: those every count is over."""
+        return int(self.feasible.sum())
+
+    @property
+    def excluded(self) -> int:
+        return int(self.holds.size - self.counted)
+
+    def count_text(self) -> str:
+        """``holds at 5 of 8 points`` or, with excluded points, ``holds at 1 of 2 feasible points``."""
+        return f"holds at {self.held} of {self.counted} {'feasible ' if self.excluded else ''}points"
+
+    @property
     def mixed(self) -> bool:
-        """The rule holds at some point and fails at another."""
-        return bool(self.holds.any() and not self.holds.all())
+        """The rule holds at some feasible point and fails at another."""
+        return bool(0 < self.held < self.counted)
+
+    def _along(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Along axis ``i``, over the feasible points of each line: (holds at every one, at some, has one)."""
+        return ((self.holds | ~self.feasible).all(axis=i), (self.holds & self.feasible).any(axis=i),
+                self.feasible.any(axis=i))
 
     def _mixed_along(self, kinds: tuple[str, ...], open_only: bool) -> bool:
         for i, axis in enumerate(self.axes):
-            if axis.kind in kinds and (axis.open or not open_only) and \
-                    (self.holds.any(axis=i) != self.holds.all(axis=i)).any():
+            every, some, has = self._along(i)
+            if axis.kind in kinds and (axis.open or not open_only) and ((every != some) & has).any():
                 return True
         return False
 
@@ -221,13 +262,15 @@ class WhyGrid:
     def to_json(self) -> dict[str, Any]:
         return {"title": self.title, "axes": [a.to_json() for a in self.axes], "holds": self.holds.tolist(),
                 "n": int(self.n), "rule": self.rule, "numbers": dict(self.numbers), "unit": self.unit,
-                "networks": self.networks}
+                "networks": self.networks, "feasible": self.feasible.tolist(), "infeasible": self.infeasible}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> WhyGrid:
         return cls(axes=tuple(Axis.from_json(a) for a in data["axes"]), holds=np.asarray(data["holds"], bool),
                    n=int(data["n"]), rule=data["rule"], numbers=data.get("numbers") or {},
-                   title=data.get("title", ""), unit=data.get("unit", "seed"), networks=data.get("networks", "ours"))
+                   title=data.get("title", ""), unit=data.get("unit", "seed"), networks=data.get("networks", "ours"),
+                   feasible=None if data.get("feasible") is None else np.asarray(data["feasible"], bool),
+                   infeasible=data.get("infeasible", ""))
 
 
 @dataclass(frozen=True)
@@ -310,23 +353,23 @@ def causes(*, grids: Sequence[WhyGrid], authors: AuthorsCheck | None = None,
     if (readings and len(set(readings.values())) > 1) or by_reading:
         parts = ["the readings differ: " + "; ".join(f"{k}: {v}" for k, v in readings.items())] \
             if readings and len(set(readings.values())) > 1 else []
-        parts += [f"{_title(g)}: holds at {int(g.holds.sum())} of {g.holds.size} points, along "
+        parts += [f"{_title(g)}: {g.count_text()}, along "
                   f"{', '.join(a.name for a in g.axes if a.kind != 'setting')}" for g in by_reading]
         found.append(Cause("a", "; ".join(parts)))
     mixed = [g for g in grids if g.networks == "ours" and g.mixed_on_open_axis]
     if mixed:
-        found.append(Cause("b", "; ".join(f"{_title(g)}: holds at {int(g.holds.sum())} of "
-                                          f"{g.holds.size} points" for g in mixed)))
+        found.append(Cause("b", "; ".join(f"{_title(g)}: {g.count_text()}" for g in mixed)))
     if authors is not None and authors.better:
         found.append(Cause("c", f"with the authors' networks ({authors.networks}) the rule reads "
                                 f"{authors.verdict}; with ours, {authors.ours}"))
     # (d): nothing tried lets the claim hold -- no grid point (ours or the authors', over every setting, reading
     # and usage), no reading of the result, not the authors' networks
-    if grids and not any(g.holds.any() for g in grids) \
+    if grids and not any(g.held for g in grids) \
             and not any(v in _HOLDS for v in (readings or {}).values()) \
             and (authors is None or authors.verdict not in _HOLDS):
         kinds = sorted({a.kind for g in grids for a in g.axes})
-        what = "; ".join(f"{_title(g)}: at none of {g.holds.size} points" for g in grids)
+        what = "; ".join(f"{_title(g)}: at none of {g.counted} {'feasible ' if g.excluded else ''}points"
+                         for g in grids)
         what += f" (axes: {', '.join(kinds)})"
         if readings:
             what += "; no reading holds (" + "; ".join(f"{k}: {v}" for k, v in readings.items()) + ")"
@@ -344,17 +387,24 @@ def _axes_text(grid: WhyGrid) -> str:
     return " x ".join(a.name for a in grid.axes)
 
 
-def _ranges(axis: Axis, ok: np.ndarray) -> str:
+def _ranges(axis: Axis, ok: np.ndarray, keep: np.ndarray | None = None, *, short: bool = False) -> str:
     """Where along a 1-D axis the rule holds, in words: ``holds for noise_std <= 0.003, fails at 0.01 and
-    above``; ``holds at 4, 6, fails at 5``."""
-    vals = list(axis.values)
+    above``; ``holds at 4, 6, fails at 5``. Only the values where ``keep`` is true (the feasible ones) are
+    read; ``short`` writes a line of more than 4 values that holds (or fails) throughout as ``holds at all 12
+    level values``."""
+    keep = np.ones(len(axis.values), bool) if keep is None else np.asarray(keep, bool)
+    vals = [v for v, k in zip(axis.values, keep) if k]
+    ok = np.asarray([o for o, k in zip(ok, keep) if k], bool)
     numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals)
     held = [v for v, o in zip(vals, ok) if o]
     failed = [v for v, o in zip(vals, ok) if not o]
-    if not failed:
-        return f"holds at every {axis.name} ({', '.join(_text(v) for v in vals)})"
-    if not held:
-        return f"fails at every {axis.name} ({', '.join(_text(v) for v in vals)})"
+    if len(vals) == 1:
+        return f"{'holds' if held else 'fails'} at {axis.name} = {_text(vals[0])}"
+    if not failed or not held:
+        word = "holds" if not failed else "fails"
+        if short and len(vals) > 4:
+            return f"{word} at all {len(vals)} {axis.name} values"
+        return f"{word} at every {axis.name} ({', '.join(_text(v) for v in vals)})"
     if numeric and vals == sorted(vals):
         k = int(np.argmin(ok)) if ok[0] else int(np.argmax(ok))
         if ok[0] and not ok[k:].any():
@@ -366,18 +416,40 @@ def _ranges(axis: Axis, ok: np.ndarray) -> str:
 
 
 def _grid_line(grid: WhyGrid) -> str:
+    """A grid in words: its count (over feasible points, the excluded ones counted and explained), then for a
+    one-axis grid where it holds; for two axes, the axis that alone decides or else every slice along the
+    shorter axis (the profile's marked "ours"); for more, the slices through the profile's point."""
+    feasible = grid.feasible
     if len(grid.axes) == 1:
-        return _ranges(grid.axes[0], grid.holds)
-    parts = [f"holds at {int(grid.holds.sum())} of {grid.holds.size} points ({_axes_text(grid)})"]
+        line = _ranges(grid.axes[0], grid.holds, feasible)
+        return f"{line} ({grid.excluded} points excluded: {grid.infeasible})" if grid.excluded else line
+    excluded = f"; {grid.excluded} points excluded: {grid.infeasible}" if grid.excluded else ""
+    parts = [f"{grid.count_text()} ({_axes_text(grid)}{excluded})"]
+    decided = False
     for i, axis in enumerate(grid.axes):
         other = tuple(j for j in range(grid.holds.ndim) if j != i)
-        every, some = grid.holds.all(axis=other), grid.holds.any(axis=other)
-        if (every == some).all() and some.any() and not some.all():  # this axis alone decides
-            parts.append(_ranges(axis, every))
-        elif all(a.ours in a.values for j, a in enumerate(grid.axes) if j != i):  # the slice through ours
+        every, some, has = grid._along(other)
+        if (every[has] == some[has]).all() and some.any() and not every[has].all():  # this axis alone decides
+            parts.append(_ranges(axis, every, has))
+            decided = True
+    if decided:
+        return "; ".join(parts)
+    if len(grid.axes) == 2:  # every slice along the shorter axis, so that no slice is left out
+        j = 1 if len(grid.axes[1].values) <= len(grid.axes[0].values) else 0
+        i, by = 1 - j, grid.axes[j]
+        for k, v in enumerate(by.values):
+            at = (slice(None), k) if j == 1 else (k, slice(None))
+            if not feasible[at].any():
+                continue
+            mark = " (ours)" if by.ours is not None and v == by.ours else ""
+            parts.append(f"at {by.name} = {_text(v)}{mark}: "
+                         f"{_ranges(grid.axes[i], grid.holds[at], feasible[at], short=True)}")
+        return "; ".join(parts)
+    for i, axis in enumerate(grid.axes):
+        if all(a.ours in a.values for j, a in enumerate(grid.axes) if j != i):  # the slice through ours
             at = tuple(slice(None) if j == i else a.values.index(a.ours) for j, a in enumerate(grid.axes))
             where = ", ".join(f"{a.name} = {_text(a.ours)}" for j, a in enumerate(grid.axes) if j != i)
-            parts.append(f"at {where}: {_ranges(axis, grid.holds[at])}")
+            parts.append(f"at {where}: {_ranges(axis, grid.holds[at], feasible[at])}")
     return "; ".join(parts)
 
 

@@ -132,6 +132,10 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
     ("own_system", {"spiral_tune_samples": 2000}, "spiral_tune_samples <= spiral_n_samples"),
     ("own_system", {"L0": -5.0}, "L0: .*not positive definite"),
     ("own_system", {"hand_L_grid": [2.0, 150.0]}, "hand_L_grid"),
+    ("own_system", {"tune_iterations": 60}, "the same budget"),  # 60 Adam steps against a 36-point sweep
+    ("own_system", {"hand_L_grid": [2.0, 5.0, 20.0], "hand_beta_grid": [0.02, 0.1, 0.5]}, "the same budget"),
+    ("tuned_gains", {"bottle_tune_iterations": 9}, "the same budget"),
+    ("tuned_gains", {"quad_hand_L_grid": [1.5, 3.0]}, "the same budget"),
     ("tuned_gains", {"bottle_tune_iterations": 0}, "bottle_tune_iterations must be an integer >= 1"),
     ("tuned_gains", {"quad_tune_cases": 0}, "quad_tune_cases"),
     ("tuned_gains", {"quad_L_grid": [0.0, 3.0]}, "quad_L_grid must list gains > 0"),

@@ -19,6 +19,13 @@ A *win* of A over B is :func:`fnnlib.stats.paired_win`: A is lower in at least S
 the 90 % t-interval of the mean paired difference lies below 0. All checks true: *reproduced*; some:
 *partly*; none: *not reproduced* (:class:`fnnlib.ClaimResult`). B1 has no guarantee.
 
+A fair comparison (the premises, enforced or shown, never checks): per setting the tuned and the hand gains
+get the same *budget* -- the same number of evaluations of their cost on the same training data, one
+evaluation being one pass of the cascade (or one flight) over that data (:func:`b1_budget` refuses unequal
+budgets; the tuner's pass also returns a gradient, which the grid does not get) -- and the hand grid spans
+the region the tuned gains reach (:func:`b1_coverage` says, per unit, whether every tuned entry of ``L`` and
+``beta`` lies within the span of the hand grid).
+
 B2 (every comparison over seeds) and B3 (the scoreboard is computed from the runs) are judged by the
 scoreboard over every task's results (:func:`b2`, :func:`b3`).
 """
@@ -32,7 +39,8 @@ import numpy as np
 from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number
 from fnnlib.stats import paired_win
 
-__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_paired", "b1_summary", "b2", "b3"]
+__all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_budget", "b1_coverage", "b1_paired", "b1_summary",
+           "b2", "b3"]
 
 KALMAN_FACTOR = 2.0
 """How much worse than the Kalman filter the tuned gains may be, unit by unit (check 3)."""
@@ -116,6 +124,59 @@ def b1_summary(errors: Errors) -> dict[str, dict]:
     return {setting: {"n": int(e["tuned"].size), "mean": {k: float(v.mean()) for k, v in e.items()},
                       "kalman_beats_tuned": (paired_win(e["kalman"], e["tuned"])["win"] if "kalman" in e else None)}
             for setting, e in _checked(errors).items()}
+
+
+def b1_budget(budgets: Mapping[str, Mapping[str, int]]) -> dict[str, int]:
+    """Each setting's budget of cost evaluations, the same for the tuned and the hand gains.
+
+    ``budgets[setting]`` gives ``tuned`` (the tuner's evaluations: Adam steps, or grid points where the tuner
+    is a grid) and ``hand`` (the points of the hand grid), both on the same training data. Returns
+    ``{setting: budget}``; raises ``ValueError`` where a setting's two budgets differ (the comparison would
+    measure the budget, not the method) or one is below 1.
+    """
+    out = {}
+    for setting, b in budgets.items():
+        for need in ("tuned", "hand"):
+            if need not in b:
+                raise ValueError(f"B1 setting {setting!r}: no {need!r} budget (it has {sorted(b)})")
+        tuned, hand = int(b["tuned"]), int(b["hand"])
+        if min(tuned, hand) < 1:
+            raise ValueError(f"B1 setting {setting!r}: a budget is at least 1 evaluation, got tuned {tuned}, hand {hand}")
+        if tuned != hand:
+            raise ValueError(f"B1 setting {setting!r}: the tuned gains get {tuned} evaluations and the hand gains "
+                             f"{hand}; a fair comparison gives both the same budget")
+        out[setting] = tuned
+    return out
+
+
+def b1_coverage(tuned: Mapping[str, Sequence[Mapping]], hand: Mapping[str, Sequence[Mapping]]) -> dict[str, dict]:
+    """Per setting, whether the hand grid spans the region the tuned gains reach (a premise, shown, not judged).
+
+    ``tuned[setting]``: per unit ``{"L": scalar or diagonal, "beta": float}``; ``hand[setting]``: per unit the
+    hand sweep (``L_grid``, ``beta_grid``). A unit is covered when every entry of its tuned ``L`` lies within
+    [min, max] of its ``L_grid`` and its ``beta`` within [min, max] of its ``beta_grid``. Returns per setting
+    ``units``, ``covered`` (how many), ``outside`` (the indices of the others) and the spans of the first
+    unit's grids.
+    """
+    out = {}
+    for setting, units in tuned.items():
+        grids = hand.get(setting, ())
+        if len(grids) != len(units):
+            raise ValueError(f"B1 setting {setting!r}: one hand grid per unit needed, got {len(grids)} for "
+                             f"{len(units)} tuned units")
+        outside = []
+        for k, (t, g) in enumerate(zip(units, grids)):
+            L, beta = np.atleast_1d(np.asarray(t["L"], float)), float(t["beta"])
+            Lg, bg = np.asarray(g["L_grid"], float), np.asarray(g["beta_grid"], float)
+            tol = 1e-9
+            if not ((L >= Lg.min() * (1 - tol)).all() and (L <= Lg.max() * (1 + tol)).all()
+                    and bg.min() - tol <= beta <= bg.max() * (1 + tol) + tol):
+                outside.append(k)
+        first = grids[0]
+        out[setting] = {"units": len(units), "covered": len(units) - len(outside), "outside": outside,
+                        "L_span": [float(min(first["L_grid"])), float(max(first["L_grid"]))],
+                        "beta_span": [float(min(first["beta_grid"])), float(max(first["beta_grid"]))]}
+    return out
 
 
 MIN_SEEDS = 5

@@ -76,6 +76,7 @@ t = torch.arange(n_samples, dtype=torch.float64) * Ts
 x_test = F.Spiral(*test).simulate(torch.tensor(x0), t).float()  # (T, 2): the test spiral of Fig. 4
 xs_test = F.stack_members(x_test, S)
 print(f"{S} networks (seeds {seeds}) from the spiral task")
+UNIT = "seed (one ensemble)"  # the spiral task's seeds train side by side on shared mini-batches: not independent
 
 
 # %%
@@ -148,7 +149,7 @@ holds3
 grid3 = W.WhyGrid(
     axes=(W.Axis("noise_std", s3_noise, "the measurement noise of Fig. 4g is not given", ours=noise_std),
           W.Axis("beta", s3_beta, "the spiral's decay rate of Eq. (11) is not given", ours=beta)),
-    holds=holds3, n=S, title="S3: noise std x decay rate",
+    holds=holds3, n=S, unit=UNIT, title="S3: noise std x decay rate",
     rule="the claim holds at a grid point when sec3.s3 reads reproduced there (strict reading, judged at the "
          "point's noise level: decay beats no decay, because of the noise, and the decayed cascade beats the "
          "open-loop neural ODE)",
@@ -231,7 +232,7 @@ holds5
 grid5 = W.WhyGrid(
     axes=(W.Axis("test_eps", s5_eps, "the test spiral's bias is not given (the release's)", ours=test[2]),
           W.Axis("test_eta", s5_eta, "the test spiral's decay is not given (the release's)", ours=test[1])),
-    holds=holds5, n=S, title="S5: test spiral bias x decay",
+    holds=holds5, n=S, unit=UNIT, title="S5: test spiral bias x decay",
     rule="the claim holds at a grid point when sec3.s5 reads reproduced there (both balls at least "
          f"{conservative_ratio:g}x the measured limit, and the limit falling as L grows, in >= S-1 seeds)",
     numbers={"ratio_x_min_over_seeds": ratio5})
@@ -273,7 +274,7 @@ holds8
 grid8 = W.WhyGrid(
     axes=(W.Axis("residual_level_domega", domega, "the 12 residual levels of App. A.7.1 (stated)", paper=domega),
           W.Axis("L", s8_L, "the spiral's gain L is not given", ours=L)),
-    holds=holds8, n=S, title="S8: residual level x gain",
+    holds=holds8, n=S, unit=UNIT, title="S8: residual level x gain",
     rule="the claim holds at a grid point when sec3.s8's strict checks hold on that level alone (the feedback "
          "beats the neural ODE in change-rate RMSE and in mean N-step error, paired over the seeds)",
     numbers={"multistep_feedback_over_neural_ode": margin8, "rate_feedback_over_neural_ode":
@@ -325,7 +326,7 @@ for i, step in enumerate(s9_beta_steps):
 grid9 = W.WhyGrid(
     axes=(W.Axis("beta_step", s9_beta_steps, "the decay grid's step (the paper states 0.01)", paper=0.01, ours=0.01),
           W.Axis("noise_std", s9_noise, "the noise of Fig. S11 is not given", ours=noise_std)),
-    holds=holds9, n=S, title="S9: beta grid step x noise std",
+    holds=holds9, n=S, unit=UNIT, title="S9: beta grid step x noise std",
     rule="the claim holds at a grid point when sec3.s9 reads reproduced on the beta grid {0: step: "
          f"{s9_beta_max:g}}} at that noise level",
     numbers={"best_beta_median_over_seeds": best9, "beta": betas9.tolist(), "rmse_noisy": noisy9.tolist(),
@@ -378,7 +379,7 @@ holds10 = np.array([[why_sec3.holds(s10_at(b, s)) for s in s10_settle] for b in 
 grid10 = W.WhyGrid(
     axes=(W.Axis("band_factor", s10_band, "the band an error returns to is not given", ours=2.0),
           W.Axis("settle_threshold", s10_settle, "how quick 'quickly' is is not given", ours=0.5)),
-    holds=holds10, n=S, title="S10: band factor x settling window",
+    holds=holds10, n=S, unit=UNIT, title="S10: band factor x settling window",
     rule="the claim holds at a grid point when sec3.s10 reads reproduced there (strict reading: each error "
          "leaves the band after the step and is back within the window, in >= S-1 seeds; the feedback rate "
          "error then below the neural ODE's)",

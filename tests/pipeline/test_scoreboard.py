@@ -267,3 +267,24 @@ def test_a_row_says_what_its_units_share(tmp_path: Path) -> None:
     s1 = ClaimResult("S1", checks={"a": True}, rule="r", n=5)
     page = render_scoreboard(score_rows(claims, _results("spiral", s1)), profile="paper", pages={})
     assert "**Units:** n = 5. one ensemble, shared batches" in _row_lines(page, "S1")[1]
+
+
+def test_a_spread_over_shared_units_is_not_shown_as_independent(tmp_path: Path) -> None:
+    path = tmp_path / "claims.yaml"
+    path.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        units: one ensemble, shared batches"
+                                                   "\n        shared: one ensemble", 1))
+    claims = read_claims(path)
+    assert claims[0].shared == "one ensemble"
+    s1 = ClaimResult("S1", checks={"a": True}, rule="r",
+                     headline=headline_number("RMSE", [0.04, 0.05, 0.06, 0.05, 0.05], unit="cm"))
+    name, text = headline_of(s1, shared=claims[0].shared)
+    assert text.endswith("(n = 5 seeds, one ensemble: not independent)")
+    assert headline_of(s1)[1].endswith("(n = 5 seeds)")  # independent units: as before
+    page = render_scoreboard(score_rows(claims, _results("spiral", s1)), profile="paper", pages={})
+    row, body = _row_lines(page, "S1")
+    assert "one ensemble: not independent" in row
+    # a claim that names what its units share explains it in its units
+    path.write_text(CLAIMS.replace("task: spiral", "task: spiral\n        shared: one ensemble", 1))
+    with pytest.raises(ValueError, match="units"):
+        read_claims(path)
+

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_paired, b1_summary, b2
+from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_budget, b1_coverage, b1_paired, b1_summary, b2
 from fnnlib.results import ClaimResult, Headline, headline_number
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
@@ -140,3 +140,28 @@ def test_summary_reports_the_true_n_and_where_kalman_wins():
 def test_summary_refuses_what_b1_refuses():
     with pytest.raises(ValueError, match="no 'hand'"):
         b1_summary({"a": {"tuned": [1.0, 2.0]}})
+
+
+def test_the_budget_is_the_same_for_tuned_and_hand_gains_or_refused():
+    assert b1_budget({"pendulum": {"tuned": 24, "hand": 24}, "bottle": {"tuned": 6, "hand": 6}}) == \
+        {"pendulum": 24, "bottle": 6}
+    with pytest.raises(ValueError, match="pendulum.*60.*9"):  # the old pendulum: 60 Adam steps against 9 grid points
+        b1_budget({"pendulum": {"tuned": 60, "hand": 9}})
+    with pytest.raises(ValueError, match="at least 1"):
+        b1_budget({"bottle": {"tuned": 0, "hand": 0}})
+    with pytest.raises(ValueError, match="tuned"):
+        b1_budget({"bottle": {"hand": 6}})
+
+
+def test_coverage_says_which_tuned_gains_lie_outside_the_hand_grid():
+    grid = {"L_grid": [1.0, 4.0, 16.0], "beta_grid": [0.0, 0.1, 0.5]}
+    inside = [{"L": [2.0, 15.9], "beta": 0.05}, {"L": 16.0, "beta": 0.0}]
+    outside = [{"L": [2.0, 40.0], "beta": 0.05}, {"L": 3.0, "beta": 0.9}, {"L": 0.5, "beta": 0.1}]
+    c = b1_coverage({"a": inside, "b": inside + outside}, {"a": [grid, grid], "b": [grid] * 5})
+    assert c["a"] == {"units": 2, "covered": 2, "outside": [], "L_span": [1.0, 16.0], "beta_span": [0.0, 0.5]}
+    assert c["b"]["covered"] == 2 and c["b"]["outside"] == [2, 3, 4]
+    # the old spiral grid (L in 2..20) misses a tuned gain of 35
+    old = {"L_grid": [2.0, 5.0, 20.0], "beta_grid": [0.02, 0.1, 0.5]}
+    assert b1_coverage({"s": [{"L": [35.0, 30.0], "beta": 0.01}]}, {"s": [old]})["s"]["outside"] == [0]
+    with pytest.raises(ValueError, match="one hand grid per unit"):
+        b1_coverage({"a": inside}, {"a": [grid]})

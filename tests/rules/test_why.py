@@ -52,7 +52,52 @@ def test_a_two_axis_grid_names_the_slice_through_the_profile_point() -> None:
     g = grid([[True, True], [True, True], [False, True], [False, False]], axes=(NOISE, beta))
     line = summary([g])
     assert line.startswith("holds at 5 of 8 points (noise_std x beta)")
-    assert "at beta = 0.02: holds for noise_std <= 0.01, fails at 0.03 and above" in line
+    assert "at beta = 0.02 (ours): holds for noise_std <= 0.01, fails at 0.03 and above" in line
+
+
+def test_a_two_axis_grid_reports_every_slice_not_only_the_profile_point() -> None:
+    # the residual levels hold at every gain but the profile's: the line must say so for each gain
+    level = Axis("level", tuple(range(12)), "the 12 residual levels (stated)", paper=tuple(range(12)))
+    gain = Axis("L", (5.0, 10.0, 20.0), "the gain L is not given", ours=20.0)
+    holds = np.ones((12, 3), bool)
+    holds[8:, 2] = False
+    line = summary([grid(holds, axes=(level, gain))])
+    assert "at L = 5: holds at all 12 level values" in line
+    assert "at L = 10: holds at all 12 level values" in line
+    assert "at L = 20 (ours): holds for level <= 7, fails at 8 and above" in line
+    # every slice failing reads as such too: no slice is left out
+    holds[:, 0] = False
+    line = summary([grid(holds, axes=(level, gain))])
+    assert "at L = 5: fails at all 12 level values" in line and "at L = 10: holds at all 12" in line
+
+
+def test_infeasible_points_are_excluded_from_every_count_and_the_line_says_why() -> None:
+    bound = Axis("u_max", (4.0, 5.0, 6.0), "the thrust bound", paper=4.0, ours=6.0)
+    gamma = Axis("Gamma", (2.0, 8.0), "the adaptation gain is not stated", ours=8.0)
+    holds = np.array([[True, True], [True, False], [False, True]])  # 4 of 6 points, 1 of 2 feasible ones
+    feasible = np.array([[False, False], [False, False], [True, True]])
+    why = "below the 5.53 N per motor the vehicle needs at the reference's peak"
+    g = WhyGrid(axes=(bound, gamma), holds=holds, n=5, rule="r", feasible=feasible, infeasible=why)
+    line = summary([g])
+    assert line.startswith("holds at 1 of 2 feasible points (u_max x Gamma; 4 points excluded: " + why + ")")
+    assert "4 of 6" not in line
+    # the excluded points never count: holding only where infeasible is (d); the causes count feasible points
+    never = WhyGrid(axes=(bound, gamma), holds=~feasible, n=5, rule="r", feasible=feasible, infeasible=why)
+    assert letters(grids=[never]) == "d"
+    found = causes(grids=[g])
+    assert [c.letter for c in found] == ["b"] and "holds at 1 of 2 feasible points" in found[0].evidence
+    # a grid mixed only through its excluded points is not mixed
+    flat = WhyGrid(axes=(bound, gamma), holds=np.array([[True, False], [False, True], [True, True]]), n=5,
+                   rule="r", feasible=feasible, infeasible=why)
+    assert not flat.mixed and letters(grids=[flat]) == ""
+    back = WhyGrid.from_json(json.loads(json.dumps(g.to_json())))
+    assert summary([back]) == line
+    with pytest.raises(ValueError, match="why"):
+        WhyGrid(axes=(bound, gamma), holds=holds, n=5, rule="r", feasible=feasible)
+    with pytest.raises(ValueError, match="feasible point"):
+        WhyGrid(axes=(bound, gamma), holds=holds, n=5, rule="r", feasible=np.zeros((3, 2), bool), infeasible=why)
+    with pytest.raises(ValueError, match="shape"):
+        WhyGrid(axes=(bound, gamma), holds=holds, n=5, rule="r", feasible=np.ones(3, bool), infeasible=why)
 
 
 def test_shapes_values_and_runs_are_checked() -> None:
