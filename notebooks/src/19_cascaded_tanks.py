@@ -253,7 +253,9 @@ display(Markdown("\n".join(rows) if episodes else "No overflow episode in this v
 
 # %% [markdown]
 # ## Why a claim does not hold, where it does not
-# Computed from the numbers above: for each check that fails, the paired numbers behind it.
+# Computed from the numbers above: for each check that fails, the paired numbers behind it. The page *Why B4,
+# B5 and B6 stand where they stand* (`why_tanks`, `make why`) judges these models again by the same rules over
+# fixed gains, the scored window, the observer's first estimate and the baseline's start and segment.
 
 # %% tags=["nbval-check-output"]
 for c in (b4, b5, b6):
