@@ -245,7 +245,9 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
                          lr=s["train_lr"], train_model=True, members=E)
     clock["train_observer"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    base = [no_feedback(rec, seed, s, field([seed]), C) for seed in seeds]
+    free = _free_starts(rec, seeds, s, field(seeds), C) if "free" in s["baseline_starts"] else None
+    base = [no_feedback(rec, seed, s, field([seed]), C, free=None if free is None else free.member(e))
+            for e, seed in enumerate(seeds)]
     plain = _stacked([b["model"] for b in base], field(seeds))
     clock["train_no_feedback"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -264,7 +266,7 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
         for N in out[e]["n_step"]:
             out[e]["n_step"][N]["no_feedback_free_run"] = capped(F.simulation_rmse, b["series"][N:], rec.y_val[N:],
                                                                  skip=skip)
-        out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]], "no_feedback": b["loss"]}
+        out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]]}
     trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L,
                "tuned_beta": [float(v) for v in torch.as_tensor(tuned.beta).reshape(-1).expand(E)],
                "hand": [out[e]["gains"]["hand"] for e in range(E)]}
@@ -323,14 +325,28 @@ def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, 
                        for e in range(E)] for N in Ns} for g, name in enumerate(rows)}
 
 
-def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor) -> dict[str, Any]:
+def _free_starts(rec: Any, seeds: Sequence[int], s: Mapping[str, Any], stacked: Any, C: Tensor) -> Any:
+    """The free-start baseline of every seed in one run: the stacked field on the record tiled once per member,
+    with a block-diagonal measurement (each member's start states and weights are its own; Adam is elementwise,
+    so each member descends as alone, its loss scaled by 1 / E)."""
+    from fnnlib.training.outputs import OutputRecipe, train_from_outputs  # noqa: PLC0415
+
+    E = len(seeds)
+    train_from_outputs(stacked, rec.y_est.expand(-1, E).contiguous(), _blocks(C, E), OutputRecipe(
+        start="free", iterations=int(s["train_iterations"]), lr=s["train_lr"], burn=1,
+        horizon=int(s["baseline_horizon"])), Ts=rec.Ts, u=rec.u_est, seed=seeds[0], progress=False)
+    return stacked
+
+
+def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor, *, free: Any = None) -> dict[str, Any]:
     """The same architecture and seed trained without feedback: for each start of ``baseline_starts`` (a free
     initial state per segment, or an encoder of the first ``n_init`` samples) over segments of
     ``baseline_horizon`` samples, with the same Adam steps and rate as the model trained through its observer;
     the one whose free run of the *estimation* record is best is kept (nothing chosen on the validation
     record). Its free run of the validation record starts as it was trained to start: from the encoder, or
     (free starts) from the observer on the first ``n_init`` samples, as the observer-trained model's does.
-    ``make`` is an untrained one-member field of this seed (copied per start)."""
+    ``make`` is an untrained one-member field of this seed (copied per start); ``free``, where given, is this
+    seed's free-start model already trained (:func:`run_seeds` trains them as one ensemble)."""
     import copy  # noqa: PLC0415
 
     import fnnlib as F  # noqa: PLC0415
@@ -339,18 +355,21 @@ def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor)
     skip, H = int(s["n_init"]), int(s["baseline_horizon"])
     tried = {}
     for start in s["baseline_starts"]:
-        m = copy.deepcopy(make)
-        fit = train_from_outputs(m, rec.y_est, C, OutputRecipe(
-            start=start, iterations=int(s["train_iterations"]), lr=s["train_lr"],
-            burn=1 if start == "free" else skip, horizon=H), Ts=rec.Ts, u=rec.u_est, seed=seed, progress=False)
-        est = _simulate(F, m, fit.encoder, rec.y_est, rec.u_est, rec.Ts, skip, C, s)
-        tried[start] = (m, fit, capped(F.simulation_rmse, est, rec.y_est, skip=skip))
+        if start == "free" and free is not None:
+            m, encoder = free, None
+        else:
+            m = copy.deepcopy(make)
+            encoder = train_from_outputs(m, rec.y_est, C, OutputRecipe(
+                start=start, iterations=int(s["train_iterations"]), lr=s["train_lr"],
+                burn=1 if start == "free" else skip, horizon=H), Ts=rec.Ts, u=rec.u_est, seed=seed,
+                progress=False).encoder
+        est = _simulate(F, m, encoder, rec.y_est, rec.u_est, rec.Ts, skip, C, s)
+        tried[start] = (m, encoder, capped(F.simulation_rmse, est, rec.y_est, skip=skip))
     best = min(tried, key=lambda k: tried[k][2])
-    m, fit, _ = tried[best]
-    val = _simulate(F, m, fit.encoder, rec.y_val, rec.u_val, rec.Ts, skip, C, s)
+    m, encoder, _ = tried[best]
+    val = _simulate(F, m, encoder, rec.y_val, rec.u_val, rec.Ts, skip, C, s)
     return {"model": m, "start": best, "estimation_free_run": {k: v[2] for k, v in tried.items()},
-            "free_run": capped(F.simulation_rmse, val, rec.y_val, skip=skip), "series": val,
-            "loss": [fit.loss[0], fit.loss[-1]]}
+            "free_run": capped(F.simulation_rmse, val, rec.y_val, skip=skip), "series": val}
 
 
 def _simulate(F: Any, m: Any, encoder: Any, y: Tensor, u: Tensor, Ts: float, skip: int, C: Tensor,

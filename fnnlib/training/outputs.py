@@ -214,10 +214,12 @@ def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, 
 
 
 def _state_dim(model: nn.Module, C, recipe: OutputRecipe) -> int:
-    """The state dimension: the model's ``n`` / ``n_state``, else ``C``'s columns, else ``L``'s rows."""
-    for name in ("n", "n_state"):
-        if isinstance(getattr(model, name, None), int):
-            return int(getattr(model, name))
+    """The state dimension: the model's ``n``, its ``n_state`` (times ``n_members`` for a stacked ensemble,
+    :class:`~fnnlib.models.scaled.ScaledField`), else ``C``'s columns, else ``L``'s rows."""
+    if isinstance(getattr(model, "n", None), int):
+        return int(model.n)
+    if isinstance(getattr(model, "n_state", None), int):
+        return int(model.n_state) * int(getattr(model, "n_members", 1))
     if isinstance(C, Tensor) and C.ndim == 2:
         return int(C.shape[1])
     if recipe.L is not None:

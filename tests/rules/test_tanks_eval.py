@@ -162,3 +162,21 @@ def test_the_baseline_start_is_chosen_on_the_estimation_record_only() -> None:
     assert a["start"] == b["start"] and a["estimation_free_run"] == b["estimation_free_run"]
     assert a["start"] == min(a["estimation_free_run"], key=a["estimation_free_run"].get)
     assert a["free_run"] != b["free_run"]  # the validation record is what it is scored on
+
+
+def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
+    """The free-start baseline of two seeds trained as one stacked ensemble gives each seed the model it gets
+    alone (Adam is elementwise; the ensemble's mean loss scales each member's by 1/2, which Adam's steps ignore
+    up to its epsilon)."""
+    from fnnbook.tanks_eval import LEVEL, _field, _free_starts
+    from fnnlib.training.outputs import OutputRecipe, train_from_outputs
+    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+             baseline_horizon=10, train_iterations=4, train_lr=0.01)
+    both = _free_starts(rec, [0, 1], s, _field(s, [0, 1]), LEVEL)
+    for e, seed in enumerate((0, 1)):
+        one = _field(s, [seed])
+        train_from_outputs(one, rec.y_est, LEVEL, OutputRecipe(start="free", iterations=4, lr=0.01, burn=1, horizon=10),
+                           Ts=rec.Ts, u=rec.u_est, seed=seed, progress=False)
+        for a, b in zip(both.member(e).parameters(), one.parameters()):
+            torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
