@@ -127,7 +127,7 @@ checks_held = [[int(sum(results[i, j].checks[c] for c in FEEDBACK_CHECKS)) for j
 gain_grid = W.WhyGrid(
     axes=(W.Axis("L", L_grid, "the base gain L of the bottle's feedback is not given", ours=L_ours),
           W.Axis("beta", beta_grid, "the decay rate beta of Eq. (11) for the bottle is not given", ours=beta_ours)),
-    holds=holds, n=E, title="bottle gains L x beta",
+    holds=holds, n=E, title="bottle gains L x beta", unit="seed (one ensemble)",
     rule=f"the claim holds at a grid point when both feedback checks of O1 hold there (feedback < neural ODE "
          f"per throw over the {x_test.shape[0]} test throws, and over the seeds); the neural ODE vs drag checks "
          "do not depend on L or beta",
@@ -139,6 +139,7 @@ gain_grid = W.WhyGrid(
 full_grid = W.WhyGrid(
     axes=gain_grid.axes, holds=np.array([[results[i, j].verdict == "reproduced" for j in range(len(beta_grid))]
                                          for i in range(len(L_grid))]), n=E, title="O1 whole, L x beta",
+    unit="seed (one ensemble)",
     rule="the claim holds at a grid point when O1's rule holds there with all four checks (feedback < neural "
          "ODE < drag model, per throw and over the seeds)",
     numbers={"checks_holding": [[int(sum(results[i, j].checks.values())) for j in range(len(beta_grid))]

@@ -157,7 +157,7 @@ RULE = {"Q3": "FNN paired-beats each of the other five and Neural beats Nomi and
         "Q5": "AdapFNN within 25 % of FNN in >= S - 1 of S units and its mean RMSE >= FNN's (q5_adaptive, strict "
               "reading, reads reproduced)"}
 grids = {q: tuple(WhyGrid(axes=(U, gain_axis(q, c)), holds=holds[q][c], n=S, rule=f"{COST_TEXT[c]}: {RULE[q]}",
-                          title=c.replace("_", " "), unit="unit",
+                          title=c.replace("_", " "), unit="unit (networks of one ensemble)",
                           feasible=np.broadcast_to(feasible_bound[:, None], holds[q][c].shape).copy(),
                           infeasible=INFEASIBLE,
                           numbers={"failing_checks_at_profile_gains": failing[q][c],
