@@ -148,10 +148,15 @@ b5_grid = W.WhyGrid(
 # Causes and summaries are computed by `fnnbook.why` from the grids above.
 
 # %% tags=["nbval-check-output"]
-whys = [W.Why(claim="B4", verdict=result.claim("B4").verdict, grids=(gain_grid, wf["B4"])),
+ratio = np.array(gain_grid.numbers["mean_ratio_longest_N"])
+i, j = np.unravel_index(ratio.argmin(), ratio.shape)
+note = (f"N={max(Ns)} RMSE ratio feedback / open loop over the fixed gains: from {ratio.min():.3f} (L = {L_grid[i]:g}, "
+        f"beta = {beta_grid[j]:g}) to {ratio.max():.3g}")
+whys = [W.Why(claim="B4", verdict=result.claim("B4").verdict, grids=(gain_grid, wf["B4"]), note=note),
         W.Why(claim="B5", verdict=result.claim("B5").verdict, grids=(b5_grid,)),
         W.Why(claim="B6", verdict=result.claim("B6").verdict, grids=(wf["B6"],))]
 W.write_whys(out, whys)
+print(note)
 for w in whys:
     print(f"{w.claim} ({w.verdict}): {w.summary}")
     for c in w.causes:
