@@ -79,7 +79,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1, help="flights per model and configuration; medians reported")
     ap.add_argument("--only", default=None, help="run only the configurations whose name contains this text")
     ap.add_argument("--cost", choices=COSTS, default="as_written",
-                    help="Eq. (28)'s weighting: as written in the paper, or as flown by the release (the release flies its own reading)")
+                    help="Eq. (28)'s weighting: as written in the paper, or as flown by the release")
     args = ap.parse_args()
     residual, mlp, origin = residuals(args.learning_dir)
     truth = Quadrotor(TEST_TRUTH)

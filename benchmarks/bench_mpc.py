@@ -8,7 +8,8 @@ reference, the state and the linearisation slowly; timings are per step (paramet
 solve), reported as wall time and as this thread's CPU time (the CPU figure is the one to trust
 on a shared machine). ``solver`` is the time the QP solver reports; ``max|du|`` is the largest
 deviation of the planned inputs from a Clarabel solve at 1e-10 (same cost variant). Both cost
-variants of Eq. (28) are timed (``as_written``, ``as_flown``: the paper's Eq. (28) as written and as the release flies it). For the fast path
+variants of Eq. (28) are timed (``as_written``, ``as_flown``: as the paper writes it and as the release
+flies it). For the fast path
 (``OSQPMPC``: OSQP updated from cvxpy's canonicalisation) the step is split into the guard and
 plan checks, applying cvxpy's parameter tensor + ``update``, and OSQP's own solve.
 
