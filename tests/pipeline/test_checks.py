@@ -145,3 +145,12 @@ def _write(tmp_path: Path, doc: dict[str, Any]) -> Path:
     path = tmp_path / "pipeline.yaml"
     path.write_text(yaml.safe_dump(doc))
     return path
+
+
+def test_the_tanks_chapter_without_its_data_file_is_not_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    doc = copy.deepcopy(_repository_pipeline())
+    (tmp_path / "data").mkdir()
+    code, out = main(["check", "--pipeline", str(_write(tmp_path, doc)), "--profile", "paper", "cascaded_tanks"]), \
+        capsys.readouterr().out
+    assert code == 0 and "note: cascaded_tanks will not run: data missing: dataBenchmark.mat" in out
+    assert "fnn-pipeline data fetch --tanks" in out
