@@ -7,7 +7,7 @@ package (torch, torchdiffeq, numpy, fnnlib, ...: the time of the functions defin
 and the functions of this repository that take the most time with their children.
 
     .venv/bin/python benchmarks/profile_tasks.py spiral tuned_gains --profile paper --output-root outputs \\
-        --data-dir ../shared/data [--top 25]
+        --data-dir DATA_DIR [--top 25]
 """
 
 from __future__ import annotations
