@@ -165,8 +165,8 @@ class TuneRecipe:
     tuning record, measured by ``benchmarks/study_partial_cascade.py``); ``settle``: the first start
     times not scored (an observer's start-up transient, where any large gain helps and which a prediction
     made after it never meets); ``members``: the state is that many stacked members of an ensemble, each tuned
-    as it would be alone (:class:`CascadeGains`; their losses add, their gradients never mix). Checked in ``__post_init__``; replace a field with
-    ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
+    as it would be alone (:class:`CascadeGains`; their losses add, their gradients never mix). Checked in
+    ``__post_init__``; replace a field with ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
     own-system chapter.
     """
 
