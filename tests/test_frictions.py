@@ -1,4 +1,4 @@
-"""The frictions a new user met (issue 17), each fixed and pinned by a test."""
+"""The frictions a new user met, each fixed and pinned by a test."""
 
 from __future__ import annotations
 

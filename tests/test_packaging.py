@@ -61,6 +61,18 @@ def test_no_tracked_file_names_the_workspace_outside_the_repository() -> None:
     assert found.stdout.split() == [".ci/run"]  # CI alone passes the workspace's data directory on
 
 
+def test_no_tracked_file_names_an_internal_work_item() -> None:
+    """The product cites equations and sections, never the project's own work items; the changelog may."""
+    try:
+        found = subprocess.run(["git", "grep", "-n", "-i", "-E", r"\bissue[ s]+#?[0-9]+", "--", ".",
+                                ":!CHANGELOG.md"], cwd=ROOT, capture_output=True, text=True, check=False)
+    except OSError:
+        pytest.skip("no git here")
+    if found.returncode not in (0, 1):
+        pytest.skip("not a git checkout")
+    assert not found.stdout, found.stdout
+
+
 def test_the_default_install_finds_torchs_cpu_build_without_pip_args() -> None:
     """The Makefile installs torch alone first, from PyTorch's CPU index as a default extra index (no PIP_ARGS
     needed), with the lock's hash; its awk line takes exactly torch's block out of the lock."""

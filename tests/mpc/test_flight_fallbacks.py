@@ -1,4 +1,4 @@
-"""Issue 16: a flight records its MPC fallbacks (reasons, reference steps) and is marked diverged past the share."""
+"""A flight records its MPC fallbacks (reasons, reference steps) and is marked diverged past the share."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 16: the two cost variants of Eq. (28), the guard before every solve, and the safe fallback.
+"""The two cost variants of Eq. (28), the guard before every solve, and the safe fallback.
 
 Every test runs through both QPs: the cvxpy problem (:class:`LinearizedMPC`) and the fast path that
 updates OSQP from cvxpy's canonicalisation (:class:`OSQPMPC`).
@@ -32,7 +32,7 @@ def boxed(cls: type, N: int = 5, cost: str = "as_written", **kw: object) -> Line
 @pytest.mark.parametrize("cost", COSTS)
 @pytest.mark.parametrize("cls", QPS)
 def test_data_at_osqp_infinity_is_a_fallback_not_a_stale_optimum(cls: type, cost: str, capfd) -> None:
-    """Issue 16, point 2: a c entry of 1e31 made osqp reject the update and re-solve the previous step's data."""
+    """A c entry of 1e31 made osqp reject the update and re-solve the previous step's data."""
     N, x0 = 5, np.array([0.5, 0.0])
     mpc = boxed(cls, N, cost, **TIGHT)
     good = mpc.solve(x0, *lti(N), np.zeros(2), np.zeros(1))
@@ -69,7 +69,7 @@ def test_derived_data_at_osqp_infinity_is_refused_too(cls: type) -> None:
 @pytest.mark.parametrize("cost", COSTS)
 @pytest.mark.parametrize("cls", QPS)
 def test_data_near_1e29_never_gives_a_usable_plan_outside_the_box(cls: type, cost: str, value: float) -> None:
-    """Issue 16: with data near 1e29 OSQP said "optimal" with u[0] = 4.4e19 against a box of [-1, 1]."""
+    """With data near 1e29 OSQP said "optimal" with u[0] = 4.4e19 against a box of [-1, 1]."""
     N = 5
     mpc = boxed(cls, N, cost)
     A, B, c = lti(N)
@@ -171,7 +171,7 @@ def test_reasons_and_the_diverged_share() -> None:
     assert set(FALLBACK_REASONS) >= {"data_not_finite", "data_too_large", "outside_box", "dynamics_mismatch"}
     assert OSQP_INFTY == 1e30 and 0 < DIVERGED_FALLBACK_SHARE < 1
     assert not is_diverged(0, 300) and not is_diverged(30, 300) and is_diverged(31, 300)
-    assert is_diverged(278, 300)  # issue 16's AdapNN flight at Gamma = 8
+    assert is_diverged(278, 300)  # an AdapNN flight seen at Gamma = 8
     with pytest.raises(ValueError, match="n_steps"):
         is_diverged(1, 0)
     with pytest.raises(ValueError, match="share"):

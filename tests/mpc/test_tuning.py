@@ -1,4 +1,4 @@
-"""Issue 16: baseline gains chosen on validation flights from the training distribution, never on the test flight."""
+"""Baseline gains chosen on validation flights from the training distribution, never on the test flight."""
 
 from __future__ import annotations
 

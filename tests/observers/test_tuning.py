@@ -1,4 +1,4 @@
-"""Issue 16: the Kalman filter's disturbance process noise from training trajectories (not the true test residual)."""
+"""The Kalman filter's disturbance process noise from training trajectories (not the true test residual)."""
 
 from __future__ import annotations
 

@@ -379,6 +379,47 @@ def test_ctrl_c_cancels_and_leaves_no_processes(make_pipeline: MakePipeline, tmp
     assert "\n--- FAILED" in (logs / "leaf.log").read_text()  # by the task itself or, if it was gone, the runner
 
 
+# A stand-in for fnnbook.cli whose import is cut short by a Ctrl-C: the press arrives while its code runs.
+SLOW_IMPORT = '''\
+import importlib.abc, importlib.util, sys
+BODY = """
+import os, signal
+try:
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(10 ** 7):
+        pass
+except KeyboardInterrupt:
+    print("a KeyboardInterrupt reached the imported code", flush=True)
+    raise
+print("the import went on after the Ctrl-C", flush=True)
+"""
+class SlowCli(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def find_spec(self, name, path, target=None):
+        return importlib.util.spec_from_loader(name, self) if name == "fnnbook.cli" else None
+    def create_module(self, spec):
+        return None
+    def exec_module(self, module):
+        exec(BODY, {})
+sys.meta_path.insert(0, SlowCli())
+from fnnbook.entry import main
+sys.exit(main([]))
+'''
+
+
+def test_ctrl_c_during_the_imports_never_raises_inside_them(tmp_path: Path) -> None:
+    """A KeyboardInterrupt raised inside the imports is not safe to catch: raised in torch's C++ bindings it
+    aborted the command (SIGABRT), raised in code run through exec (dataclasses, numpy) CPython killed the process
+    with SIGINT at exit (status -2, after it had printed "interrupted"). So the press ends the command at once:
+    the imported code never sees a KeyboardInterrupt, never goes on, and the status is 130."""
+    script = tmp_path / "slow_import.py"
+    script.write_text(SLOW_IMPORT)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).parents[2]),
+                                                                      os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert (proc.returncode, proc.stdout, proc.stderr) == (130, "", "interrupted\n")
+
+
 @pytest.mark.parametrize("when", ["imports", "spawn", "spawn+0.5s"])
 def test_ctrl_c_at_any_moment_is_one_line_and_exit_130(make_pipeline: MakePipeline, tmp_path: Path, when: str) -> None:
     """Ctrl-C while the command imports its modules, as the cluster's first worker process is spawned, and half a
