@@ -48,10 +48,11 @@ def main() -> None:
     y_gap = y.clone()
     y_gap[lost] = float("nan")
     t = torch.cumsum(Ts * (0.5 + torch.rand(T, generator=gen, dtype=F64)), 0)
-    obs = F.MeasuredFeedback(model, L_y, C, Ts, A=A, allow_unstable=True)
-    obs_t = F.MeasuredFeedback(model, L_y, C, None, A=A, allow_unstable=True)
+    obs = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=C), A=A, allow_unstable=True)
+    obs_t = F.MeasuredFeedback(model, None, L=L_y, measurement=F.Measurement(C=C), A=A, allow_unstable=True)
     h = lambda s: s[..., :1]  # noqa: E731  the same sensor as a function
-    obs_h = F.MeasuredFeedback(model, L_y, h, Ts, x0=torch.zeros(2, dtype=F64), allow_unstable=True)
+    obs_h = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=h, x0=torch.zeros(2, dtype=F64)),
+                               allow_unstable=True)
     cases = {
         "full state": lambda: F.cascade_predict(model, x, Ts, N, 2.0, 0.05, u=u),
         "full state, 20 % gaps": lambda: F.cascade_predict(model, x_gap, Ts, N, 2.0, 0.05, u=u),
@@ -85,10 +86,11 @@ def main() -> None:
     if args.tune:
         Tt = 1000
         start = time.perf_counter()
-        F.tune_gains(model, y_gap[:Tt], Ts, 25, u=u[:Tt], observer=obs, L0=2.0, beta0=0.05, iterations=100, lr=0.1)
+        F.tune_gains(model, y_gap[:Tt], Ts, 25, recipe=F.TuneRecipe(L0=2.0, beta0=0.05, iterations=100, lr=0.1),
+                     u=u[:Tt], observer=obs)
         with_obs = time.perf_counter() - start
         start = time.perf_counter()
-        F.tune_gains(model, x[:Tt], Ts, 25, u=u[:Tt], L0=2.0, beta0=0.05, iterations=100, lr=0.1)
+        F.tune_gains(model, x[:Tt], Ts, 25, recipe=F.TuneRecipe(L0=2.0, beta0=0.05, iterations=100, lr=0.1), u=u[:Tt])
         report["tune_gains, T = 1000, N = 25, 100 iterations [s]"] = {
             "with an observer (y = C x, 20 % gaps)": round(with_obs, 2),
             "full state": round(time.perf_counter() - start, 2)}

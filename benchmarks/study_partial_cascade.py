@@ -72,7 +72,7 @@ def main() -> None:
     F.train_neural_ode(model, torch.arange(T_train, dtype=F64) * TS, x_tr, recipe, seed=0, u=u_tr, progress=False)
     A = F.model_jacobian(model, torch.zeros(2, dtype=F64), torch.zeros(1, dtype=F64))
     L_y = F.place_observer_gain(torch.eye(2, dtype=F64) + TS * A, TS * C, [0.85, 0.9])
-    obs = F.MeasuredFeedback(model, L_y, C, TS, A=A)
+    obs = F.MeasuredFeedback(model, TS, L=L_y, measurement=F.Measurement(C=C), A=A)
     T = 600
     u = forcing(2, T, gen)
     x = simulate(0.5 * torch.randn(2, 2, generator=gen, dtype=F64), u)  # [0] calibration, [1] test
@@ -118,12 +118,14 @@ def main() -> None:
             grid = torch.tensor([0.0, 0.25, 0.5, 1.0, 2.0, 4.0], dtype=F64)  # 0: the feedback switched off
             sweep = F.cascade_sweep(model, y[0], TS, N, grid, 0.05, u=u[0], observer=obs)
             L_hand = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep[g]))])
-            tuned = F.tune_gains(model, y[0], TS, N, u=u[0], observer=obs, L0=1.0, beta0=0.05, iterations=60, lr=0.1,
-                                 settle=settle)
+            tuned = F.tune_gains(model, y[0], TS, N,
+                                 recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
+                                 u=u[0], observer=obs)
             sweep2 = F.cascade_sweep(model, y_cal, TS, N, grid, 0.05, u=u_cal, observer=obs)
             L_hand2 = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep2[g], y_cal))])
-            tuned2 = F.tune_gains(model, y_cal, TS, N, u=u_cal, observer=obs, L0=1.0, beta0=0.05, iterations=60,
-                                  lr=0.1, settle=settle)
+            tuned2 = F.tune_gains(model, y_cal, TS, N,
+                                  recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
+                                  u=u_cal, observer=obs)
             q_d = 1e-3
             R = max(noise, 0.005) ** 2
             ekf = F.ExtendedKalmanObserver(model, TS, 2, [1e-6, 1e-6, q_d], R, C=C, disturbance=[1], A=A)

@@ -231,7 +231,8 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
         return _field(s, members)
 
     def observer(model: Any, y: Tensor) -> Any:  # the first estimate: both tanks at the first measured level
-        return F.MeasuredFeedback(model, L_obs, CE, Ts, x0=y[0, 0].repeat(2 * E), allow_unstable=True)
+        return F.MeasuredFeedback(model, Ts, L=L_obs, measurement=F.Measurement(C=CE, x0=y[0, 0].repeat(2 * E)),
+                                  allow_unstable=True)
 
     def tile(y: Tensor) -> Tensor:
         return y.expand(-1, E).contiguous()
@@ -240,9 +241,10 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
     t0 = time.perf_counter()
     model = field(seeds)  # trained through its observer: Eqs. (7)-(8) first, the N-step output error descended
     ye = tile(rec.y_est)
-    tuned = F.tune_gains(model, ye, Ts, int(s["train_N"]), u=rec.u_est, observer=observer(model, ye),
-                         L0=s["L_start"], beta0=s["beta_start"], iterations=int(s["train_iterations"]),
-                         lr=s["train_lr"], train_model=True, members=E)
+    tuned = F.tune_gains(model, ye, Ts, int(s["train_N"]),
+                         recipe=F.TuneRecipe(L0=s["L_start"], beta0=s["beta_start"], iterations=int(s["train_iterations"]),
+                                             lr=s["train_lr"], train_model=True, members=E),
+                         u=rec.u_est, observer=observer(model, ye))
     clock["train_observer"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     free = _free_starts(rec, seeds, s, field(seeds), C) if "free" in s["baseline_starts"] else None
@@ -267,7 +269,7 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
             out[e]["n_step"][N]["no_feedback_free_run"] = capped(F.simulation_rmse, b["series"][N:], rec.y_val[N:],
                                                                  skip=skip)
         out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]]}
-    trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L,
+    trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L.tolist(),
                "tuned_beta": [float(v) for v in torch.as_tensor(tuned.beta).reshape(-1).expand(E)],
                "hand": [out[e]["gains"]["hand"] for e in range(E)]}
     return {seed: out[e] for e, seed in enumerate(seeds)}, clock, trained
@@ -310,8 +312,8 @@ def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, 
     C = torch.tensor([[0.0, 1.0]], dtype=f64)
     yv = rec.y_val.expand(-1, E)
     x0 = {"first_level": yv[0, 0].repeat(2 * E), "least_squares": None}[first]
-    obs = F.MeasuredFeedback(model, _blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E), _blocks(C, E),
-                             rec.Ts, x0=x0, allow_unstable=True)
+    obs = F.MeasuredFeedback(model, rec.Ts, L=_blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E),
+                             measurement=F.Measurement(C=_blocks(C, E), x0=x0), allow_unstable=True)
     two = lambda v: torch.as_tensor(v, dtype=f64).reshape(-1).repeat_interleave(2)  # noqa: E731  per member -> per state
     rows = {"open_loop": (torch.zeros(2 * E, dtype=f64), torch.zeros(2 * E, dtype=f64)),
             "tuned": (torch.as_tensor(trained["tuned_L"], dtype=f64), two(trained["tuned_beta"])),
@@ -381,8 +383,8 @@ def _simulate(F: Any, m: Any, encoder: Any, y: Tensor, u: Tensor, Ts: float, ski
     if encoder is not None:
         sim = from_start(m, y, C, burn=skip, Ts=Ts, u=u, encoder=encoder)[:, 0].numpy()
         return np.r_[y[:skip, 0].numpy(), sim]
-    obs = F.MeasuredFeedback(m, torch.tensor(s["observer_gain"], dtype=C.dtype)[:, None], C, Ts,
-                             x0=y[0, 0].repeat(2), allow_unstable=True)
+    obs = F.MeasuredFeedback(m, Ts, L=torch.tensor(s["observer_gain"], dtype=C.dtype)[:, None],
+                             measurement=F.Measurement(C=C, x0=y[0, 0].repeat(2)), allow_unstable=True)
     return free_run(obs, y, u, skip, C)
 
 
@@ -404,7 +406,7 @@ def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: An
     hand = sweep.argmin(1)
     beta_t = torch.as_tensor(tuned.beta, dtype=f64).reshape(-1).expand(E).repeat_interleave(2)
     zero = torch.zeros(1, 2 * E, dtype=f64)
-    L_all = torch.cat([zero, tuned.L_tensor.reshape(1, -1), L_grid])  # open loop, tuned, the hand grid
+    L_all = torch.cat([zero, tuned.L.reshape(1, -1), L_grid])  # open loop, tuned, the hand grid
     b_all = torch.cat([zero, beta_t[None], b_grid])
     Nmax = max(Ns)
     d = depths(model, obs_v, yv, uv, Ts, L_all, b_all, Nmax)  # (Nmax, 2 + G, T, 2E)
@@ -421,7 +423,7 @@ def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: An
         out.append({
             "free_run": {"observer_trained": capped(F.simulation_rmse, free_obs[:, e], y_e, skip=skip)},
             "n_step": table, "overflow": _overflow(rec, free, p, C1, s),
-            "gains": {"tuned": {"L": tuned.L[2 * e:2 * e + 2], "beta": float(beta_t[2 * e])},
+            "gains": {"tuned": {"L": tuned.L[2 * e:2 * e + 2].tolist(), "beta": float(beta_t[2 * e])},
                       "hand": {"L": L_h, "beta": b_h},
                       "sweep": {f"L={L:g}, beta={b:g}": float(v) for (L, b), v in zip(grid, sweep[e])}},
             "series": {"free_run": free_obs[:, e].tolist(),

@@ -103,6 +103,8 @@ from fnnlib.models.neural_ode import init_parameters
 from fnnlib.feedback import (
     DEFAULT_TUNE_RECIPE,
     DetectabilityError,
+    Gains,
+    Measurement,
     TuneRecipe,
     check_detectable,
     check_measurements,
@@ -155,7 +157,7 @@ __all__ += [
 ]
 
 __all__ += [  # a real plant
-    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
+    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Gains", "Measurement", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
     "check_measurements", "model_jacobian", "output_jacobian",
 ]
 

@@ -1,6 +1,8 @@
 """The Sec. 3 core: the feedback network of Eqs. (7)-(8), the gain decay of Eq. (11) and the cascade of Sec. 3.3.
 
 * :mod:`~fnnlib.feedback.types`: ``VectorField``, ``Feedback``, ``Estimate``.
+* :mod:`~fnnlib.feedback.options`: the option objects ``Gains`` (``L``, ``beta`` of Eq. (11)) and ``Measurement``
+  (``C`` or ``h``, gaps, first estimate, sample times), each checked on construction.
 * :mod:`~fnnlib.feedback.gains`: the base gain ``L`` (shapes, Theorem 1 / Eq. (25) checks).
 * :mod:`~fnnlib.feedback.decay`: Eq. (11), ``L_stack[i] = L e^{-beta i}``, and the checks on N and beta.
 * :mod:`~fnnlib.feedback.layer`: Eqs. (7)-(8) along a sequence, one gain or a batch of gains.
@@ -36,6 +38,7 @@ from fnnlib.feedback.measurement import (
     model_jacobian,
     output_jacobian,
 )
+from fnnlib.feedback.options import Gains, Measurement
 from fnnlib.feedback.rollout import rollout_predict
 from fnnlib.feedback.tuning import (
     DEFAULT_TUNE_RECIPE,
@@ -52,7 +55,7 @@ from fnnlib.feedback.tuning import (
 )
 from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
-__all__ = ["DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
+__all__ = ["Gains", "Measurement", "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
            "check_measurements", "model_jacobian", "output_jacobian", "MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
            "noise_amplification", "prediction_loss", "sweep_gains", "choose_gain", "GainChoice", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_predict", "cascade_predict_loop",
            "cascade_sweep", "check_N", "check_beta", "check_betas", "check_gain", "decay_factors", "decayed_gains", "eval_field",

@@ -121,7 +121,7 @@ def measured(f: VectorField, x: Tensor, Ts: float | None, N: int, *, t: Tensor |
         meas = check_measurements(x, n, u=u, mask=mask, f=f, name="x")
     else:
         n = observer.n
-        meas = check_measurements(x, n, C=observer.measurement, u=u, mask=mask, f=f, name="y")
+        meas = check_measurements(x, n, C=observer.output, u=u, mask=mask, f=f, name="y")
     if Ts is None and t is None and observer is not None and observer.Ts is not None:
         Ts = observer.Ts
     return meas, check_times(t, Ts, meas.y, name="x" if observer is None else "y"), N, n

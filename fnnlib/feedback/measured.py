@@ -33,6 +33,7 @@ from fnnlib.feedback.measurement import (
     check_output_matrix,
     output_jacobian,
 )
+from fnnlib.feedback.options import Measurement
 from fnnlib.feedback.sampling import Steps, check_times, longest, row_steps
 from fnnlib.feedback.types import Estimate, VectorField
 
@@ -103,24 +104,36 @@ class MeasuredFeedback:
     ----------
     f : callable
         The learned field ``f(t, x)`` or, with inputs, ``f(t, x, u)``.
+    Ts : float or None
+        Sample step; ``None`` when every call gives the sample times ``t``.
     L : Tensor, shape (n, p)
         Output-feedback gain, checked by :func:`check_output_gain` (with ``A`` when given).
-    C : Tensor (p, n) or callable ``h(x)``
-        Measurement matrix, or measurement function (batch, n) -> (batch, p), linearised at ``x0`` for the checks.
-    Ts : float, optional
-        Sample step; ``None`` when every call gives the sample times ``t``.
+    measurement : Measurement
+        ``C`` (p, n), or a measurement function ``h`` (batch, n) -> (batch, p) linearised at ``x0`` for the
+        checks; ``x0`` (n,) the first estimate (default: the least-squares state of the first sample,
+        :math:`C^+ y_0`; required with ``h``). A record's gaps and times go to :meth:`observe` and
+        :meth:`predict` (``mask=``, ``t=``), so here they are refused.
     A : Tensor, shape (n, n), optional
         The model's Jacobian for the detectability and stability check.
-    x0 : Tensor, shape (n,), optional
-        First estimate (default: the least-squares state of the first sample, :math:`C^+ y_0`; required with ``h``).
     allow_unstable : bool
         Skip the stability checks.
     """
 
-    def __init__(self, f: VectorField, L: Tensor, C, Ts: float | None = None, *, A: Tensor | None = None,
-                 x0: Tensor | None = None, allow_unstable: bool = False):
+    def __init__(self, f: VectorField, Ts: float | None, *, L: Tensor, measurement: Measurement,
+                 A: Tensor | None = None, allow_unstable: bool = False):
+        if not isinstance(measurement, Measurement):
+            raise TypeError(f"measurement must be a fnnlib.Measurement(C=..., x0=...), got "
+                            f"{type(measurement).__name__}")
+        if measurement.C is None:
+            raise ValueError("MeasuredFeedback needs the measurement's C (p, n) or h(x); with every state measured "
+                             "use LinearFeedback")
+        if measurement.mask is not None or measurement.t is not None:
+            raise ValueError("a record's mask and sample times t go to observe / predict (mask=, t=), not to the "
+                             "observer's measurement model")
         self.f = f
         self.Ts = None if Ts is None else check_positive(Ts, name="Ts")
+        self.measurement = measurement
+        C, x0 = measurement.C, measurement.x0
         self.h = C if callable(C) and not isinstance(C, Tensor) else None
         L_in = torch.as_tensor(as_gain(L), dtype=F64)
         if L_in.ndim != 2:
@@ -128,9 +141,6 @@ class MeasuredFeedback:
         n = int(L_in.shape[0])
         self.x0 = None if x0 is None else _check_x0(x0, n)
         if self.h is not None:
-            if self.x0 is None:
-                raise ValueError("with a measurement function h give the first estimate x0 (n,): h cannot be inverted, "
-                                 "and its Jacobian at x0 is what the gain is checked against")
             C_lin = output_jacobian(self.h, self.x0[None])[0].double()
         else:
             C_lin = C
@@ -142,7 +152,7 @@ class MeasuredFeedback:
             self.gain_for(self.Ts)
 
     @property
-    def measurement(self):
+    def output(self):
         """What :func:`~fnnlib.feedback.measurement.check_measurements` takes: ``h`` or ``C``."""
         return self.h if self.h is not None else self.C
 
@@ -155,7 +165,7 @@ class MeasuredFeedback:
 
     def _measurements(self, y: Tensor, u: Tensor | None, mask: Tensor | None, t: Tensor | None):
         """The one check of ``y``, ``u``, ``mask`` and the times, before any work."""
-        meas = check_measurements(y, self.n, C=self.measurement, u=u, mask=mask, f=self.f)
+        meas = check_measurements(y, self.n, C=self.output, u=u, mask=mask, f=self.f)
         return meas, check_times(t, None if t is not None else self.Ts, meas.y)
 
     def observe(self, y: Tensor, u: Tensor | None = None, *, t: Tensor | None = None,

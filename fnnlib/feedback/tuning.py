@@ -33,6 +33,7 @@ from fnnlib.feedback.cascade import _checked, measured, run_cascade
 from fnnlib.feedback.gaps import first_layer, measure_fn, start_state
 from fnnlib.feedback.layer import check_inputs, check_model_dtype
 from fnnlib.feedback.measured import MeasuredFeedback, check_output_gain
+from fnnlib.feedback.options import Gains, Measurement, record_sampling
 from fnnlib.feedback.sampling import Steps, longest
 from fnnlib.feedback.types import VectorField
 
@@ -154,6 +155,12 @@ class ObserverGain(nn.Module):
         return self.raw_L
 
 
+#: A closed-loop cost: ``objective(gains, x, u, mask)`` -> a scalar tensor, differentiable in ``gains``
+#: (a :class:`CascadeGains`); ``x`` (..., T, n) the tuning data, ``u`` its inputs or ``None``, ``mask`` its gaps or
+#: ``None``.
+Objective = Callable[["CascadeGains", Tensor, "Tensor | None", "Tensor | None"], Tensor]
+
+
 @dataclass(frozen=True)
 class TuneRecipe:
     """The settings of :func:`tune_gains` in one checked, immutable object.
@@ -165,7 +172,9 @@ class TuneRecipe:
     tuning record, measured by ``benchmarks/study_partial_cascade.py``); ``settle``: the first start
     times not scored (an observer's start-up transient, where any large gain helps and which a prediction
     made after it never meets); ``members``: the state is that many stacked members of an ensemble, each tuned
-    as it would be alone (:class:`CascadeGains`; their losses add, their gradients never mix). Checked in
+    as it would be alone (:class:`CascadeGains`; their losses add, their gradients never mix); ``objective``:
+    a closed-loop cost ``objective(gains, x, u, mask)`` (:data:`Objective`) to descend instead of the N-step
+    prediction error, e.g. the error of the loop the gains will serve, on training data. Checked in
     ``__post_init__``; replace a field with ``dataclasses.replace(recipe, lr=0.05)``. :data:`DEFAULT_TUNE_RECIPE` holds the values of the
     own-system chapter.
     """
@@ -180,6 +189,7 @@ class TuneRecipe:
     tune_observer: bool = False
     settle: int = 0
     members: int = 1
+    objective: Objective | None = None
 
     def __post_init__(self):
         L0 = self.L0 if isinstance(self.L0, (int, float)) else _as_tuple(self.L0)
@@ -201,31 +211,34 @@ class TuneRecipe:
         for name in ("full", "train_model", "tune_observer"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"TuneRecipe.{name} must be a bool, got {getattr(self, name)!r}")
+        if self.objective is not None and not callable(self.objective):
+            raise TypeError(f"TuneRecipe.objective must be a callable objective(gains, x, u, mask), got "
+                            f"{type(self.objective).__name__}")
 
 
 #: :func:`tune_gains`'s settings of the own-system chapter (L0 = 5, beta0 = 0.05, 60 Adam steps at lr 0.1).
 DEFAULT_TUNE_RECIPE = TuneRecipe()
 
-#: A closed-loop cost: ``objective(gains, x, u, mask)`` -> a scalar tensor, differentiable in ``gains``
-#: (a :class:`CascadeGains`); ``x`` (..., T, n) the tuning data, ``u`` its inputs or ``None``, ``mask`` its gaps or ``None``.
-Objective = Callable[["CascadeGains", Tensor, "Tensor | None", "Tensor | None"], Tensor]
-
-
 @dataclass
 class TunedGains:
-    """What :func:`tune_gains` found: the gains module, plain values and the loss per iteration."""
+    """What :func:`tune_gains` found: the gains module, the tuned base gain ``L`` (a float64 tensor, (n,) diagonal
+    or (n, n)), the decay rate ``beta`` (a float; a list of one per member with ``members > 1``), the loss per
+    iteration, the seconds taken and the first layer's observer (with one). :meth:`schedule` is the
+    :class:`~fnnlib.feedback.options.Gains` the cascade takes."""
 
     gains: CascadeGains
-    L: list
+    L: Tensor
     beta: float | list
     loss: list[float] = field(default_factory=list)
     seconds: float = 0.0
     observer: MeasuredFeedback | None = None
 
-    @property
-    def L_tensor(self) -> Tensor:
-        """The tuned base gain as a float64 tensor ((n,) diagonal or (n, n)), as :func:`~fnnlib.cascade_predict` takes it."""
-        return torch.tensor(self.L, dtype=torch.float64)
+    def schedule(self, *, allow_unstable: bool = False) -> Gains:
+        """The tuned gain schedule of Eq. (11), ``Gains(L, beta)``, as :func:`~fnnlib.cascade_predict` takes it
+        (one decay rate: with ``members > 1`` each member has its own, and the cascade takes one)."""
+        if not isinstance(self.beta, float):
+            raise ValueError(f"the gains were tuned per member (beta = {self.beta}); the cascade takes one decay rate")
+        return Gains(self.L, self.beta, allow_unstable=allow_unstable)
 
 
 def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
@@ -233,12 +246,8 @@ def prediction_loss(z: Tensor, y: Tensor, N: int) -> Tensor:
     return (z[..., : y.shape[-2] - N, :] - y[..., N:, :]).pow(2).sum(-1).mean()
 
 
-def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor | None = None,
-               L0: float | Tensor | None = None, beta0: float | None = None, iterations: int | None = None,
-               lr: float | None = None, u: Tensor | None = None, full: bool | None = None, L_max: float | None = None,
-               train_model: bool | None = None, tune_observer: bool | None = None, settle: int | None = None,
-               members: int | None = None, recipe: TuneRecipe | None = None,
-               objective: Objective | None = None, mask: Tensor | None = None,
+def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, recipe: TuneRecipe = DEFAULT_TUNE_RECIPE, *,
+               u: Tensor | None = None, measurement: Measurement | None = None,
                observer: MeasuredFeedback | None = None) -> TunedGains:
     r"""Learn the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11) from measured trajectories (B1).
 
@@ -252,48 +261,34 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
     Parameters
     ----------
     f : callable
-        The learned field ``f(t, x)`` (or ``f(t, x, u)`` with ``u``); frozen unless ``train_model``.
+        The learned field ``f(t, x)`` (or ``f(t, x, u)`` with ``u``); frozen unless ``recipe.train_model``.
     y : Tensor, shape (T, n) or (B, T, n); (..., T, p) with an ``observer``
         Tuning measurements, in ``f``'s dtype.
     Ts, N
-        Sample step (``None`` with ``t``) and prediction horizon (cascade depth).
-    t : Tensor, shape (..., T), optional
-        Sample times, when they are uneven (:mod:`fnnlib.feedback.sampling`).
-    L0, beta0
-        Initial gain (scalar or (n,)) and decay rate, see :class:`CascadeGains`.
-    iterations, lr
-        Adam steps and learning rate (on the raw parameters).
+        Sample step (``None`` with ``measurement.t``) and prediction horizon (cascade depth).
+    recipe : TuneRecipe
+        Every setting of the descent (initial gains, steps, learning rate, the gain's form, what else is
+        tuned, the start times not scored, the members, an objective), checked on construction; by default
+        :data:`DEFAULT_TUNE_RECIPE`. With ``members > 1`` the state (and the outputs) are that many stacked
+        members of an ensemble (e.g. a :class:`~fnnlib.models.scaled.ScaledField` of several seeds with a
+        block-diagonal observer), each with its own gains and decay rate; the result's ``beta`` is then a list.
     u : Tensor, shape like ``y`` with m columns, optional
         Inputs of a controlled model.
-    full, L_max
-        See :class:`CascadeGains`.
-    train_model : bool
-        Also descend on ``f``'s parameters (an ``nn.Module``).
-    tune_observer : bool
-        With an ``observer``: also descend on its output gain (:class:`TuneRecipe`).
-    settle : int
-        Start times not scored at the beginning of each record (:class:`TuneRecipe`).
-    members : int
-        The state (and the outputs) are that many stacked members of an ensemble, e.g. a
-        :class:`~fnnlib.models.scaled.ScaledField` of several seeds with a block-diagonal observer: each member
-        gets its own gains and decay rate (:class:`TuneRecipe`); the result's ``beta`` is then a list.
-    recipe : TuneRecipe, optional
-        All of ``L0 .. tune_observer`` at once (then give none of them separately), e.g. :data:`DEFAULT_TUNE_RECIPE`.
-    objective : callable, optional
-        A closed-loop cost ``objective(gains, x, u, mask)`` (:data:`Objective`) to descend instead of the
-        N-step prediction error, e.g. the error of the loop the gains will serve, on training data.
-    mask : Tensor of bool, shape (..., T) or (..., T, n), optional
-        Missing samples (a NaN in ``y`` means the same): the first layer runs open loop through them
-        (:mod:`fnnlib.feedback.gaps`) and the error is scored on present targets only.
+    measurement : Measurement, optional
+        The record's missing samples (``mask``; a NaN in ``y`` means the same: the first layer runs open loop
+        through them, :mod:`fnnlib.feedback.gaps`, and the error is scored on present targets only) and its
+        sample times ``t`` when they are uneven (:mod:`fnnlib.feedback.sampling`). Its ``C`` and ``x0`` are
+        the observer's: give them to the :class:`~fnnlib.feedback.measured.MeasuredFeedback`.
     observer : MeasuredFeedback, optional
         Partial measurements ``y = C x`` (or ``h(x)``): the first layer is this observer, the tuned ``L`` and
         ``beta`` are those of the full-state layers after it (:mod:`fnnlib.feedback.cascade`), and the error is
-        that of the predicted outputs. The result's ``observer`` is the one used (tuned with ``tune_observer``).
+        that of the predicted outputs. The result's ``observer`` is the one used (tuned with
+        ``recipe.tune_observer``).
     """
-    recipe = _recipe(recipe, L0=L0, beta0=beta0, iterations=iterations, lr=lr, full=full, L_max=L_max,
-                     train_model=train_model, tune_observer=tune_observer, settle=settle, members=members)
-    if objective is not None and not callable(objective):
-        raise TypeError(f"objective must be a callable objective(gains, x, u, mask), got {type(objective).__name__}")
+    if not isinstance(recipe, TuneRecipe):
+        raise TypeError(f"recipe must be a TuneRecipe (e.g. fnnlib.DEFAULT_TUNE_RECIPE), got {type(recipe).__name__}")
+    objective = recipe.objective
+    t, mask = record_sampling(measurement)
     meas, dt, N, n = measured(f, y, Ts, N, t=t, u=u, mask=mask, observer=observer)
     if recipe.tune_observer and observer is None:
         raise ValueError("tune_observer=True needs an observer (the first layer on partial measurements)")
@@ -341,11 +336,12 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, *, t: Tensor
         if obs_gain is not None:
             with torch.no_grad():
                 tuned = obs_gain().detach().clone()
-            result.observer = MeasuredFeedback(observer.f, tuned, observer.measurement, observer.Ts, A=observer._A,
-                                               x0=observer.x0, allow_unstable=observer._allow)
+            result.observer = MeasuredFeedback(observer.f, observer.Ts, L=tuned, measurement=observer.measurement,
+                                               A=observer._A, allow_unstable=observer._allow)
             result.observer.gain_for(dt)  # still stabilising after the descent (raises if not)
-    vals = gains.values()
-    result.L, result.beta = vals["L"], vals["beta"]
+    with torch.no_grad():
+        result.L = gains.L().detach().clone()
+    result.beta = gains.values()["beta"]
     return result
 
 
@@ -355,23 +351,6 @@ def _observer_layer(f: VectorField, meas, dt: Steps, n: int, observer: MeasuredF
     L = observer.gain_for(dt) if obs_gain is None else obs_gain()
     _, _, z1, _ = first_layer(f, meas, L.to(meas.y.dtype), dt, start_state(meas, n, observer.x0), diagonal=False)
     return z1
-
-
-def _recipe(recipe: TuneRecipe | None, **loose) -> TuneRecipe:
-    """The recipe of :func:`tune_gains`: ``recipe``, or one built from the loose arguments (not both)."""
-    given = {k: v for k, v in loose.items() if v is not None}
-    if recipe is not None:
-        if not isinstance(recipe, TuneRecipe):
-            raise TypeError(f"recipe must be a TuneRecipe, got {type(recipe).__name__}")
-        if given:
-            raise ValueError(f"give either recipe or the loose settings, not both (got recipe and {sorted(given)})")
-        return recipe
-    missing = [k for k in ("L0", "beta0", "iterations", "lr") if k not in given]
-    if missing:
-        raise TypeError(f"tune_gains needs {missing} (or recipe=TuneRecipe(...), e.g. DEFAULT_TUNE_RECIPE)")
-    L0 = given.pop("L0")
-    L0 = float(L0) if torch.as_tensor(L0).ndim == 0 else _as_tuple(L0)
-    return TuneRecipe(L0=L0, **given)
 
 
 def _loss(f: VectorField, meas, dt: Steps, N: int, gains: CascadeGains, objective: Objective | None,

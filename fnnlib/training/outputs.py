@@ -34,6 +34,7 @@ from fnnlib.feedback.gaps import first_layer, measure_fn, start_state
 from fnnlib.feedback.layer import eval_field
 from fnnlib.feedback.measured import MeasuredFeedback
 from fnnlib.feedback.measurement import Measurements, check_measurements
+from fnnlib.feedback.options import Measurement
 from fnnlib.feedback.sampling import Steps, check_times, row_steps
 from fnnlib.models.neural_ode import init_parameters, mlp
 from fnnlib.training.neural_ode import OPTIMIZERS, Recipe
@@ -209,7 +210,8 @@ def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, 
         bar.set_postfix(loss=f"{fit.loss[-1]:.4g}", refresh=False)
     fit.seconds = time.perf_counter() - start
     if r.start == "feedback":
-        fit.observer = MeasuredFeedback(model, L_y.detach().double(), C, Ts, allow_unstable=True)
+        fit.observer = MeasuredFeedback(model, Ts, L=L_y.detach().double(), measurement=Measurement(C=C),
+                                        allow_unstable=True)
     return fit
 
 

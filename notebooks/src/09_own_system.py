@@ -152,7 +152,7 @@ def pendulum_predictions(model, y_eval, u_eval, hand: F.GainSweep, tuned: F.Tune
         return {"open_loop": F.cascade_predict(model, y_eval, Ts, N, 0.0, u=u_eval),
                 "hand": F.cascade_predict(model, y_eval, Ts, N, hand.L, hand.beta, u=u_eval),
                 "paper": F.cascade_predict(model, y_eval, Ts, N, L_hand, beta_hand, u=u_eval),
-                "tuned": F.cascade_predict(model, y_eval, Ts, N, torch.tensor(tuned.L), tuned.beta, u=u_eval),
+                "tuned": F.cascade_predict(model, y_eval, Ts, N, tuned.L, tuned.beta, u=u_eval),
                 "kalman": kalman.predict(y_eval, N, u=u_eval).float()}
 
 
@@ -164,11 +164,12 @@ def pendulum_run(seed: int) -> dict:
     x_tune, x_eval = (plant.simulate(x, t[:n_test], u).float() for x, u in [(x0[1], u_tune), (x0[2], u_eval)])
     y_tune, y_eval = (F.add_measurement_noise(x, noise_std, gen) for x in (x_tune, x_eval))
     u_tune, u_eval = u_tune.float(), u_eval.float()
-    tuned = F.tune_gains(model, y_tune, Ts, N, u=u_tune, L0=L0, beta0=beta0, iterations=tune_iterations, lr=tune_lr)
+    tuned = F.tune_gains(model, y_tune, Ts, N,
+                         recipe=F.TuneRecipe(L0=L0, beta0=beta0, iterations=tune_iterations, lr=tune_lr), u=u_tune)
     hand = hand_sweep(model, y_tune, Ts, N, u=u_tune)
     preds = pendulum_predictions(model, y_eval, u_eval, hand, tuned)
     return {"errors": {k: float(F.n_step_errors(z, x_eval, N).mean()) for k, z in preds.items()},
-            "L": tuned.L, "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
+            "L": tuned.L.tolist(), "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
             "hand_sweep": hand.as_dict(),
             "trace": {k: z[: n_test - N, 0].numpy() for k, z in preds.items()} | {"truth": x_eval[N:, 0].numpy()}}
 
@@ -206,7 +207,7 @@ def spiral_predictions(model_s, y, hand: F.GainSweep, tuned: F.TunedGains) -> di
         return {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, 0.0),
                 "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, hand.L, hand.beta),
                 "paper": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, spiral_L, spiral_beta),
-                "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, torch.tensor(tuned.L), tuned.beta),
+                "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, tuned.L, tuned.beta),
                 "kalman": kalman_s.predict(y, spiral_N).float()}
 
 
@@ -214,12 +215,12 @@ def spiral_predictions(model_s, y, hand: F.GainSweep, tuned: F.TunedGains) -> di
 def spiral_run(seed: int, model_s) -> dict:
     gen = F.make_generator(1000 + seed)
     y_tune, y = (F.add_measurement_noise(x, spiral_noise_std, gen) for x in (x_s_tune, x_s))
-    tuned = F.tune_gains(model_s, y_tune, spiral_Ts, spiral_N, L0=L0, beta0=beta0,
-                         iterations=spiral_tune_iterations, lr=tune_lr)
+    tuned = F.tune_gains(model_s, y_tune, spiral_Ts, spiral_N,
+                         recipe=F.TuneRecipe(L0=L0, beta0=beta0, iterations=spiral_tune_iterations, lr=tune_lr))
     hand = hand_sweep(model_s, y_tune, spiral_Ts, spiral_N)
     preds = spiral_predictions(model_s, y, hand, tuned)
     return {"errors": {k: float(F.n_step_errors(z, x_s, spiral_N).mean()) for k, z in preds.items()},
-            "L": tuned.L, "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
+            "L": tuned.L.tolist(), "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
             "hand_sweep": hand.as_dict(), "seed": seed}
 
 

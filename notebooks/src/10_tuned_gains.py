@@ -147,8 +147,9 @@ def bottle_tune(seed: int, net) -> F.TunedGains:
     """The network's (L, beta), from the paper's values, tuned on the O1 error of its tuning throws."""
     def objective(gains, x, u, mask):  # the judged metric on the training throws, differentiable in the gains
         return o1_loss(x, F.cascade_forward(net, x, b_Ts, bN, gains, rows=x.shape[-2] - bN))
-    return F.tune_gains(net, bottle_tuning_throws(seed), b_Ts, bN, L0=bottle_L, beta0=bottle_beta,
-                        objective=objective, iterations=bottle_tune_iterations, lr=bottle_tune_lr)
+    return F.tune_gains(net, bottle_tuning_throws(seed), b_Ts, bN,
+                        recipe=F.TuneRecipe(L0=bottle_L, beta0=bottle_beta, objective=objective,
+                                            iterations=bottle_tune_iterations, lr=bottle_tune_lr))
 
 
 def o1_errors(pred: torch.Tensor) -> torch.Tensor:

@@ -50,13 +50,15 @@ A_guess = torch.tensor([[0.0, 1.0], [-1.0, 0.0]], dtype=f64)  # a rough guess (a
 L_y = F.place_observer_gain(torch.eye(2, dtype=f64) + Ts * A_guess, Ts * C, [0.8, 0.85])  # the observer's gain
 model = F.init_parameters(F.NeuralODE(2, (16, 16), "tanh", n_input=1).double(), gen)
 F.train_from_outputs(model, y[:2], C, F.OutputRecipe(iterations=train_iterations, L=L_y.tolist()), Ts=Ts, u=u[:2])
-observer = F.MeasuredFeedback(model, L_y, C, Ts, allow_unstable=True)  # learned from y, u alone: the first layer
+# learned from y, u alone: the first layer
+observer = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=C), allow_unstable=True)
 
 # %%
-tuned = F.tune_gains(model, y[2], Ts, N, u=u[2], observer=observer, L0=1.0, beta0=0.05, settle=T // 4,
-                     iterations=tune_iterations, lr=0.2)  # the gains tuned on a third log, after the start-up
+tuned = F.tune_gains(model, y[2], Ts, N,
+                     recipe=F.TuneRecipe(L0=1.0, beta0=0.05, settle=T // 4, iterations=tune_iterations, lr=0.2),
+                     u=u[2], observer=observer)  # the gains tuned on a third log, after the start-up
 preds = {"open loop": observer.predict(y[3], N, u[3]),
-         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.L_tensor, tuned.beta, u=u[3], observer=observer)}
+         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.L, tuned.beta, u=u[3], observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
     preds[name] = kf(model, Ts, 2, [1e-6, 1e-6, 1e-3], noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[3], N, u[3])
@@ -71,7 +73,7 @@ errors = {k: float(F.n_step_errors(z @ C.T, x[3] @ C.T, N)[T // 4:].mean()) for 
 # %% tags=["nbval-check-output"]
 best = min(errors, key=errors.get)
 print(f"lowest N-step error: {best} ({errors[best]:.4g}); the tuned feedback: {errors['feedback, tuned']:.4g}")
-print(f"tuned L = {[round(v, 3) for v in tuned.L]}, beta = {tuned.beta:.3f}")
+print(f"tuned L = {[round(v, 3) for v in tuned.L.tolist()]}, beta = {tuned.beta:.3f}")
 
 # %% [markdown]
 # The fourth record: the true position, the lost and noisy samples the model was given, and the predictions
@@ -89,4 +91,4 @@ figure = F.save_figure(fig, out_dir, "quick_start_prediction")
 
 # %%
 results_file = F.write_results(out_dir, task="quick_start", profile=profile, claims=[],
-                               metrics={"errors": errors, "L": tuned.L, "beta": tuned.beta})
+                               metrics={"errors": errors, "L": tuned.L.tolist(), "beta": tuned.beta})

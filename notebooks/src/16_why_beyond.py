@@ -84,8 +84,9 @@ HORIZON = {"one_step": 1, "multi_step": multi_step_N, "judged": bN}
 def tuned_on(seed: int, net, N_tune: int) -> F.TunedGains:
     """The network's (L, beta) tuned as tuned_gains tunes them, on the N_tune-step error of the whole state."""
     which = torch.randperm(x_train.shape[0], generator=F.make_generator(seed))[:ran_t["bottle_tune_throws"]]
-    return F.tune_gains(net, x_train[which], Ts, N_tune, L0=ran_b["L"], beta0=ran_b["beta"],
-                        iterations=ran_t["bottle_tune_iterations"], lr=ran_t["bottle_tune_lr"])
+    return F.tune_gains(net, x_train[which], Ts, N_tune,
+                        recipe=F.TuneRecipe(L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
+                                            lr=ran_t["bottle_tune_lr"]))
 
 
 def test_errors(net, L, beta: float) -> torch.Tensor:

@@ -41,7 +41,7 @@ def test_inputs_rows_off_are_refused_before_the_loop(plant):
     y, u_short = torch.zeros(T, 1, dtype=F64), torch.zeros(T - 6, 1, dtype=F64)
     ekf = F.ExtendedKalmanObserver(plant, TS, 2, [1e-6] * 3, 1e-4, C=C, disturbance=[1], A=A)
     ukf = F.UnscentedKalmanObserver(plant, TS, 2, [1e-6] * 3, 1e-4, C=C, disturbance=[1], A=A)
-    mf = F.MeasuredFeedback(plant, _gain(), C, TS, A=A)
+    mf = F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     CountingPlant.calls = 0
     for call in (lambda: ekf.predict(y, 5, u_short), lambda: ukf.observe(y, u_short), lambda: mf.predict(y, 5, u_short),
                  lambda: F.cascade_predict(plant, y, TS, 5, 1.0, u=u_short, observer=mf),
@@ -54,7 +54,7 @@ def test_inputs_rows_off_are_refused_before_the_loop(plant):
 
 def test_transposed_C_is_named(plant):
     with pytest.raises(ValueError, match=r"C has shape \(2, 1\) .*looks transposed: pass C.T"):
-        F.MeasuredFeedback(plant, _gain(), C.T, TS, A=A)
+        F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C.T), A=A)
     with pytest.raises(ValueError, match=r"looks transposed"):
         F.ExtendedKalmanObserver(plant, TS, 2, 1e-6, 1e-4, C=C.T)
     _check_no_work()
@@ -69,7 +69,8 @@ def test_dtype_errors_are_clear(plant):
     with pytest.raises(TypeError, match=r"model's parameters are torch.float32"):
         ekf.predict(x64, 3)
     with pytest.raises(TypeError, match=r"inputs u are torch.float32 but y is torch.float64"):
-        F.MeasuredFeedback(plant, _gain(), C, TS, A=A).observe(torch.zeros(T, 1, dtype=F64), torch.zeros(T, 1))
+        F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A).observe(torch.zeros(T, 1, dtype=F64),
+                                                                                     torch.zeros(T, 1))
     with pytest.raises(TypeError, match="must be a floating-point tensor"):
         F.cascade_predict(plant, torch.zeros(T, 2, dtype=torch.int64), TS, 3, 1.0)
 
@@ -87,11 +88,12 @@ def test_a_callable_measurement_with_the_wrong_output_and_an_inf_sample(plant):
     y = torch.zeros(T, 1, dtype=F64)
     y[3] = float("inf")
     with pytest.raises(ValueError, match=r"y holds an infinite value \(first at index \(3, 0\)\)"):
-        F.MeasuredFeedback(plant, _gain(), C, TS, A=A).observe(y)
+        F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A).observe(y)
     u = torch.zeros(T, 1, dtype=F64)
     u[5] = float("nan")
     with pytest.raises(ValueError, match="inputs u hold a NaN or infinite value .*cannot be missing"):
-        F.MeasuredFeedback(plant, _gain(), C, TS, A=A).observe(torch.zeros(T, 1, dtype=F64), u)
+        F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A).observe(torch.zeros(T, 1, dtype=F64),
+                                                                                     u)
     _check_no_work()
 
 

@@ -44,7 +44,7 @@ def test_estimate_through_a_gap_is_the_euler_rollout_and_corrects_after(how):
     x, u = _data()
     y = x @ C.T + 0.3  # a biased sensor: the estimate differs from the truth, so the gap is visible
     gap = slice(40, 60)
-    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     if how == "nan":
         y_gap, mask = y.clone(), None
         y_gap[gap] = float("nan")
@@ -76,7 +76,7 @@ def test_cascade_with_C_predicts_a_partially_measured_plant():
     x, u = _data()
     y = x @ C.T
     y[30:45] = float("nan")
-    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     z = F.cascade_predict(PLANT, y, TS, 5, 3.0, 0.05, u=u, observer=obs)
     assert z.shape == (T, 2) and bool(torch.isfinite(z).all())
     torch.testing.assert_close(z[100:-5], x[105:], rtol=0, atol=1e-6)
@@ -88,7 +88,7 @@ def test_multi_rate_mask_per_output():
     mask = torch.ones(T, 2, dtype=torch.bool)
     mask[1::2, 1] = False  # the velocity sensor at half the rate
     L = torch.tensor([[8.0, 0.0], [0.0, 8.0]], dtype=F64)
-    obs = F.MeasuredFeedback(PLANT, L, C2, TS, A=A, x0=torch.zeros(2, dtype=F64))
+    obs = F.MeasuredFeedback(PLANT, TS, L=L, measurement=F.Measurement(C=C2, x0=torch.zeros(2, dtype=F64)), A=A)
     est = obs.observe(x + 0.1, u, mask=mask)
     assert bool(torch.isfinite(est.x_hat).all())
     with pytest.raises(ValueError, match=r"mask of shape \(120, 3\) fits neither"):
@@ -102,8 +102,9 @@ def test_tune_gains_through_gaps_and_with_a_recipe_and_an_objective():
     y = x + 0.01 * torch.randn(T, 2, generator=torch.Generator().manual_seed(0), dtype=F64)
     recipe = F.TuneRecipe(L0=2.0, beta0=0.1, iterations=3, lr=0.1)
     a = F.tune_gains(PLANT, y, TS, 5, u=u, recipe=recipe)
-    b = F.tune_gains(PLANT, y, TS, 5, u=u, L0=2.0, beta0=0.1, iterations=3, lr=0.1)
-    assert a.loss == b.loss and a.L == b.L  # the recipe is the loose settings, bit for bit
+    b = F.tune_gains(PLANT, y, TS, 5, F.TuneRecipe(L0=2, beta0=0.1, iterations=3, lr=0.1), u=u)
+    assert a.loss == b.loss and torch.equal(a.L, b.L)  # an integer L0 is the float, bit for bit
+    assert isinstance(a.L, torch.Tensor) and a.L.dtype == F64 and torch.equal(a.schedule().L, a.L) and a.schedule().beta == a.beta
     y_gap = y.clone()
     y_gap[20:30] = float("nan")
     g = F.tune_gains(PLANT, y_gap, TS, 5, u=u, recipe=recipe)
@@ -114,41 +115,49 @@ def test_tune_gains_through_gaps_and_with_a_recipe_and_an_objective():
         calls.append(mask_ is None)
         return (gains.L() - 7.0).pow(2).sum() + gains.beta()
 
-    o = F.tune_gains(PLANT, y, TS, 5, u=u, recipe=F.TuneRecipe(L0=2.0, beta0=0.1, iterations=40, lr=0.1),
-                     objective=objective)
+    o = F.tune_gains(PLANT, y, TS, 5, u=u,
+                     recipe=F.TuneRecipe(L0=2.0, beta0=0.1, iterations=40, lr=0.1, objective=objective))
     assert len(calls) == 40 and o.L[0] > 2.5  # the closed-loop cost is what was descended
-    with pytest.raises(ValueError, match="either recipe or the loose settings"):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'lr'"):  # the recipe holds every setting
         F.tune_gains(PLANT, y, TS, 5, u=u, recipe=recipe, lr=0.2)
+    with pytest.raises(TypeError, match="recipe must be a TuneRecipe"):
+        F.tune_gains(PLANT, y, TS, 5, {"lr": 0.2}, u=u)
+    with pytest.raises(TypeError, match="TuneRecipe.objective must be a callable"):
+        F.TuneRecipe(objective=3.0)
     with pytest.raises(ValueError, match="TuneRecipe.iterations must be an integer >= 1"):
         F.TuneRecipe(iterations=0)
     with pytest.raises(ValueError, match="TuneRecipe.L0 must be > 0"):
         F.TuneRecipe(L0=-1.0)
-    with pytest.raises(TypeError, match="needs \\['iterations', 'lr'\\]"):
-        F.tune_gains(PLANT, y, TS, 5, u=u, L0=2.0, beta0=0.1)
+    d = F.tune_gains(PLANT, y[:40], TS, 5, u=u[:40])  # no recipe: the default one
+    assert len(d.loss) == F.DEFAULT_TUNE_RECIPE.iterations
 
 
 def test_tune_gains_with_an_observer_tunes_the_layers_after_it_and_checks_its_gain():
     x, u = _data()
     y = x @ C.T + 0.01 * torch.randn(T, 1, generator=torch.Generator().manual_seed(2), dtype=F64)
     y[10:20] = float("nan")
-    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
-    tuned = F.tune_gains(PLANT, y, TS, 4, u=u, observer=obs, L0=2.0, beta0=0.05, iterations=3, lr=0.1)
-    assert torch.tensor(tuned.L).shape == (2,) and tuned.loss[-1] < tuned.loss[0] and tuned.observer is obs
-    both = F.tune_gains(PLANT, y, TS, 4, u=u, observer=obs, L0=2.0, beta0=0.05, iterations=3, lr=0.1,
-                        tune_observer=True)
+    obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
+    tuned = F.tune_gains(PLANT, y, TS, 4, recipe=F.TuneRecipe(L0=2.0, beta0=0.05, iterations=3, lr=0.1), u=u,
+                         observer=obs)
+    assert tuned.L.shape == (2,) and tuned.loss[-1] < tuned.loss[0] and tuned.observer is obs
+    both = F.tune_gains(PLANT, y, TS, 4,
+                        recipe=F.TuneRecipe(L0=2.0, beta0=0.05, iterations=3, lr=0.1, tune_observer=True), u=u,
+                        observer=obs)
     assert both.observer is not obs and both.observer.L.shape == (2, 1) and both.loss[-1] < both.loss[0]
     assert not torch.equal(both.observer.L, obs.L)
     with pytest.raises(ValueError, match="tune_observer=True needs an observer"):
-        F.tune_gains(PLANT, x, TS, 4, u=u, L0=2.0, beta0=0.05, iterations=1, lr=0.1, tune_observer=True)
+        F.tune_gains(PLANT, x, TS, 4,
+                     recipe=F.TuneRecipe(L0=2.0, beta0=0.05, iterations=1, lr=0.1, tune_observer=True), u=u)
     with pytest.raises(F.GainError, match="not detectable"):  # a Jacobian whose mode the position does not see
-        F.MeasuredFeedback(PLANT, _gain(), C, TS, A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64))
+        F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C),
+                           A=torch.tensor([[0.0, 0.0], [0.0, 1.0]], dtype=F64))
 
 
 def test_cascade_sweep_with_an_observer_sweeps_the_layers_after_it():
     x, u = _data()
     y = x @ C.T
     y[30:45] = float("nan")
-    obs = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
+    obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     sweep = F.cascade_sweep(PLANT, y, TS, 5, torch.tensor([1.0, 3.0]), [0.05, 0.2], u=u, observer=obs)
     assert sweep.shape == (2, T, 2)
     for g, (L, beta) in enumerate([(1.0, 0.05), (3.0, 0.2)]):

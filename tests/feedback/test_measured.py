@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import GainError, LinearSystem, MeasuredFeedback, check_output_gain, place_observer_gain
+from fnnlib import GainError, LinearSystem, MeasuredFeedback, Measurement, check_output_gain, place_observer_gain
 
 from tests.feedback.test_inputs import A, B, F64, TS
 from tests.feedback.test_inputs import _euler_data as _euler
@@ -24,7 +24,8 @@ def test_estimate_converges_at_the_placed_rate_and_predicts_exactly():
     L = _gain()
     u = torch.sin(0.7 * torch.arange(T, dtype=F64) * TS)[:, None]
     x = _euler(torch.tensor([1.0, -2.0], dtype=F64), u)
-    obs = MeasuredFeedback(LinearSystem(A, B), L, C, TS, A=A, x0=torch.zeros(2, dtype=F64))
+    obs = MeasuredFeedback(LinearSystem(A, B), TS, L=L, measurement=Measurement(C=C, x0=torch.zeros(2, dtype=F64)),
+                           A=A)
     est = obs.observe(x @ C.T, u)
     err = (est.x_hat - x).norm(dim=-1)
     assert float(err[0]) > 1.0 and float(err[60]) < 1e-6 * float(err[0])  # error poles 0.6, 0.7: 0.7^60 ~ 5e-10
@@ -36,7 +37,7 @@ def test_batched_measurements():
     L = _gain()
     u = torch.zeros(2, 50, 1, dtype=F64)
     x = torch.stack([_euler(torch.tensor([1.0, 0.0], dtype=F64), u[0]), _euler(torch.tensor([0.0, 1.0], dtype=F64), u[1])])
-    obs = MeasuredFeedback(LinearSystem(A, B), L, C, TS, A=A)
+    obs = MeasuredFeedback(LinearSystem(A, B), TS, L=L, measurement=Measurement(C=C), A=A)
     both = obs.observe(x @ C.T, u).x_hat
     torch.testing.assert_close(both[1], obs.observe(x[1] @ C.T, u[1]).x_hat, rtol=0, atol=1e-14)
 

@@ -56,7 +56,7 @@ def _gain():
 def test_observer_equals_its_sequential_reference(model):
     f = Duffing() if model == "plant" else _net()
     x, y, u = _record()
-    obs = F.MeasuredFeedback(f, _gain(), C, TS, allow_unstable=True)
+    obs = F.MeasuredFeedback(f, TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     fast, slow = obs.observe(y, u), obs.observe_loop(y, u)
     torch.testing.assert_close(fast.x_hat, slow.x_hat, rtol=0, atol=1e-10)
     torch.testing.assert_close(fast.f_hat, slow.f_hat, rtol=0, atol=1e-10)
@@ -67,7 +67,8 @@ def test_measurement_function_and_uneven_times_equal_the_reference():
     g = torch.Generator().manual_seed(3)
     t = torch.cumsum(TS * (0.5 + torch.rand(2, T, generator=g, dtype=F64)), -1)
     h = lambda s: torch.sin(s[..., :1])  # noqa: E731  a nonlinear sensor
-    obs = F.MeasuredFeedback(Duffing(), _gain(), h, None, x0=torch.zeros(2, dtype=F64), allow_unstable=True)
+    obs = F.MeasuredFeedback(Duffing(), None, L=_gain(), measurement=F.Measurement(C=h, x0=torch.zeros(2, dtype=F64)),
+                             allow_unstable=True)
     y = torch.sin(y)
     fast, slow = obs.observe(y, u, t=t), obs.observe_loop(y, u, t=t)
     torch.testing.assert_close(fast.x_hat, slow.x_hat, rtol=0, atol=1e-10)
@@ -141,7 +142,7 @@ def test_gradients_through_the_batched_layer_equal_the_loops():
 def test_cascade_with_an_observer_is_its_layer_then_the_paper_cascade():
     f = _net()
     x, y, u = _record(B=2)
-    obs = F.MeasuredFeedback(f, _gain(), C, TS, allow_unstable=True)
+    obs = F.MeasuredFeedback(f, TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     z_hat = obs.observe_loop(y, u).x_hat
     first = z_hat[..., 1:, :]
     all_depths = F.cascade_predict(f, y, TS, 6, 2.0, 0.1, u=u, observer=obs, return_all=True)
@@ -164,5 +165,5 @@ def test_a_long_record_is_solved_in_chunks_and_equals_the_reference():
     u = torch.randn(1, T_long, 1, generator=g, dtype=F64)
     y = 0.3 * torch.randn(1, T_long, 1, generator=g, dtype=F64).cumsum(1) / T_long ** 0.5
     y[torch.rand(1, T_long, generator=g) < 0.2] = float("nan")
-    obs = F.MeasuredFeedback(Duffing(), _gain(), C, TS, allow_unstable=True)
+    obs = F.MeasuredFeedback(Duffing(), TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     torch.testing.assert_close(obs.observe(y, u).x_hat, obs.observe_loop(y, u).x_hat, rtol=0, atol=1e-10)

@@ -36,7 +36,7 @@ def test_a_record_with_no_present_sample_is_refused(plant):
     x = torch.full((2, T, 2), float("nan"), dtype=F64)
     x[0] = 0.1  # the first record is fine, the second has nothing
     y = x[..., :1]
-    mf = F.MeasuredFeedback(plant, _gain(), C, TS, A=A)
+    mf = F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     hide = torch.zeros(T, dtype=torch.bool)
     for call in (lambda: F.cascade_predict(plant, x, TS, 3, 1.0),
                  lambda: F.cascade_predict(plant, y, TS, 3, 1.0, observer=mf),
@@ -57,7 +57,7 @@ def test_a_record_with_no_present_sample_is_refused(plant):
 ])
 def test_a_bad_first_estimate_is_refused(plant, x0, match):
     with pytest.raises(ValueError, match=match):
-        F.MeasuredFeedback(plant, _gain(), C, TS, A=A, x0=x0)
+        F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C, x0=x0), A=A)
 
 
 @pytest.mark.parametrize("beta", [float("nan"), float("inf"), -0.1])
@@ -72,7 +72,7 @@ def test_gains_given_as_text_are_refused(plant, L):
     with pytest.raises(TypeError, match="gain L must be a number, a vector or a matrix of numbers"):
         F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, L)
     with pytest.raises(TypeError, match="gain L must be a number"):
-        F.MeasuredFeedback(plant, L, C, TS)
+        F.MeasuredFeedback(plant, TS, L=L, measurement=F.Measurement(C=C))
     assert Counting.calls == 0
 
 

@@ -38,8 +38,8 @@ def test_uniform_times_equal_the_step_path():
     gap[:, 20:30] = float("nan")
     torch.testing.assert_close(F.cascade_predict(PLANT, gap, TS, 5, 3.0, 0.1, u=u),
                                F.cascade_predict(PLANT, gap, None, 5, 3.0, 0.1, u=u, t=t), rtol=0, atol=1e-12)
-    obs_ts = F.MeasuredFeedback(PLANT, _gain(), C, TS, A=A)
-    obs_t = F.MeasuredFeedback(PLANT, _gain(), C, None, A=A)
+    obs_ts = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
+    obs_t = F.MeasuredFeedback(PLANT, None, L=_gain(), measurement=F.Measurement(C=C), A=A)
     y = x @ C.T
     torch.testing.assert_close(obs_ts.observe(y, u).x_hat, obs_t.observe(y, u, t=t).x_hat, rtol=0, atol=1e-12)
     torch.testing.assert_close(F.cascade_predict(PLANT, y, TS, 5, 2.0, 0.1, u=u, observer=obs_ts),
@@ -53,8 +53,8 @@ def test_uniform_times_equal_the_step_path():
                                    F.rollout_predict(PLANT, x, None, 4, u=u, t=t, method=method), rtol=0, atol=1e-12)
     recipe = F.TuneRecipe(L0=2.0, beta0=0.1, iterations=3, lr=0.1)
     a = F.tune_gains(PLANT, x, TS, 5, u=u, recipe=recipe)
-    b = F.tune_gains(PLANT, x, None, 5, u=u, t=t, recipe=recipe)
-    torch.testing.assert_close(torch.tensor(a.L), torch.tensor(b.L), rtol=0, atol=1e-12)
+    b = F.tune_gains(PLANT, x, None, 5, u=u, recipe=recipe, measurement=F.Measurement(t=t))
+    torch.testing.assert_close(a.L, b.L, rtol=0, atol=1e-12)
 
 
 def test_a_linear_plant_at_random_intervals_matches_its_closed_form():
@@ -106,11 +106,12 @@ def test_bad_times_are_refused_before_any_work(bad, match):
         calls.append(1)
         return PLANT(tt, xx, uu)
 
-    obs = F.MeasuredFeedback(counting, _gain(), C, None, A=A)
+    obs = F.MeasuredFeedback(counting, None, L=_gain(), measurement=F.Measurement(C=C), A=A)
     for call in (lambda: F.cascade_predict(counting, x[0], None, 3, 1.0, t=bad(t), u=u[0]),
                  lambda: obs.observe(x[0] @ C.T, u[0], t=bad(t)),
                  lambda: F.rollout_predict(counting, x[0], None, 3, t=bad(t), u=u[0]),
-                 lambda: F.tune_gains(counting, x[0], None, 3, t=bad(t), u=u[0], recipe=F.DEFAULT_TUNE_RECIPE)):
+                 lambda: F.tune_gains(counting, x[0], None, 3, u=u[0], recipe=F.DEFAULT_TUNE_RECIPE,
+                                      measurement=F.Measurement(t=bad(t)))):
         with pytest.raises((ValueError, TypeError), match=match):
             call()
     assert not calls

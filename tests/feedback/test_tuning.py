@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fnnlib import (CascadeGains, GainWarning, LinearSystem, NeuralODE, add_measurement_noise, cascade_forward,
-                    cascade_predict, check_gain, make_generator, n_step_errors, spectral_radius, tune_gains)
+                    cascade_predict, check_gain, make_generator, n_step_errors, spectral_radius, tune_gains,
+                    TuneRecipe)
 from fnnlib.feedback.tuning import prediction_loss
 
 F64 = torch.float64
@@ -84,12 +85,12 @@ def test_tuned_gains_beat_hand_picked_ones_and_the_open_loop_on_noisy_data():
     gen = make_generator(0)
     x_tune, x_eval = plant.simulate(torch.tensor([5.0, 0.0]), t, u), plant.simulate(torch.tensor([0.0, 4.0]), t, u)
     y_tune, y_eval = add_measurement_noise(x_tune, 0.02, gen), add_measurement_noise(x_eval, 0.02, gen)
-    tuned = tune_gains(model, y_tune, Ts, N, u=u, L0=5.0, beta0=0.05, iterations=60, lr=0.1)
+    tuned = tune_gains(model, y_tune, Ts, N, recipe=TuneRecipe(L0=5.0, beta0=0.05, iterations=60, lr=0.1), u=u)
     assert tuned.loss[-1] < tuned.loss[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GainWarning)
         err = {name: float(n_step_errors(cascade_predict(model, y_eval, Ts, N, L, b, u=u), x_eval, N).mean())
-               for name, L, b in [("open", 0.0, 0.0), ("hand", 40.0, 0.0), ("tuned", torch.tensor(tuned.L), tuned.beta)]}
+               for name, L, b in [("open", 0.0, 0.0), ("hand", 40.0, 0.0), ("tuned", tuned.L, tuned.beta)]}
     assert err["tuned"] < 0.9 * err["open"] and err["tuned"] < 0.9 * err["hand"], err
 
 
@@ -102,16 +103,18 @@ def test_bad_settings_are_refused():
         CascadeGains(2, 0.1, L0=1.0, beta0=0.1, L_max=30.0)
     model = _model()
     with pytest.raises(ValueError, match="need more than N \\+ settle = 10 samples"):
-        tune_gains(model, torch.randn(10, 2, dtype=F64), 0.1, 10, L0=1.0, beta0=0.1, iterations=1, lr=0.1)
+        tune_gains(model, torch.randn(10, 2, dtype=F64), 0.1, 10,
+                   recipe=TuneRecipe(L0=1.0, beta0=0.1, iterations=1, lr=0.1))
     with pytest.raises(ValueError, match="empty trajectory"):
-        tune_gains(model, torch.randn(0, 2, dtype=F64), 0.1, 1, L0=1.0, beta0=0.1, iterations=1, lr=0.1)
+        tune_gains(model, torch.randn(0, 2, dtype=F64), 0.1, 1,
+                   recipe=TuneRecipe(L0=1.0, beta0=0.1, iterations=1, lr=0.1))
 
 
 def test_frozen_model_is_left_without_gradients():
     model = _model()
     y = torch.randn(40, 2, dtype=F64, generator=torch.Generator().manual_seed(3))
     before = [p.detach().clone() for p in model.parameters()]
-    tune_gains(model, y, 0.05, 3, L0=2.0, beta0=0.1, iterations=2, lr=0.1)
+    tune_gains(model, y, 0.05, 3, recipe=TuneRecipe(L0=2.0, beta0=0.1, iterations=2, lr=0.1))
     assert all(torch.equal(a, b) for a, b in zip(before, model.parameters()))
     assert all(p.grad is None and p.requires_grad for p in model.parameters())
     check_gain(torch.tensor([1.0, 2.0]), None, 0.05)  # n implied by L
@@ -141,7 +144,7 @@ def test_tune_gains_equals_descent_on_the_whole_cascade():
     """tune_gains runs the T - N rows with a target only; the same Adam steps on the whole cascade agree."""
     model, Ts, N = _model(), 0.05, 4
     y = torch.randn(3, 25, 2, dtype=F64, generator=torch.Generator().manual_seed(5))
-    tuned = tune_gains(model, y, Ts, N, L0=2.0, beta0=0.1, iterations=3, lr=0.2)
+    tuned = tune_gains(model, y, Ts, N, recipe=TuneRecipe(L0=2.0, beta0=0.1, iterations=3, lr=0.2))
     gains = CascadeGains(2, Ts, L0=2.0, beta0=0.1)
     opt = torch.optim.Adam(gains.parameters(), lr=0.2)
     ref = []

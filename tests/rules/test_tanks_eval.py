@@ -39,7 +39,7 @@ def test_free_run_sees_only_the_first_samples() -> None:
         x[k + 1] = x[k] + Ts * model(0.0, x[k:k + 1], u[k:k + 1])[0]
     y = x[:, 1:].clone()
     L = F.place_observer_gain(torch.eye(2, dtype=torch.float64) + Ts * A, Ts * C, [0.3, 0.4])
-    obs = F.MeasuredFeedback(model, L, C, Ts, A=A, x0=x[0])
+    obs = F.MeasuredFeedback(model, Ts, L=L, measurement=F.Measurement(C=C, x0=x[0]), A=A)
     y_bad = y.clone()
     y_bad[10:] += 50.0
     np.testing.assert_allclose(free_run(obs, y_bad, u, 10, C), y[:, 0].numpy(), atol=1e-8)
@@ -75,8 +75,8 @@ def test_depths_are_the_cascade_and_the_open_loop_at_every_horizon() -> None:
     from fnnbook.tanks_eval import depths
     rec, field = _ensemble_setup(1)
     model = field([0])
-    obs = F.MeasuredFeedback(model, torch.tensor([[0.02], [0.15]], dtype=torch.float64), C, rec.Ts,
-                             x0=rec.y_val[0, 0].repeat(2), allow_unstable=True)
+    obs = F.MeasuredFeedback(model, rec.Ts, L=torch.tensor([[0.02], [0.15]], dtype=torch.float64),
+                             measurement=F.Measurement(C=C, x0=rec.y_val[0, 0].repeat(2)), allow_unstable=True)
     L = torch.tensor([[0.0, 0.0], [0.03, 0.03]], dtype=torch.float64)
     beta = torch.tensor([[0.0, 0.0], [0.2, 0.2]], dtype=torch.float64)
     d = depths(model, obs, rec.y_val, rec.u_val, rec.Ts, L, beta, 6)
@@ -98,10 +98,13 @@ def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
         E = len(seeds)
         m = field(seeds)
         y = rec.y_est.expand(-1, E).contiguous()
-        obs = F.MeasuredFeedback(m, _blocks(Lo, E), _blocks(C, E), rec.Ts, x0=y[0, 0].repeat(2 * E),
+        obs = F.MeasuredFeedback(m, rec.Ts, L=_blocks(Lo, E),
+                                 measurement=F.Measurement(C=_blocks(C, E), x0=y[0, 0].repeat(2 * E)),
                                  allow_unstable=True)
-        return m, F.tune_gains(m, y, rec.Ts, 4, u=rec.u_est, observer=obs, L0=0.01, beta0=0.1, iterations=3,
-                               lr=0.01, train_model=True, members=E)
+        return m, F.tune_gains(m, y, rec.Ts, 4,
+                               recipe=F.TuneRecipe(L0=0.01, beta0=0.1, iterations=3, lr=0.01, train_model=True,
+                                                   members=E),
+                               u=rec.u_est, observer=obs)
     both, tb = tune([0, 1])
     for e, seed in enumerate((0, 1)):
         one, t1 = tune([seed])
@@ -110,8 +113,8 @@ def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
         for a, b in zip(both.member(e).parameters(), one.parameters()):
             torch.testing.assert_close(a, b, rtol=1e-6, atol=1e-9)
     with pytest.raises(ValueError, match="members"):
-        F.tune_gains(both, rec.y_est.expand(-1, 2), rec.Ts, 4, u=rec.u_est, L0=0.01, beta0=0.1, iterations=1,
-                     lr=0.01, members=3)
+        F.tune_gains(both, rec.y_est.expand(-1, 2), rec.Ts, 4,
+                     recipe=F.TuneRecipe(L0=0.01, beta0=0.1, iterations=1, lr=0.01, members=3), u=rec.u_est)
 
 
 def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() -> None:

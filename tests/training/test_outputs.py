@@ -50,7 +50,7 @@ def _fit(start, train):
 
 def _scores(model, test):
     y, u, x = test
-    obs = F.MeasuredFeedback(model, _gain(), C, TS, allow_unstable=True)
+    obs = F.MeasuredFeedback(model, TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     sim = free_run(model, y, C, burn=20, Ts=TS, u=u, observer=obs)
     rmse = float((sim - (x @ C.T)[:, 20:]).pow(2).mean().sqrt())
     est = obs.observe(y, u).x_hat[:, 50:].reshape(-1, 2)
