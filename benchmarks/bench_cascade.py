@@ -41,12 +41,12 @@ def spiral_case(description: str):
 
 def main() -> None:
     args, model, x = spiral_case(__doc__.splitlines()[0])
-    batched = best_of(lambda: F.cascade_predict(model, x, 0.01, args.N, 20.0, 0.02), args.repeats)
-    loop = best_of(lambda: F.cascade_predict_loop(model, x, 0.01, args.N, 20.0, 0.02), max(1, args.repeats // 5))
+    batched = best_of(lambda: F.cascade_predict(model, x, 0.01, args.N, F.Gains(20.0, 0.02)), args.repeats)
+    loop = best_of(lambda: F.cascade_predict_loop(model, x, 0.01, args.N, F.Gains(20.0, 0.02)), max(1, args.repeats // 5))
     # agreement, in float64 (float32 rounding is amplified by up to (1 + Ts L)^N along the cascade)
     m64, x64 = model.double(), x.double()
-    a = F.cascade_predict(m64, x64, 0.01, args.N, 20.0, 0.02)
-    b = F.cascade_predict_loop(m64, x64, 0.01, args.N, 20.0, 0.02)
+    a = F.cascade_predict(m64, x64, 0.01, args.N, F.Gains(20.0, 0.02))
+    b = F.cascade_predict_loop(m64, x64, 0.01, args.N, F.Gains(20.0, 0.02))
     diff = float((a - b).abs().max() / b.abs().max())
     print(json.dumps({"T": args.T, "N": args.N, "batched_ms": round(1000 * batched, 2),
                       "loop_ms": round(1000 * loop, 1), "speedup": round(loop / batched, 1),

@@ -54,13 +54,13 @@ def main() -> None:
     obs_h = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=h, x0=torch.zeros(2, dtype=F64)),
                                allow_unstable=True)
     cases = {
-        "full state": lambda: F.cascade_predict(model, x, Ts, N, 2.0, 0.05, u=u),
-        "full state, 20 % gaps": lambda: F.cascade_predict(model, x_gap, Ts, N, 2.0, 0.05, u=u),
-        "y = C x": lambda: F.cascade_predict(model, y, Ts, N, 2.0, 0.05, u=u, observer=obs),
-        "y = C x, 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, 2.0, 0.05, u=u, observer=obs),
-        "y = h(x), 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, 2.0, 0.05, u=u, observer=obs_h),
-        "y = C x, 20 % gaps, uneven times": lambda: F.cascade_predict(model, y_gap, None, N, 2.0, 0.05, u=u, t=t,
-                                                                       observer=obs_t),
+        "full state": lambda: F.cascade_predict(model, x, Ts, N, F.Gains(2.0, 0.05), u=u),
+        "full state, 20 % gaps": lambda: F.cascade_predict(model, x_gap, Ts, N, F.Gains(2.0, 0.05), u=u),
+        "y = C x": lambda: F.cascade_predict(model, y, Ts, N, F.Gains(2.0, 0.05), u=u, observer=obs),
+        "y = C x, 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, F.Gains(2.0, 0.05), u=u, observer=obs),
+        "y = h(x), 20 % gaps": lambda: F.cascade_predict(model, y_gap, Ts, N, F.Gains(2.0, 0.05), u=u, observer=obs_h),
+        "y = C x, 20 % gaps, uneven times": lambda: F.cascade_predict(model, y_gap, None, N, F.Gains(2.0, 0.05), u=u,
+                                                                      measurement=F.Measurement(t=t), observer=obs_t),
         "observer alone (MeasuredFeedback.observe), 20 % gaps": lambda: obs.observe(y_gap, u),
     }
     if args.loop:

@@ -37,7 +37,7 @@ def monte_carlo(L, Ts: float, N: int, beta: float, A: torch.Tensor, *, T: int = 
     v = torch.randn(draws, T, n, generator=torch.Generator().manual_seed(0), dtype=F64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", F.GainWarning)
-        z = F.cascade_predict(lambda t, x: x @ A.T, v, Ts, N, L, beta)
+        z = F.cascade_predict(lambda t, x: x @ A.T, v, Ts, N, F.Gains(L, beta))
     return float(z[:, 2000:].pow(2).mean().sqrt())
 
 
@@ -58,10 +58,10 @@ def main() -> None:
         n = A.shape[0]
         with_A = bool(A.abs().sum() > 0)
         kw = {"n": n, "exact": True, **({"A": A} if with_A else {})}
-        exact = F.noise_amplification(L, Ts, N, beta, **kw)
-        ms = best_ms(lambda: F.noise_amplification(L, Ts, N, beta, **kw), args.repeats)
-        bound = F.noise_amplification(L, Ts, N, beta, n=n)
-        worst = F.noise_amplification(L, Ts, N, beta, n=n, exact=True, reduce="max")
+        exact = F.noise_amplification(F.Gains(L, beta), Ts, N)
+        ms = best_ms(lambda: F.noise_amplification(F.Gains(L, beta), Ts, N), args.repeats)
+        bound = F.noise_amplification(F.Gains(L, beta), Ts, N, n=n)
+        worst = F.noise_amplification_exact(F.Gains(L, beta), Ts, N, n=n, reduce="max")
         mc = monte_carlo(L, Ts, N, beta, A)
         rows.append({"case": name, "exact_rms": exact, "monte_carlo_rms": mc, "rel_diff": exact / mc - 1,
                      "ms": ms, "product_bound": bound, "worst_direction": worst})

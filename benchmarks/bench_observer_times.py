@@ -47,8 +47,8 @@ def main() -> None:
     y = x @ C.T
     out = {"T": T, "N": args.N, "jitter": "+-30% of Ts", "seconds": {}}
     cases = {
-        "LinearFeedback": (F.LinearFeedback(f, 5.0, Ts, 2), x),
-        "NeuralFeedbackObserver": (F.NeuralFeedbackObserver(f, h, Ts, 2), x),
+        "LinearFeedback": (F.LinearFeedback(f, Ts, gains=F.Gains(5.0), n=2), x),
+        "NeuralFeedbackObserver": (F.NeuralFeedbackObserver(f, Ts, h=h, n=2), x),
         "KalmanObserver (full state)": (F.KalmanObserver(f, Ts, 2, 1e-6, 1e-4), x),
         "KalmanObserver (full state, steady)": (F.KalmanObserver(f, Ts, 2, 1e-6, 1e-4, steady_state=True), x),
         "LuenbergerObserver (full state)": (F.LuenbergerObserver(f, Ts, 2, [0.5, 0.6, 0.7, 0.8]), x),

@@ -36,12 +36,13 @@ def main() -> None:
             F.cascade_forward(model, x, Ts, args.N, gains)
 
     res = {"T": args.T, "N": args.N,
-           "cascade_predict_ms": best_of(lambda: F.cascade_predict(model, x, Ts, args.N, L, beta), args.repeats),
+           "cascade_predict_ms": best_of(lambda: F.cascade_predict(model, x, Ts, args.N, F.Gains(L, beta)), args.repeats),
            "forward_no_grad_ms": best_of(forward_no_grad, args.repeats),
            "forward_graph_ms": best_of(lambda: F.cascade_forward(model, x, Ts, args.N, gains), args.repeats),
            "forward_backward_ms": best_of(backward, args.repeats)}
     with torch.no_grad():
-        diff = float((F.cascade_forward(model, x, Ts, args.N, gains) - F.cascade_predict(model, x, Ts, args.N, L, beta))
+        diff = float((F.cascade_forward(model, x, Ts, args.N, gains) - F.cascade_predict(model, x, Ts, args.N,
+                                                                                         F.Gains(L, beta)))
                      .abs().max())
     out = {k: round(1000 * v, 2) if k.endswith("_ms") else v for k, v in res.items()}
     out["max_abs_diff"] = diff

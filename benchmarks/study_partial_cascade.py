@@ -116,12 +116,12 @@ def main() -> None:
                 return (z[..., : T - N, :1] - target[..., N:, :]).pow(2).sum(-1)[..., settle:]
 
             grid = torch.tensor([0.0, 0.25, 0.5, 1.0, 2.0, 4.0], dtype=F64)  # 0: the feedback switched off
-            sweep = F.cascade_sweep(model, y[0], TS, N, grid, 0.05, u=u[0], observer=obs)
+            sweep = F.cascade_sweep(model, y[0], TS, N, F.Gains.sweep(grid, 0.05), u=u[0], observer=obs)
             L_hand = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep[g]))])
             tuned = F.tune_gains(model, y[0], TS, N,
                                  recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
                                  u=u[0], observer=obs)
-            sweep2 = F.cascade_sweep(model, y_cal, TS, N, grid, 0.05, u=u_cal, observer=obs)
+            sweep2 = F.cascade_sweep(model, y_cal, TS, N, F.Gains.sweep(grid, 0.05), u=u_cal, observer=obs)
             L_hand2 = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep2[g], y_cal))])
             tuned2 = F.tune_gains(model, y_cal, TS, N,
                                   recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
@@ -132,20 +132,23 @@ def main() -> None:
             ukf = F.UnscentedKalmanObserver(model, TS, 2, [1e-6, 1e-6, q_d], R, C=C, disturbance=[1], A=A)
             row = {"N": N, "noise": noise, "hand L": L_hand, "tuned L": [round(v, 3) for v in tuned.L],
                    "tuned beta": round(tuned.beta, 3),
-                   "cascade, hand gains": score(F.cascade_predict(model, y[1], TS, N, L_hand, 0.05, u=u[1],
+                   "cascade, hand gains": score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand, 0.05), u=u[1],
                                                                   observer=obs)),
-                   "cascade, tuned gains": score(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta,
-                                                                   u=u[1], observer=obs)),
+                   "cascade, tuned gains": score(F.cascade_predict(model, y[1], TS, N,
+                                                                   F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
+                                                                   observer=obs)),
                    "open loop from the observer": score(obs.predict(y[1], N, u[1])),
                    "EKF": score(ekf.predict(y[1], N, u[1])), "UKF": score(ukf.predict(y[1], N, u[1]))}
-            z_tuned_cal = F.cascade_predict(model, y[0], TS, N, tuned.L_tensor, tuned.beta, u=u[0], observer=obs)
+            z_tuned_cal = F.cascade_predict(model, y[0], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[0],
+                                            observer=obs)
             g_hand = F.choose_gain(per_start(sweep))
             g_tuned = F.choose_gain(torch.stack([per_start(sweep[0]), per_start(z_tuned_cal)]))
             L_guard = float(grid[g_hand.index])
             row["guarded: hand L, tuned kept"] = [L_guard, bool(g_tuned.index)]
             row["guarded: cascade hand / tuned"] = [
-                round(score(F.cascade_predict(model, y[1], TS, N, L_guard, 0.05, u=u[1], observer=obs)), 4),
-                round(score(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta, u=u[1], observer=obs)
+                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_guard, 0.05), u=u[1], observer=obs)), 4),
+                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
+                                              observer=obs)
                             if g_tuned.index else obs.predict(y[1], N, u[1])), 4)]
             y8 = x8 @ C.T + noise * torch.randn(8, T, 1, generator=gen3, dtype=F64)
             y8[lost8] = float("nan")
@@ -155,20 +158,20 @@ def main() -> None:
 
             ol8 = per_record(obs.predict(y8, N, u8))
             eight = {"open loop": ol8,
-                     "hand": per_record(F.cascade_predict(model, y8, TS, N, L_hand, 0.05, u=u8, observer=obs)),
-                     "tuned": per_record(F.cascade_predict(model, y8, TS, N, tuned.L_tensor, tuned.beta, u=u8,
-                                                           observer=obs)),
+                     "hand": per_record(F.cascade_predict(model, y8, TS, N, F.Gains(L_hand, 0.05), u=u8, observer=obs)),
+                     "tuned": per_record(F.cascade_predict(model, y8, TS, N, F.Gains(tuned.L_tensor, tuned.beta),
+                                                           u=u8, observer=obs)),
                      "EKF": per_record(ekf.predict(y8, N, u8))}
             y4 = x4 @ C.T + noise * torch.randn(4, T, 1, generator=gen4, dtype=F64)
             y4[lost4] = float("nan")
-            sweep4 = F.cascade_sweep(model, y4, TS, N, grid, 0.05, u=u4, observer=obs)  # (K, 4, T, n)
+            sweep4 = F.cascade_sweep(model, y4, TS, N, F.Gains.sweep(grid, 0.05), u=u4, observer=obs)  # (K, 4, T, n)
             L_four = float(grid[F.choose_gain(per_start(sweep4, y4)).index])
             y8b = x8b @ C.T + noise * torch.randn(8, T, 1, generator=gen5, dtype=F64)
             y8b[lost8b] = float("nan")
             fresh_ol = F.n_step_errors(obs.predict(y8b, N, u8b), x8b, N)[..., settle:].mean(-1)
-            fresh = F.n_step_errors(F.cascade_predict(model, y8b, TS, N, L_four, 0.05, u=u8b, observer=obs), x8b,
+            fresh = F.n_step_errors(F.cascade_predict(model, y8b, TS, N, F.Gains(L_four, 0.05), u=u8b, observer=obs), x8b,
                                     N)[..., settle:].mean(-1)
-            four = per_record(F.cascade_predict(model, y8, TS, N, L_four, 0.05, u=u8, observer=obs))
+            four = per_record(F.cascade_predict(model, y8, TS, N, F.Gains(L_four, 0.05), u=u8, observer=obs))
             row["four calibration records, guarded: L; on the eight; on eight fresh (open loop)"] = [
                 L_four, [round(float(four.mean()), 4), int((four <= ol8 + 1e-12).sum())],
                 [round(float(fresh.mean()), 4), int((fresh <= fresh_ol + 1e-12).sum()),
@@ -177,12 +180,12 @@ def main() -> None:
                 k: [round(float(v.mean()), 4), int((v <= ol8 + 1e-12).sum())] for k, v in eight.items()}
             row["two calibration records: hand L"] = L_hand2
             row["two calibration records: cascade hand / tuned"] = [
-                round(score(F.cascade_predict(model, y[1], TS, N, L_hand2, 0.05, u=u[1], observer=obs)), 4),
-                round(score(F.cascade_predict(model, y[1], TS, N, tuned2.L_tensor, tuned2.beta, u=u[1],
+                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand2, 0.05), u=u[1], observer=obs)), 4),
+                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned2.L_tensor, tuned2.beta), u=u[1],
                                               observer=obs)), 4)]
             row["position only: cascade hand / tuned / open loop"] = [
-                round(position(F.cascade_predict(model, y[1], TS, N, L_hand, 0.05, u=u[1], observer=obs)), 4),
-                round(position(F.cascade_predict(model, y[1], TS, N, tuned.L_tensor, tuned.beta, u=u[1],
+                round(position(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand, 0.05), u=u[1], observer=obs)), 4),
+                round(position(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
                                                  observer=obs)), 4),
                 round(position(obs.predict(y[1], N, u[1])), 4)]
             rows.append(row)

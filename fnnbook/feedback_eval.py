@@ -123,7 +123,7 @@ def nominal_errors(f: torch.nn.Module, h: torch.nn.Module | None, setup: Evaluat
         with torch.no_grad():
             fhat = _per_seed(F.eval_field(f, xs), E)
     else:
-        fhat = _per_seed(F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E).observe(xs).f_hat, E)
+        fhat = _per_seed(F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E).observe(xs).f_hat, E)
     return np.array([F.relative_rmse(fhat[e], setup.f_nom) for e in range(E)])
 
 
@@ -134,7 +134,7 @@ def rate_error_curves(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationS
     xs = F.stack_members(setup.x_nom, E)
     with torch.no_grad():
         alone = _per_seed(F.eval_field(f, xs), E)
-    fb = _per_seed(F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E).observe(xs).f_hat, E)
+    fb = _per_seed(F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E).observe(xs).f_hat, E)
     scale = float(torch.linalg.vector_norm(setup.f_nom, dim=-1).pow(2).mean().sqrt())
     return {k: (torch.linalg.vector_norm(v - setup.f_nom, dim=-1) / scale).numpy()
             for k, v in (("neural_ode", alone), ("neural_feedback", fb))}
@@ -157,7 +157,7 @@ def release_form_loss(f: torch.nn.Module, h: torch.nn.Module, x_cases: Tensor, T
     loss the release logs and stops on (its ``Total_loss``, read in ``spiral_curve/d_FeedbackNN_converge.py``,
     not copied); the first ``skip_seconds``, which the release fades in, are left out."""
     xs = F.stack_members(x_cases, E)
-    f_hat = _per_seed(F.NeuralFeedbackObserver(f, h, Ts, 2 * E).observe(xs).f_hat, E)  # (E, C, T, 2)
+    f_hat = _per_seed(F.NeuralFeedbackObserver(f, Ts, h=h, n=2 * E).observe(xs).f_hat, E)  # (E, C, T, 2)
     fd = (x_cases[:, 1:] - x_cases[:, :-1]) / Ts
     k0 = int(round(skip_seconds / Ts))
     return (f_hat[:, :, k0:-1] - fd[None, :, k0:]).abs().mean(dim=(1, 2, 3)).numpy()
@@ -169,7 +169,7 @@ def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tens
     rollout) and of ``f`` with the neural feedback ``h`` (its cascade, decayed by ``beta`` along its layers), on
     the levels ``x`` (levels, T, 2)."""
     xs = F.stack_members(x, E)
-    nf = F.NeuralFeedbackObserver(f, h, setup.Ts, 2 * E, beta=beta)
+    nf = F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E, beta=beta)
     with torch.no_grad():
         f_nn = _per_seed(F.eval_field(f, xs), E)
     z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N, method="euler"), E),

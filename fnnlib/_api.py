@@ -26,8 +26,10 @@ from fnnlib.feedback import (
     choose_gain,
     cascade_forward,
     noise_amplification,
+    noise_amplification_exact,
     tune_gains,
     VectorField,
+    cascade_depths,
     cascade_predict,
     cascade_predict_loop,
     cascade_sweep,
@@ -115,7 +117,7 @@ from fnnlib.observers import UnscentedKalmanObserver
 
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
-    "TunedGains", "cascade_forward", "noise_amplification", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
+    "TunedGains", "cascade_depths", "cascade_forward", "noise_amplification", "noise_amplification_exact", "paired_win", "randomized_cases", "register_model", "disturbance_drift_variance",
     "tune_gains", "GainSweep", "sweep_gains", "GainChoice", "choose_gain",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",

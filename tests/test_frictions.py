@@ -17,18 +17,18 @@ def test_float64_data_into_a_float32_model_gives_a_clear_error():
     x = F.Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0]), torch.linspace(0, 1, 20))
     model = F.NeuralODE(2, [8], "relu")
     with pytest.raises(TypeError, match=r"parameters are torch.float32 but the states are torch.float64"):
-        F.cascade_predict(model, x, 0.05, 2, 1.0)
-    assert F.cascade_predict(model, x.float(), 0.05, 2, 1.0).dtype == torch.float32
+        F.cascade_predict(model, x, 0.05, 2, F.Gains(1.0))
+    assert F.cascade_predict(model, x.float(), 0.05, 2, F.Gains(1.0)).dtype == torch.float32
 
 
 def test_n_is_implied_by_the_gain_or_the_model():
     model = F.NeuralODE(2, [8], "relu")
-    assert F.LinearFeedback(model, 5.0, 0.01).n == 2  # from the model's n
-    assert F.LinearFeedback(lambda t, x: x, torch.tensor([1.0, 2.0, 3.0]), 0.01).n == 3  # from L
+    assert F.LinearFeedback(model, 0.01, gains=F.Gains(5.0)).n == 2  # from the model's n
+    assert F.LinearFeedback(lambda t, x: x, 0.01, gains=F.Gains(torch.tensor([1.0, 2.0, 3.0]))).n == 3  # from L
     assert F.check_gain(torch.tensor([1.0, 2.0]), None, 0.01).shape == (2, 2)
     with pytest.raises(ValueError, match="scalar gain L does not say the state dimension"):
-        F.LinearFeedback(lambda t, x: x, 5.0, 0.01)
-    assert F.NeuralFeedbackObserver(model, F.NeuralFeedback(2, [4], "relu"), 0.01).n == 2
+        F.LinearFeedback(lambda t, x: x, 0.01, gains=F.Gains(5.0))
+    assert F.NeuralFeedbackObserver(model, 0.01, h=F.NeuralFeedback(2, [4], "relu")).n == 2
 
 
 def test_rate_takes_the_arguments_of_call():
@@ -107,7 +107,7 @@ def test_empty_trajectory_is_a_clear_error_for_both_cascades():
     f = F.Spiral(2.0, 0.1, 0.0)
     for fn in (F.cascade_predict, F.cascade_predict_loop):
         with pytest.raises(ValueError, match="x is an empty trajectory"):
-            fn(f, torch.zeros(0, 2, dtype=F64), 0.01, 3, 1.0)
+            fn(f, torch.zeros(0, 2, dtype=F64), 0.01, 3, F.Gains(1.0))
 
 
 def test_semidefinite_gain_is_not_called_unstable():

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import LinearFeedback, Spiral, mlp
+from fnnlib import Gains, LinearFeedback, Spiral, mlp
 from fnnlib.stability import (
     discrete_residual,
     divergence_transition,
@@ -101,7 +101,7 @@ def test_discrete_observer_converges_to_the_continuous_one_at_first_order():
     for Ts in (1e-2, 1e-3):
         t = torch.arange(round(1.0 / Ts) + 1, dtype=F64) * Ts
         x, cont = observe_continuous(true, f, 5.0, torch.tensor([2.0, 0.0]), t)
-        disc = LinearFeedback(f, 5.0, Ts, 2).observe(x)
+        disc = LinearFeedback(f, Ts, gains=Gains(5.0), n=2).observe(x)
         gaps.append(float((disc.x_hat - cont.x_hat).norm(dim=-1).max()))
     assert 6.0 < gaps[0] / gaps[1] < 14.0  # first order: ratio ~10
 

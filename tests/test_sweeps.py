@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import GainError, LinearFeedback, Spiral, cascade_predict
+from fnnlib import Gains, GainError, LinearFeedback, Spiral, cascade_predict
 from fnnlib._scan import linear_recurrence
 from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
@@ -96,7 +96,7 @@ def test_observe_gains_equals_linear_feedback_per_gain(f, x, L):
     est = observe_gains(f, x, TS, L)
     assert est.x_hat.shape == est.f_hat.shape == (L.shape[0], 2, 40, 2)
     for g in range(L.shape[0]):
-        one = LinearFeedback(f, L[g], TS, 2).observe(x)
+        one = LinearFeedback(f, TS, gains=Gains(L[g]), n=2).observe(x)
         torch.testing.assert_close(est.x_hat[g], one.x_hat, rtol=0, atol=1e-12)
         torch.testing.assert_close(est.f_hat[g], one.f_hat, rtol=0, atol=1e-12)
 
@@ -118,18 +118,18 @@ def test_observe_gains_refuses_unstable_unless_allowed(f, x):
     (5.0, torch.tensor([0.0, 0.05, 0.3])),
 ])
 def test_cascade_sweep_equals_cascade_predict_per_pair(f, x, L, beta):
-    z = cascade_sweep(f, x, TS, 7, L, beta)
+    z = cascade_sweep(f, x, TS, 7, Gains.sweep(L, beta))
     Lb = torch.as_tensor(L, dtype=F64).reshape(-1, *torch.as_tensor(L).shape[1:])
     bb = torch.as_tensor(beta, dtype=F64).reshape(-1)
     G = max(Lb.shape[0], bb.numel())
     assert z.shape == (G, 2, 40, 2)
     for g in range(G):
         Lg, bg = Lb[g % Lb.shape[0]], float(bb[g % bb.numel()])
-        torch.testing.assert_close(z[g], cascade_predict(f, x, TS, 7, Lg, bg), rtol=0, atol=1e-12)
+        torch.testing.assert_close(z[g], cascade_predict(f, x, TS, 7, Gains(Lg, bg)), rtol=0, atol=1e-12)
 
 
 def test_cascade_sweep_zero_gain_is_an_euler_rollout(f, x):
-    z = cascade_sweep(f, x[0], TS, 5, 0.0)[0]
+    z = cascade_sweep(f, x[0], TS, 5, Gains.sweep(0.0))[0]
     ref = x[0]
     for _ in range(5):
         ref = ref + TS * f(0.0, ref)  # Euler: z <- z + Ts f(z)
@@ -141,15 +141,15 @@ def test_cascade_sweep_zero_gain_is_an_euler_rollout(f, x):
     (dict(N=2.5), ValueError, "N must be an integer >= 1"),
     (dict(beta=-0.1), ValueError, "decay rate beta must be finite and >= 0"),
     (dict(beta=torch.tensor([0.0, 0.1])), ValueError, "3 gains and 2 decay rates do not pair up"),
-    (dict(L=torch.ones(3, 3)), ValueError, r"shape \(G,\) \(scalar gains\) or \(G, 2\)"),
-    (dict(L=torch.tensor([])), ValueError, "gain batch L is empty"),
+    (dict(L=torch.ones(3, 3)), ValueError, "a swept diagonal gain has 3 entries but the state has n = 2"),
+    (dict(L=torch.tensor([])), ValueError, r"a gain sweep L must be a scalar, shape \(G,\)"),
     (dict(L=torch.tensor([1.0, -1.0, 2.0])), GainError, "not positive definite"),
     (dict(Ts=0.0), ValueError, "Ts must be a finite positive"),
 ])
 def test_cascade_sweep_bad_inputs(f, x, kwargs, err, match):
     args = dict(Ts=TS, N=3, L=torch.tensor([1.0, 2.0, 3.0]), beta=0.0) | kwargs
     with pytest.raises(err, match=match):
-        cascade_sweep(f, x, args["Ts"], args["N"], args["L"], args["beta"])
+        cascade_sweep(f, x, args["Ts"], args["N"], Gains.sweep(args["L"], args["beta"]))
 
 
 # --- metrics of a sweep ------------------------------------------------------------------------------------------

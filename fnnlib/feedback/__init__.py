@@ -15,7 +15,7 @@
 * :mod:`~fnnlib.feedback.rollout`: the open-loop neural ODE (Eq. (2)) it is compared to.
 """
 
-from fnnlib.feedback.cascade import cascade_predict, cascade_predict_loop, cascade_sweep, run_cascade
+from fnnlib.feedback.cascade import cascade_depths, cascade_predict, cascade_predict_loop, cascade_sweep, run_cascade
 from fnnlib.feedback.decay import check_beta, check_betas, check_N, decay_factors, decayed_gains
 from fnnlib.feedback.gains import (
     NOISE_AMPLIFICATION_LIMIT,
@@ -26,6 +26,7 @@ from fnnlib.feedback.gains import (
     gain_compact,
     gain_matrix,
     noise_amplification,
+    noise_amplification_exact,
     spectral_radius,
 )
 from fnnlib.feedback.layer import eval_field, feedback_layer, observe_gains
@@ -57,7 +58,7 @@ from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
 __all__ = ["Gains", "Measurement", "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
            "check_measurements", "model_jacobian", "output_jacobian", "MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
-           "noise_amplification", "prediction_loss", "sweep_gains", "choose_gain", "GainChoice", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_predict", "cascade_predict_loop",
+           "noise_amplification", "noise_amplification_exact", "prediction_loss", "sweep_gains", "choose_gain", "GainChoice", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_depths", "cascade_predict", "cascade_predict_loop",
            "cascade_sweep", "check_N", "check_beta", "check_betas", "check_gain", "decay_factors", "decayed_gains", "eval_field",
            "feedback_layer", "gain_batch", "gain_compact", "gain_matrix", "observe_gains", "rollout_predict",
            "run_cascade", "spectral_radius"]

@@ -36,12 +36,13 @@ import torch
 from torch import Tensor
 
 from fnnlib._validation import as_trajectory, check_positive
-from fnnlib.feedback.decay import check_beta, check_N, decay_factors, decayed_gains
-from fnnlib.feedback.gains import check_gain, gain_batch, gain_compact
+from fnnlib.feedback.decay import check_N, decay_factors, decayed_gains
+from fnnlib.feedback.gains import check_gain, gain_compact
 from fnnlib.feedback.gaps import first_layer, start_state
 from fnnlib.feedback.layer import eval_field, feedback_layer, lead_gains, shift_inputs
 from fnnlib.feedback.measured import MeasuredFeedback
 from fnnlib.feedback.measurement import Measurements, check_measurements
+from fnnlib.feedback.options import Gains, Measurement, record_sampling
 from fnnlib.feedback.sampling import Steps, check_times, longest, row_steps
 from fnnlib.feedback.types import VectorField
 
@@ -143,10 +144,8 @@ def _first_then_cascade(f: VectorField, meas: Measurements, dt: Steps, L0: Tenso
 
 
 @torch.no_grad()
-def cascade_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float | Tensor, beta: float = 0.0,
-                    *, t: Tensor | None = None, u: Tensor | None = None, mask: Tensor | None = None,
-                    observer: MeasuredFeedback | None = None, return_all: bool = False,
-                    allow_unstable: bool = False) -> Tensor:
+def cascade_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, gains: Gains, *, u: Tensor | None = None,
+                    measurement: Measurement | None = None, observer: MeasuredFeedback | None = None) -> Tensor:
     r"""N-step prediction by the cascaded feedback network (Sec. 3.3, Eq. (11)), from every start time.
 
     With ``L = 0`` (and no gap) this equals :func:`~fnnlib.rollout_predict` with ``method="euler"``.
@@ -158,35 +157,52 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, L: floa
     x : Tensor, shape (..., T, n), or (..., T, p) with an ``observer``
         Measured states (or outputs), one row per sample.
     Ts : float or None
-        Sample step (also the prediction step); ``None`` with ``t``.
+        Sample step (also the prediction step); ``None`` with ``measurement.t``.
     N : int
         Prediction steps (layers).
-    L : float, Tensor (n,) or (n, n)
-        Base feedback gain (full state) of Eq. (11).
-    beta : float
-        Decay rate of Eq. (11); 0 keeps every layer at ``L``.
-    t : Tensor, shape (..., T), optional
-        Sample times instead of ``Ts`` (uneven sampling, :mod:`fnnlib.feedback.sampling`).
+    gains : Gains
+        The schedule of Eq. (11): base gain ``L`` (full state; float, (n,) or (n, n)) and decay rate ``beta``
+        (0 keeps every layer at ``L``), checked by :func:`~fnnlib.feedback.gains.check_gain` (Theorem 1,
+        Eq. (25), the noise amplification) unless ``gains.allow_unstable``.
     u : Tensor, shape (..., T, m), optional
         Inputs of a controlled model ``f(t, x, u)``, one row per sample (held over the step from it).
-    mask : Tensor of bool, shape (..., T) or (..., T, p), optional
-        ``False`` where no sample was taken (a NaN in ``x`` means the same).
+    measurement : Measurement, optional
+        The record's missing samples (``mask`` (..., T) or (..., T, p), ``False`` where no sample was taken;
+        a NaN in ``x`` means the same) and its sample times ``t`` (..., T) instead of ``Ts`` (uneven sampling,
+        :mod:`fnnlib.feedback.sampling`). ``C`` and ``x0`` belong to the ``observer``.
     observer : MeasuredFeedback, optional
         Partial measurements ``y = C x`` (or ``h(x)``): the first layer is this observer (its output gain, its
-        first estimate); the layers after it use ``L`` (module docstring).
-    return_all : bool
-        Also return every intermediate depth.
+        first estimate); the layers after it use ``gains`` (module docstring).
 
     Returns
     -------
     Tensor
-        Shape (..., T, n): row k predicts the state at ``t_{k+N}``; with ``return_all`` shape
-        (N+1, ..., T, n), depth 0 being ``x`` itself (its gaps filled by the estimate; with an observer, the
-        estimates :math:`\hat x_k`).
+        Shape (..., T, n): row k predicts the state at ``t_{k+N}``. :func:`cascade_depths` returns every depth.
     """
-    beta = check_beta(beta)
+    return _cascade(f, x, Ts, N, gains, u, measurement, observer, return_all=False)
+
+
+@torch.no_grad()
+def cascade_depths(f: VectorField, x: Tensor, Ts: float | None, N: int, gains: Gains, *, u: Tensor | None = None,
+                   measurement: Measurement | None = None, observer: MeasuredFeedback | None = None) -> Tensor:
+    r"""Every depth of the cascade of :func:`cascade_predict` (same arguments), shape (N+1, ..., T, n).
+
+    Depth ``i`` holds the ``i``-step predictions :math:`z^{(i)}`; depth 0 is ``x`` itself (its gaps filled by
+    the estimate; with an ``observer``, the estimates :math:`\hat x_k`).
+    """
+    return _cascade(f, x, Ts, N, gains, u, measurement, observer, return_all=True)
+
+
+def _cascade(f: VectorField, x: Tensor, Ts: float | None, N: int, gains: Gains, u: Tensor | None,
+             measurement: Measurement | None, observer: MeasuredFeedback | None, *, return_all: bool) -> Tensor:
+    """The cascade of Sec. 3.3 for :func:`cascade_predict` and :func:`cascade_depths`."""
+    if not isinstance(gains, Gains):
+        raise TypeError(f"gains must be a fnnlib.Gains(L, beta), got {type(gains).__name__}")
+    t, mask = record_sampling(measurement)
+    beta = gains.beta
     meas, dt, N, n = measured(f, x, Ts, N, t=t, u=u, mask=mask, observer=observer)
-    L = check_gain(L, n, longest(dt), allow_unstable=allow_unstable, N=N, beta=beta)  # warns on noise amplification
+    L = check_gain(gains.L, n, longest(dt), allow_unstable=gains.allow_unstable, N=N,
+                   beta=beta)  # warns on noise amplification
     L_stack = [gain_compact(L_i, n, dtype=meas.y.dtype) for L_i in decayed_gains(L, N, beta)]
     if observer is None and meas.mask is None:  # no gap: the paper's cascade, one scan per layer
         return run_cascade(f, meas.y, L_stack, dt, return_all=return_all, u=meas.u)
@@ -195,15 +211,14 @@ def cascade_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, L: floa
 
 
 @torch.no_grad()
-def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float | Sequence[float] | Tensor,
-                  beta: float | Sequence[float] | Tensor = 0.0, *, t: Tensor | None = None,
-                  u: Tensor | None = None, mask: Tensor | None = None, observer: MeasuredFeedback | None = None,
-                  allow_unstable: bool = False) -> Tensor:
-    r"""The N-step cascade for a batch of (base gain, decay rate) pairs in one pass.
+def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, gains: Sequence[Gains], *,
+                  u: Tensor | None = None, measurement: Measurement | None = None,
+                  observer: MeasuredFeedback | None = None) -> Tensor:
+    r"""The N-step cascade for a batch of gain schedules (base gain, decay rate) in one pass.
 
-    Batch element ``g`` runs :func:`cascade_predict` with gain ``L_g`` and
-    decay rate ``beta_g``: layer ``i`` uses :math:`L_g e^{-\beta_g i}`. Gains and
-    decay rates pair up by broadcasting (one of either, or as many of each).
+    Batch element ``g`` runs :func:`cascade_predict` with ``gains[g]``: layer ``i`` uses
+    :math:`L_g e^{-\beta_g i}`. Each base gain is a scalar or a diagonal (n,); :meth:`Gains.sweep
+    <fnnlib.feedback.options.Gains.sweep>` pairs a grid of gains with decay rates by broadcasting.
     The ablations of Sec. 3.4 and App. A.3 sweep gains and decay rates this way.
 
     Parameters
@@ -213,14 +228,13 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float 
     x : Tensor, shape (..., T, n)
         Measurements (any leading axes: levels, noise draws); (..., T, p) with an ``observer``.
     Ts : float or None
-        Sample step (also the prediction step); ``None`` with ``t``.
+        Sample step (also the prediction step); ``None`` with ``measurement.t``.
     N : int
         Prediction steps (layers).
-    L : float, Tensor (G,) or Tensor (G, n)
-        Scalar or diagonal base gains.
-    beta : float or Tensor (G,)
-        Decay rates of Eq. (11).
-    t, u, mask, observer : optional
+    gains : sequence of Gains
+        The G schedules, each checked by :func:`~fnnlib.feedback.gains.check_gain` unless its
+        ``allow_unstable``.
+    u, measurement, observer : optional
         As :func:`cascade_predict` takes them. With an ``observer`` the first layer runs once and the gains
         sweep the layers after it.
 
@@ -229,14 +243,20 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float 
     Tensor, shape (G, ..., T, n)
         Row ``k`` predicts the state at ``t_{k+N}``.
     """
+    gains = tuple(gains) if isinstance(gains, (list, tuple)) else gains
+    if not isinstance(gains, tuple) or not gains or not all(isinstance(g, Gains) for g in gains):
+        raise TypeError("gains must be a non-empty sequence of fnnlib.Gains (e.g. Gains.sweep(L_grid, beta_grid))")
+    if any(g.L.ndim > 1 for g in gains):
+        raise ValueError("a swept gain must be a scalar or a diagonal (n,) (the sweep runs diagonal gains)")
+    t, mask = record_sampling(measurement)
     meas, dt, N, n = measured(f, x, Ts, N, t=t, u=u, mask=mask, observer=observer)
-    L = gain_batch(L, n, longest(dt), allow_unstable=allow_unstable).to(meas.y.dtype)  # (G, n) base gains
-    decay = decay_factors(beta, N)  # (B, N)
-    G, B = L.shape[0], decay.shape[0]
-    if B != 1 and G != 1 and B != G:
-        raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
-    G = max(G, B)
-    L = L.expand(G, n)
+    for g in gains:
+        if g.L.ndim == 1 and g.L.shape[0] != n:
+            raise ValueError(f"a swept diagonal gain has {g.L.shape[0]} entries but the state has n = {n}")
+        check_gain(g.L, n, longest(dt), allow_unstable=g.allow_unstable)
+    L = torch.stack([g.L.expand(n) for g in gains]).to(meas.y.dtype)  # (G, n) base gains
+    decay = decay_factors([g.beta for g in gains], N)  # (G, N)
+    G = L.shape[0]
     y = meas.y
     nd = y.ndim + 1
     L_stack = [lead_gains(L * decay[:, i].to(y.dtype)[:, None], nd) for i in range(N)]  # Eq. (11)
@@ -251,8 +271,7 @@ def cascade_sweep(f: VectorField, x: Tensor, Ts: float | None, N: int, L: float 
 
 
 @torch.no_grad()
-def cascade_predict_loop(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor, beta: float = 0.0,
-                         *, allow_unstable: bool = False) -> Tensor:
+def cascade_predict_loop(f: VectorField, x: Tensor, Ts: float, N: int, gains: Gains) -> Tensor:
     """Reference implementation of :func:`cascade_predict`: loops over start times and depths.
 
     The streaming form a real-time system would run: at each new measurement
@@ -264,8 +283,10 @@ def cascade_predict_loop(f: VectorField, x: Tensor, Ts: float, N: int, L: float 
     if x.ndim != 2:
         raise ValueError(f"the loop reference takes one trajectory of shape (T, n), got {tuple(x.shape)}")
     T, n = x.shape
-    L = check_gain(L, n, Ts, allow_unstable=allow_unstable)
-    L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, beta)]
+    if not isinstance(gains, Gains):
+        raise TypeError(f"gains must be a fnnlib.Gains(L, beta), got {type(gains).__name__}")
+    L = check_gain(gains.L, n, Ts, allow_unstable=gains.allow_unstable)
+    L_stack = [gain_compact(L_i, n, dtype=x.dtype) for L_i in decayed_gains(L, N, gains.beta)]
     x_hat: list[Tensor] = []  # each layer's estimate, started at that layer's first input
     out = torch.empty_like(x)
     for k in range(T):

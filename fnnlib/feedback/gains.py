@@ -70,13 +70,11 @@ class GainWarning(UserWarning):
 NOISE_AMPLIFICATION_LIMIT = 10.0
 
 
-def noise_amplification(L: float | Tensor | list, Ts: float, N: int, beta: float = 0.0, *,
-                        n: int | None = None, exact: bool = False, horizon: int | None = None,
-                        A: Tensor | None = None, reduce: str = "rms") -> float:
-    r"""How much the N-layer cascade (Sec. 3.3, Eq. (11)) amplifies white measurement noise.
+def noise_amplification(gains, Ts: float, N: int, *, n: int | None = None) -> float:
+    r"""How much the N-layer cascade (Sec. 3.3, Eq. (11)) amplifies white measurement noise: a quick lower bound.
 
     Derivation. Linearise layer ``i`` (gain :math:`L_i = L e^{-\beta i}`) around the noise-free run; with
-    the model's Jacobian :math:`A` (neglected by default: :math:`T_s\|\partial f/\partial x\| \ll T_s L_i`)
+    the model's Jacobian :math:`A` (neglected here: :math:`T_s\|\partial f/\partial x\| \ll T_s L_i`)
     a perturbation :math:`v` of its input :math:`z^{(i)}` reaches its estimate :math:`s` and its output by
 
     .. math:: s_{k+1} = (I - T_s L_i)\,s_k + T_s(A + L_i)\,v_k, \qquad
@@ -84,47 +82,59 @@ def noise_amplification(L: float | Tensor | list, Ts: float, N: int, beta: float
 
     (Eqs. (7)-(8)). Per eigen-direction of :math:`L` and with :math:`A = 0`, :math:`c = T_s\lambda(L_i)`, the
     layer is the filter :math:`H_i(z) = (1 + c - z^{-1})/(1 - (1 - c)z^{-1})`: DC gain 1 (slow signals pass
-    unchanged), leading coefficient :math:`1 + c`. The N layers are in series.
-
-    * Default: the leading coefficient of the cascade, the spectral norm of
-      :math:`\prod_{i=0}^{N-1} (I + T_s L e^{-\beta i})`, a lower bound of the worst direction's factor
-      (the tail of each filter adds :math:`O(c^3)`).
-    * ``exact``: the root mean square over the n components of the cascade's stationary output for unit
-      white noise on every component, :math:`\sqrt{\operatorname{tr}\Sigma / n}` with
-      :math:`\Sigma = D D^T + C_s P C_s^T`, :math:`P = A_s P A_s^T + B_s B_s^T` the discrete Lyapunov
-      equation of the cascade's state-space form (the N estimates stacked), solved by doubling (batched
-      over eigen-directions for a symmetric ``L`` without ``A``; one (nN)-dimensional system otherwise).
-      This is what a Monte Carlo run of the cascade on white noise measures (the RMS of the output
-      noise over all components, divided by the input's). ``reduce="max"``: the worst eigen-direction
-      instead (symmetric ``L``, no ``A``). An open-loop rollout (``L = 0``, ``A = 0``) has factor 1.
+    unchanged), leading coefficient :math:`1 + c`. The N layers are in series. This returns the leading
+    coefficient of the cascade, the spectral norm of :math:`\prod_{i=0}^{N-1} (I + T_s L e^{-\beta i})`, a lower
+    bound of the worst direction's factor (the tail of each filter adds :math:`O(c^3)`);
+    :func:`noise_amplification_exact` gives the stationary factor itself.
 
     Parameters
     ----------
-    L : float, Tensor (n,) or (n, n)
-        Base gain.
-    Ts, N, beta
-        Sample step, cascade depth, decay rate of Eq. (11).
+    gains : Gains
+        The base gain ``L`` (scalar, (n,) or (n, n)) and decay rate ``beta`` of Eq. (11).
+    Ts, N
+        Sample step and cascade depth.
     n : int, optional
         State dimension; implied by a vector or matrix ``L``.
-    horizon : int, optional
-        Unused (kept for callers of the former truncated impulse response).
-    A : Tensor (n, n), optional
-        The model's Jacobian along the run (``exact`` only).
-    reduce : {"rms", "max"}
-        How ``exact`` summarises the components.
     """
-    N = int(N)
-    if N < 1:
-        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
-    M = gain_matrix(L, implied_n(L, n))
-    decay = [math.exp(-float(beta) * i) for i in range(N)]
-    if not exact:
-        if A is not None:
-            raise ValueError("the model Jacobian A enters the exact factor only: pass exact=True")
-        P = torch.eye(M.shape[0], dtype=M.dtype)
-        for d in decay:
-            P = (torch.eye(M.shape[0], dtype=M.dtype) + float(Ts) * d * M) @ P  # (I + Ts L_i) ... (I + Ts L_0)
-        return float(torch.linalg.matrix_norm(P, ord=2))
+    return _leading_factor(*_noise_setup(gains, N, n), float(Ts))
+
+
+def _leading_factor(M: Tensor, decay: list[float], Ts: float) -> float:
+    """The spectral norm of :math:`\prod_i (I + T_s L e^{-\beta i})` for the base gain ``M`` (n, n)."""
+    P = torch.eye(M.shape[0], dtype=M.dtype)
+    for d in decay:
+        P = (torch.eye(M.shape[0], dtype=M.dtype) + Ts * d * M) @ P  # (I + Ts L_i) ... (I + Ts L_0)
+    return float(torch.linalg.matrix_norm(P, ord=2))
+
+
+def noise_amplification_exact(gains, Ts: float, N: int, *, n: int | None = None, A: Tensor | None = None,
+                              reduce: str = "rms") -> float:
+    r"""The stationary noise factor of the N-layer cascade (Sec. 3.3, Eq. (11)) on white measurement noise.
+
+    The linearised layers of :func:`noise_amplification` in series, in state-space form (the N estimates
+    stacked): the root mean square over the n components of the cascade's stationary output for unit white
+    noise on every component, :math:`\sqrt{\operatorname{tr}\Sigma / n}` with
+    :math:`\Sigma = D D^T + C_s P C_s^T`, :math:`P = A_s P A_s^T + B_s B_s^T` the discrete Lyapunov equation,
+    solved by doubling (batched over eigen-directions for a symmetric ``L`` without ``A``; one
+    (nN)-dimensional system otherwise). This is what a Monte Carlo run of the cascade on white noise
+    measures (the RMS of the output noise over all components, divided by the input's). An open-loop
+    rollout (``L = 0``, ``A = 0``) has factor 1.
+
+    Parameters
+    ----------
+    gains : Gains
+        The base gain ``L`` and decay rate ``beta`` of Eq. (11).
+    Ts, N
+        Sample step and cascade depth.
+    n : int, optional
+        State dimension; implied by a vector or matrix ``L``.
+    A : Tensor (n, n), optional
+        The model's Jacobian along the run (default: neglected, 0).
+    reduce : {"rms", "max"}
+        Summarise the components by their root mean square, or take the worst eigen-direction ("max": a
+        symmetric ``L`` and no ``A``).
+    """
+    M, decay = _noise_setup(gains, N, n)
     if reduce not in ("rms", "max"):
         raise ValueError(f"reduce must be 'rms' or 'max', got {reduce!r}")
     n_ = M.shape[0]
@@ -135,15 +145,27 @@ def noise_amplification(L: float | Tensor | list, Ts: float, N: int, beta: float
         if reduce == "max":
             return float(var.max().sqrt())
         return float(((var * count).sum() / n_).sqrt())
-    else:
-        if reduce == "max":
-            raise ValueError("reduce='max' needs a symmetric L and no Jacobian A")
-        Ls = M[None]
-        Jac = (torch.zeros_like(M) if A is None else torch.as_tensor(A, dtype=torch.float64))[None]
-        if Jac.shape[1:] != M.shape:
-            raise ValueError(f"the Jacobian A must have shape {tuple(M.shape)}, got {tuple(Jac.shape[1:])}")
+    if reduce == "max":
+        raise ValueError("reduce='max' needs a symmetric L and no Jacobian A")
+    Ls = M[None]
+    Jac = (torch.zeros_like(M) if A is None else torch.as_tensor(A, dtype=torch.float64))[None]
+    if Jac.shape[1:] != M.shape:
+        raise ValueError(f"the Jacobian A must have shape {tuple(M.shape)}, got {tuple(Jac.shape[1:])}")
     var = _lyapunov_output_variance(*_cascade_matrices(Ls, Jac, float(Ts), decay))  # (1,): tr of the output's
     return float((var.sum() / n_).sqrt())
+
+
+def _noise_setup(gains, N: int, n: int | None) -> tuple[Tensor, list[float]]:
+    """The base gain as an (n, n) matrix and the decay factors :math:`e^{-\beta i}` of Eq. (11), i < N."""
+    from fnnlib.feedback.options import Gains  # noqa: PLC0415 (options imports this module)
+
+    if not isinstance(gains, Gains):
+        raise TypeError(f"gains must be a fnnlib.Gains(L, beta), got {type(gains).__name__}")
+    N = int(N)
+    if N < 1:
+        raise ValueError(f"number of prediction steps N must be an integer >= 1, got {N!r}")
+    M = gain_matrix(gains.L, implied_n(gains.L, n))
+    return M, [math.exp(-float(gains.beta) * i) for i in range(N)]
 
 
 def _scalar_cascades(lam: Tensor, Ts: float, decay: list[float]) -> tuple[Tensor, Tensor, Tensor, Tensor]:
@@ -267,7 +289,7 @@ def check_gain(L: float | Tensor | list, n: int | None, Ts: float, *, allow_unst
             f"with Ts = {Ts}; the observer error diverges. Lower L (rho < 1 needs the eigenvalues of "
             f"Ts*L inside the disc |1 - z| < 1) or pass allow_unstable=True to show the divergence.")
     if N is not None:
-        factor = noise_amplification(M, Ts, N, beta)
+        factor = _leading_factor(M, [math.exp(-float(beta) * i) for i in range(int(N))], float(Ts))
         if factor > NOISE_AMPLIFICATION_LIMIT:
             warnings.warn(f"the {int(N)}-layer cascade with this gain and beta = {beta} amplifies white "
                           f"measurement noise about {factor:.3g}x (prod_i (1 + Ts L e^(-beta i)); limit "

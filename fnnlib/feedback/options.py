@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from fnnlib.feedback.gains import as_gain
+from fnnlib.feedback.gains import GainError, as_gain
 
 #: A measurement function ``h(x)``, ``x`` (batch, n) -> (batch, p).
 OutputMap = Callable[[Tensor], Tensor]
@@ -57,17 +57,36 @@ class Gains:
             raise ValueError(f"Gains.L must be a scalar, a vector (n,) or a square matrix (n, n), got shape "
                              f"{tuple(L.shape)}")
         if not bool(torch.isfinite(L).all()):
-            raise ValueError(f"Gains.L holds NaN or infinite entries: {L.tolist()}")
+            raise GainError(f"Gains.L holds NaN or infinite entries: {L.tolist()}")
         object.__setattr__(self, "L", L)
         if isinstance(self.beta, bool) or not isinstance(self.beta, (int, float)) and not (
                 isinstance(self.beta, Tensor) and self.beta.numel() == 1):
             raise TypeError(f"Gains.beta must be one number (the decay rate of Eq. (11)), got {self.beta!r}")
         beta = float(self.beta)
         if not (math.isfinite(beta) and beta >= 0):
-            raise ValueError(f"Gains.beta must be finite and >= 0 (Eq. (11)), got {self.beta!r}")
+            raise ValueError(f"Gains.beta: the decay rate beta must be finite and >= 0 (Eq. (11)), got "
+                             f"{self.beta!r}")
         object.__setattr__(self, "beta", beta)
         if not isinstance(self.allow_unstable, bool):
             raise TypeError(f"Gains.allow_unstable must be a bool, got {self.allow_unstable!r}")
+
+    @classmethod
+    def sweep(cls, L, beta=0.0, *, allow_unstable: bool = False) -> tuple[Gains, ...]:
+        """Gain schedules for :func:`~fnnlib.feedback.cascade.cascade_sweep`: ``L`` a scalar, G scalar gains (G,)
+        or G diagonal gains (G, n), paired with the decay rates ``beta`` (a scalar or (B,)) by broadcasting (one
+        of either, or as many of each)."""
+        Lt = torch.as_tensor(as_gain(L), dtype=torch.float64)
+        if Lt.ndim == 0:
+            Lt = Lt.reshape(1)
+        if Lt.ndim > 2 or Lt.shape[0] == 0:
+            raise ValueError(f"a gain sweep L must be a scalar, shape (G,) (scalar gains) or (G, n) (diagonal "
+                             f"gains); got shape {tuple(Lt.shape)}")
+        betas = torch.as_tensor(beta, dtype=torch.float64).reshape(-1)
+        G, B = Lt.shape[0], betas.shape[0]
+        if B == 0 or (B != 1 and G != 1 and B != G):
+            raise ValueError(f"{G} gains and {B} decay rates do not pair up (give one of either, or as many)")
+        return tuple(cls(Lt[0 if G == 1 else g], float(betas[0 if B == 1 else g]), allow_unstable=allow_unstable)
+                     for g in range(max(G, B)))
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,7 @@ from torch import Tensor
 
 from fnnlib._validation import as_trajectory, check_positive
 from fnnlib.feedback.cascade import cascade_predict
-from fnnlib.feedback.decay import check_beta
+from fnnlib.feedback.options import Gains, Measurement
 from fnnlib.feedback.gains import check_gain, gain_compact, implied_n
 from fnnlib.feedback.layer import eval_field, feedback_layer
 from fnnlib.feedback.sampling import longest, row_steps
@@ -24,23 +24,22 @@ from fnnlib.feedback.types import Estimate, VectorField
 class LinearFeedback:
     r"""Neural ODE with a linear feedback, Eqs. (7)-(8).
 
+    Every observer is built as ``(f, Ts, *, ...)``: the model and the nominal sample step by position, the rest
+    by name.
+
     Parameters
     ----------
     f : callable
         The learned vector field ``f(t, x)``, ``x`` of shape (batch, n).
-    L : float, Tensor (n,) or Tensor (n, n)
-        Base feedback gain (scalar, diagonal or full). Checked by
-        :func:`~fnnlib.feedback.gains.check_gain`.
     Ts : float
         Sampling step of the measurements.
+    gains : Gains
+        Base feedback gain ``L`` (scalar, diagonal or full; checked by :func:`~fnnlib.feedback.gains.check_gain`
+        unless ``gains.allow_unstable``, which accepts a gain that is not positive definite or has
+        :math:`\rho(I - T_s L) \ge 1`) and the decay rate ``beta`` of Eq. (11) used by :meth:`predict`.
     n : int, optional
         State dimension; not needed when ``L`` is a vector or matrix or ``f`` has an ``n`` attribute
         (a :class:`~fnnlib.models.NeuralODE` or a :class:`~fnnlib.systems.DynamicalSystem`).
-    allow_unstable : bool
-        Accept a gain that is not positive definite or has
-        :math:`\rho(I - T_s L) \ge 1`.
-    beta : float
-        Gain decay rate of Eq. (11) used by :meth:`predict`.
 
     Attributes
     ----------
@@ -48,14 +47,15 @@ class LinearFeedback:
         The base gain (layer 0 of the cascade; :meth:`observe` uses it alone).
     """
 
-    def __init__(self, f: VectorField, L: float | Tensor, Ts: float, n: int | None = None, *,
-                 allow_unstable: bool = False, beta: float = 0.0):
+    def __init__(self, f: VectorField, Ts: float, *, gains: Gains, n: int | None = None):
+        if not isinstance(gains, Gains):
+            raise TypeError(f"gains must be a fnnlib.Gains(L, beta), got {type(gains).__name__}")
         self.f = f
         self.Ts = check_positive(Ts, name="Ts")
-        self.n = implied_n(L, n if n is not None else getattr(f, "n", None))
-        self.L = check_gain(L, self.n, self.Ts, allow_unstable=allow_unstable)  # (n, n) float64
-        self.allow_unstable = bool(allow_unstable)
-        self.beta = check_beta(beta)
+        self.n = implied_n(gains.L, n if n is not None else getattr(f, "n", None))
+        self.L = check_gain(gains.L, self.n, self.Ts, allow_unstable=gains.allow_unstable)  # (n, n) float64
+        self.allow_unstable = gains.allow_unstable
+        self.beta = gains.beta
 
     def observe(self, x: Tensor, u: Tensor | None = None, *, t: Tensor | None = None) -> Estimate:
         """Run the feedback network along measurements ``x`` (..., T, n) (inputs ``u`` (..., T, m) of a controlled model).
@@ -87,5 +87,6 @@ class LinearFeedback:
         :func:`~fnnlib.feedback.cascade.cascade_predict` with this base gain and the decay
         ``beta`` of Eq. (11); row k predicts the state at ``t_{k+N}`` (with ``t``, the record's own).
         """
-        return cascade_predict(self.f, x, None if t is not None else self.Ts, N, self.L, self.beta,
-                               allow_unstable=self.allow_unstable, u=u, t=t)
+        return cascade_predict(self.f, x, None if t is not None else self.Ts, N,
+                               Gains(self.L, self.beta, allow_unstable=self.allow_unstable), u=u,
+                               measurement=None if t is None else Measurement(t=t))

@@ -77,11 +77,11 @@ class NeuralFeedbackObserver:
     ----------
     f : callable
         The learned vector field ``f(t, x)``, ``x`` of shape (batch, n) (frozen).
+    Ts : float
+        Sampling step of the measurements (also the prediction step).
     h : callable
         The feedback ``h(e)``, ``e = x - x_hat`` of shape (batch, n), e.g. a
         :class:`~fnnlib.models.NeuralFeedback`.
-    Ts : float
-        Sampling step of the measurements (also the prediction step).
     n : int, optional
         State dimension; by default ``f.n`` (a :class:`~fnnlib.models.NeuralODE` or a system has it).
     beta : float
@@ -89,7 +89,7 @@ class NeuralFeedbackObserver:
         :math:`e^{-\beta i} h_{neural}`. 0 (the default) keeps the learned feedback unchanged.
     """
 
-    def __init__(self, f: VectorField, h: Feedback, Ts: float, n: int | None = None, *, beta: float = 0.0):
+    def __init__(self, f: VectorField, Ts: float, *, h: Feedback, n: int | None = None, beta: float = 0.0):
         self.f = f
         self.h = h
         self.Ts = check_positive(Ts, name="Ts")

@@ -140,12 +140,12 @@ fig_c = F.save_figure(fig, out, "fig4c_nominal_rate")
 # every seed's network exactly as it would run alone.
 
 # %%
-est = F.LinearFeedback(ens, L, Ts, 2 * E).observe(xs_test)
+est = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs_test)
 f_hat = per_seed(est.f_hat)
 rate_nn = [F.rmse(f_nn_test[e], f_test) for e in range(E)]
 rate_fb = [F.rmse(f_hat[e], f_test) for e in range(E)]
 t0 = time.perf_counter()
-z_fb = per_seed(F.cascade_predict(ens, xs_test, Ts, N_max, L, beta, return_all=True))  # (E, N_max+1, T, 2)
+z_fb = per_seed(F.cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
 cascade_s = time.perf_counter() - t0
 z_nn = per_seed(F.rollout_predict(ens, xs_test, Ts, N_max, method="euler", return_all=True))
 z_nn_dp = per_seed(F.rollout_predict(ens, xs_test, Ts, N, method="dopri5", rtol=rtol, atol=atol))
@@ -196,7 +196,7 @@ for std in noise_sweep:
     sweep["noise_std"].append(std)
     sweep["neural_ode"].append(F.n_step_errors(per_seed(F.rollout_predict(ens, xm, Ts, N)), x_test, N).mean(-1).tolist())
     for key, b in [("feedback_decay", beta), ("feedback_no_decay", 0.0)]:
-        z = per_seed(F.cascade_predict(ens, xm, Ts, N, L, b))
+        z = per_seed(F.cascade_predict(ens, xm, Ts, N, F.Gains(L, b)))
         sweep[key].append(F.n_step_errors(z, x_test, N).mean(-1).tolist())
 state_rms = float(x_test.pow(2).sum(-1).mean().sqrt())
 judged = {"judged_std": noise_std, "state_rms": state_rms, "noise_to_state_rms": noise_std / state_rms,
@@ -209,7 +209,8 @@ fig, axes = F.new_figure(1, 3)  # (g): two prediction panels (first seed), then 
 lim = float(x_test[:, 0].abs().max()) * 1.5
 for ax, std in zip(axes[0, :2], [0.0, noise_std]):
     xm = x_test + std * noise[:, :2]
-    z_dec, z_nodec = F.cascade_predict(model, xm, Ts, N, L, beta), F.cascade_predict(model, xm, Ts, N, L, 0.0)
+    z_dec = F.cascade_predict(model, xm, Ts, N, F.Gains(L, beta))
+    z_nodec = F.cascade_predict(model, xm, Ts, N, F.Gains(L, 0.0))
     ax.plot(tn[N:], x_test[N:, 0], color=F.plotting.COLORS["truth"], label="truth")
     ax.plot(tn[N:], z_nodec[:-N, 0], "--", color=F.plotting.COLORS["feedback_nodecay"], label="without decay")
     ax.plot(tn[N:], z_dec[:-N, 0], "--", color=F.plotting.COLORS["feedback"], label="with decay")

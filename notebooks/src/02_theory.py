@@ -117,7 +117,7 @@ gamma = (f_true - f_nn).norm(dim=-1).amax(dim=-1)  # (S,) Assumption 1, measured
 lam_m, lam_M = F.gain_eigen_bounds(L, 2)
 ball1, ball2 = (torch.tensor(b, dtype=torch.float64) for b in zip(*(F.theorem1_balls(L, float(g), 2) for g in gamma)))
 t_tr = transient_time_constants / lam_m
-fb = F.LinearFeedback(ens64, L, Ts, 2 * S).observe(xs)
+fb = F.LinearFeedback(ens64, Ts, gains=F.Gains(L), n=2 * S).observe(xs)
 cont = F.observe_continuous(F.StackedSystem(sys_test, S), ens64, L, F.stack_members(torch.tensor(x0), S), t)[1]
 runs = {k: (F.split_members(e.x_hat, S), F.split_members(e.f_hat, S))
         for k, e in [("feedback network", fb), ("continuous observer", cont)]}

@@ -141,7 +141,7 @@ def map_errors(z_in, u):
     One level and noise draw at a time: a (gains, T, 2S) batch stays small enough for the cache; all levels
     and draws at once run several times slower.
     """
-    return F.n_step_errors(split(F.cascade_sweep(ens, z_in, Ts, N, gains, beta)), x_lv[u], N).mean(-1)
+    return F.n_step_errors(split(F.cascade_sweep(ens, z_in, Ts, N, F.Gains.sweep(gains, beta))), x_lv[u], N).mean(-1)
 
 
 err_clean = torch.stack([map_errors(xs_lv[u], u) for u in range(len(levels))], dim=-1)  # (S, G, U)
@@ -210,11 +210,11 @@ xs8 = F.stack_members(x8, S)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
     f8_nn = split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
-f8_fb = split(F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs8).f_hat)
+f8_fb = split(F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs8).f_hat)
 f8s = f8.expand_as(f8_nn)  # the true rates, the same for every seed
 rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8s).T, F.rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
 ms_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T
-ms_fb = F.n_step_errors(split(F.cascade_predict(ens, xs8, Ts, N, L, beta)), x8, N).mean(-1).T
+ms_fb = F.n_step_errors(split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
 
 # %%
 s8 = {"seeds": seeds, "offsets": res_levels.tolist(), "rate_rmse_neural_ode": rate_nn.tolist(),
@@ -262,9 +262,9 @@ def rmse_N(z, pool):
 
 
 # %%
-rmse9 = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, L, betas), (2, 3))  # (S, B)
-rmse9_ext = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, L, betas_ext), (2, 3))
-rmse9_clean = rmse_N(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, L, betas), -1)
+rmse9 = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas)), (2, 3))  # (S, B)
+rmse9_ext = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas_ext)), (2, 3))
+rmse9_clean = rmse_N(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, F.Gains.sweep(L, betas)), -1)
 s9 = {"seeds": seeds, "beta": betas.tolist(), "rmse_noisy": rmse9.T.tolist(), "rmse_noise_free": rmse9_clean.T.tolist(),
       "beta_extended": betas_ext.tolist(), "rmse_noisy_extended": rmse9_ext.T.tolist(),
       "best_beta": betas[rmse9.argmin(1)].tolist(), "best_beta_noise_free": betas[rmse9_clean.argmin(1)].tolist(),
@@ -310,12 +310,12 @@ x10 = sw.simulate(torch.tensor(x0), t)
 f10 = sw.rate(t, x10).float()
 x10 = x10.float()
 xs10 = F.stack_members(x10, S)
-est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
+est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same for every seed
 with torch.no_grad():
     e_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
 e_x, e_f = F.error_norm(split(est10.x_hat), x10s), F.error_norm(split(est10.f_hat), f10s)
-z_fb10, z_nn10 = split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), split(F.rollout_predict(ens, xs10, Ts, N, method="euler"))
+z_fb10, z_nn10 = split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), split(F.rollout_predict(ens, xs10, Ts, N, method="euler"))
 e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 

@@ -107,8 +107,8 @@ def make_observers(model, q_d):
     """The seven observers of one seed's network."""
     Q, R, P0 = [kf_q_x] * 2 + [q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [kf_p0_d] * 2
     return {
-        "neural ODE": F.LinearFeedback(model, 0.0, Ts, 2),
-        "linear feedback": F.LinearFeedback(model, L, Ts, 2, beta=beta),
+        "neural ODE": F.LinearFeedback(model, Ts, gains=F.Gains(0.0), n=2),
+        "linear feedback": F.LinearFeedback(model, Ts, gains=F.Gains(L, beta), n=2),
         "Luenberger (as LF)": F.LuenbergerObserver(model, Ts, 2, L=F.linear_feedback_gain(L, Ts, 2)),
         "Luenberger": F.LuenbergerObserver(model, Ts, 2, luenberger_poles),
         "Kalman": F.KalmanObserver(model, Ts, 2, Q, R, P0=P0),

@@ -152,7 +152,7 @@ for e, s in enumerate(seeds):
                       {"seed": s, "seeds": seeds, "iterations": recipe.iterations, "method": recipe.method,
                        "adjoint": recipe.adjoint, "final_loss_mean_over_seeds": hist_dr.loss[-1]})
 t0 = time.perf_counter()
-F.NeuralFeedbackObserver(f_ens, h_ens, float(dr_Ts), 2 * E).observe(F.stack_members(X_dr, E))  # one refresh of Alg. 1
+F.NeuralFeedbackObserver(f_ens, float(dr_Ts), h=h_ens, n=2 * E).observe(F.stack_members(X_dr, E))  # one refresh of Alg. 1
 refresh_s = time.perf_counter() - t0
 print(f"{E} feedbacks: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/iteration), frozen neural ODEs "
       f"unchanged: {frozen_unchanged}; {E} domain-randomized neural ODEs: {hist_dr.seconds:.1f} s")
@@ -174,7 +174,7 @@ print(f"one refresh of the rollout ({E} seeds, all cases) costs {1000 * refresh_
 # a failure stops the notebook), not a check.
 
 # %%
-nf = F.NeuralFeedbackObserver(f_ens, h_ens, Ts, 2 * E)
+nf = F.NeuralFeedbackObserver(f_ens, Ts, h=h_ens, n=2 * E)
 xs_nom = F.stack_members(x_nom, E)
 with torch.no_grad():
     f_nn_nom, f_dr_nom = per_seed(F.eval_field(f_ens, xs_nom)), per_seed(F.eval_field(dr_ens, xs_nom))
@@ -260,7 +260,7 @@ def level_rates(xs, f_levels):
     with torch.no_grad():
         f_nn = per_seed(F.eval_field(f_ens, xs))
     fhat = {"neural_ode": f_nn, "neural_feedback": per_seed(nf.observe(xs).f_hat),
-            "linear_feedback": per_seed(F.LinearFeedback(f_ens, L, Ts, 2 * E).observe(xs).f_hat)}
+            "linear_feedback": per_seed(F.LinearFeedback(f_ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs).f_hat)}
     return {k: F.rmse_over_time(v, f_levels.expand_as(v)) for k, v in fhat.items()}
 
 
@@ -275,7 +275,7 @@ def level_errors(x_levels, f_levels):
     z_nf = per_seed(nf.predict(xs, N))
     seconds = time.perf_counter() - t0
     z = {"neural_ode": per_seed(F.rollout_predict(f_ens, xs, Ts, N, method="euler")), "neural_feedback": z_nf,
-         "linear_feedback": per_seed(F.cascade_predict(f_ens, xs, Ts, N, L, beta))}
+         "linear_feedback": per_seed(F.cascade_predict(f_ens, xs, Ts, N, F.Gains(L, beta)))}
     multistep = {k: F.n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}
     return rate, multistep, seconds
 

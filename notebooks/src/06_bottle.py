@@ -95,7 +95,7 @@ print(f"drag k = {drag.k.numpy().round(4)}; {E} neural ODEs trained in {history.
 t0 = time.perf_counter()
 pred = {"drag model": F.rollout_predict(drag, x_test.double(), Ts, N).float()[None],
         "neural ODE": F.split_members(F.rollout_predict(ens, xs_test, Ts, N), E),
-        "feedback": F.split_members(F.cascade_predict(ens, xs_test, Ts, N, L, beta), E)}  # (seeds, throws, T, 6)
+        "feedback": F.split_members(F.cascade_predict(ens, xs_test, Ts, N, F.Gains(L, beta)), E)}  # (seeds, throws, T, 6)
 predict_s = time.perf_counter() - t0
 err = {k: F.error_norm(z[..., :-N, :3], x_test[:, N:, :3].expand_as(z[..., :-N, :3])) for k, z in pred.items()}  # (seeds, throws, T - N)
 per_throw = {k: e.mean(-1).T for k, e in err.items()}  # (throws, seeds): each throw's mean error, per seed
@@ -135,7 +135,7 @@ fig_6 = F.save_figure(fig, out, "fig6_bottle_errors")
 # velocity part; it is compared with the measured one and with the open-loop neural ODE's.
 
 # %%
-est = F.LinearFeedback(ens, L, Ts, 6 * E).observe(xs_test)
+est = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=6 * E).observe(xs_test)
 with torch.no_grad():
     acc_nn_s = F.split_members(F.eval_field(ens, xs_test), E)[..., 3:]  # (seeds, throws, T, 3)
 acc_fb_s, acc_meas = F.split_members(est.f_hat, E)[..., 3:], test.acc.float()

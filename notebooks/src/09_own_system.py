@@ -69,8 +69,8 @@ from fnnbook.rules.beyond import b1, b1_budget, b1_coverage, b1_paired
 
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-print(f"hand-picked gain: noise amplification {F.noise_amplification(L_hand, Ts, N, beta_hand, n=2):.3g}x "
-      f"(N = {N}), {F.noise_amplification(spiral_L, spiral_Ts, spiral_N, spiral_beta, n=2):.3g}x on the spiral")
+print(f"hand-picked gain: noise amplification {F.noise_amplification(F.Gains(L_hand, beta_hand), Ts, N, n=2):.3g}x "
+      f"(N = {N}), {F.noise_amplification(F.Gains(spiral_L, spiral_beta), spiral_Ts, spiral_N, n=2):.3g}x on the spiral")
 
 # %% [markdown]
 # ## The numbers for B1
@@ -108,7 +108,7 @@ def hand_sweep(model, y, Ts_, N_, u=None) -> F.GainSweep:
     """The (L, beta) of the hand grid with the lowest N-step error on the tuning measurements ``y``."""
     def cost(L, beta):
         with torch.no_grad():
-            return float(F.n_step_errors(F.cascade_predict(model, y, Ts_, N_, L, beta, u=u), y, N_).mean())
+            return float(F.n_step_errors(F.cascade_predict(model, y, Ts_, N_, F.Gains(L, beta), u=u), y, N_).mean())
     return F.sweep_gains(cost, hand_L_grid, hand_beta_grid)
 
 
@@ -149,10 +149,10 @@ def pendulum_predictions(model, y_eval, u_eval, hand: F.GainSweep, tuned: F.Tune
     kalman = F.KalmanObserver(model, Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2,
                               P0=[noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
     with torch.no_grad():
-        return {"open_loop": F.cascade_predict(model, y_eval, Ts, N, 0.0, u=u_eval),
-                "hand": F.cascade_predict(model, y_eval, Ts, N, hand.L, hand.beta, u=u_eval),
-                "paper": F.cascade_predict(model, y_eval, Ts, N, L_hand, beta_hand, u=u_eval),
-                "tuned": F.cascade_predict(model, y_eval, Ts, N, tuned.L, tuned.beta, u=u_eval),
+        return {"open_loop": F.cascade_predict(model, y_eval, Ts, N, F.Gains(0.0), u=u_eval),
+                "hand": F.cascade_predict(model, y_eval, Ts, N, F.Gains(hand.L, hand.beta), u=u_eval),
+                "paper": F.cascade_predict(model, y_eval, Ts, N, F.Gains(L_hand, beta_hand), u=u_eval),
+                "tuned": F.cascade_predict(model, y_eval, Ts, N, tuned.schedule(), u=u_eval),
                 "kalman": kalman.predict(y_eval, N, u=u_eval).float()}
 
 
@@ -204,10 +204,10 @@ def spiral_predictions(model_s, y, hand: F.GainSweep, tuned: F.TunedGains) -> di
     kalman_s = F.KalmanObserver(model_s, spiral_Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
                                 P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
     with torch.no_grad():
-        return {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, 0.0),
-                "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, hand.L, hand.beta),
-                "paper": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, spiral_L, spiral_beta),
-                "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, tuned.L, tuned.beta),
+        return {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(0.0)),
+                "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(hand.L, hand.beta)),
+                "paper": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(spiral_L, spiral_beta)),
+                "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, tuned.schedule()),
                 "kalman": kalman_s.predict(y, spiral_N).float()}
 
 
@@ -302,7 +302,7 @@ with torch.no_grad():
     drop_preds = {f"{name}, {which}": predict(y)
                   for which, y in [("every sample", y_full), ("30 % lost", y_drop)]
                   for name, predict in [("hand cascade", lambda y: F.cascade_predict(model_s, y, spiral_Ts, spiral_N,
-                                                                                     spiral_L, spiral_beta)),
+                                                                                     F.Gains(spiral_L, spiral_beta))),
                                         ("EKF", lambda y: ekf_s.predict(y, spiral_N))]}
 assert all(bool(torch.isfinite(z).all()) for z in drop_preds.values())  # no NaN reaches a prediction
 print(f"{int(lost.sum())} of {lost.numel()} samples lost")

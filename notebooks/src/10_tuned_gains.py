@@ -138,7 +138,7 @@ def bottle_hand(seed: int, net) -> F.GainSweep:
 
     def cost(L, beta):
         with torch.no_grad():
-            return float(o1_loss(x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, L, beta)))
+            return float(o1_loss(x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, F.Gains(L, beta))))
     return F.sweep_gains(cost, bottle_hand_L_grid, bottle_hand_beta_grid)
 
 
@@ -167,9 +167,9 @@ seconds["bottle_tune"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 starts = x_b_test[:, :-bN]  # the cascade is causal: the first T - N rows are those of the whole run
 with torch.no_grad():
-    tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, torch.tensor(r.L), r.beta))
+    tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, r.schedule()))
                                   for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
-    hand_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, h.L, h.beta))
+    hand_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, F.Gains(h.L, h.beta)))
                                  for net, h in zip(b_nets, b_hand)])
 
 # %%
@@ -179,11 +179,11 @@ errors = {"bottle": {"tuned": tuned_per_seed.mean(0).tolist(), "hand": hand_per_
                      "open_loop": open_loop}}
 paper_errors = {"bottle": paper_gains}
 hand_sweeps = {"bottle": [h.as_dict() for h in b_hand]}
-tuned_values = {"bottle": [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, b_tuned)]}
+tuned_values = {"bottle": [{"seed": s, "L": r.L.tolist(), "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, b_tuned)]}
 print("bottle, mean 0.5 s error [m]: " + ", ".join(f"{k} {np.mean(v):.4f}" for k, v in errors["bottle"].items())
       + f", paper's gains {np.mean(paper_gains):.4f}")
 print("hand sweep picks (L, beta): " + ", ".join(f"({h.L:g}, {h.beta:g})" for h in b_hand))
-[(np.round(r.L, 2).tolist(), round(r.beta, 4)) for r in b_tuned]
+[(np.round(r.L.tolist(), 2).tolist(), round(r.beta, 4)) for r in b_tuned]
 
 # %% [markdown]
 # ## The quadrotor FNN-MPC flight (the Q3 setting)
@@ -275,8 +275,8 @@ def quad_hand(net) -> F.GainSweep:
 
     def cost(L, beta):
         with torch.no_grad():
-            z = F.cascade_predict(lambda t, x, u: neural.f(x, u), x_train_q, train_flights.Ts, quad_N, L, beta,
-                                  u=u_train_q)
+            z = F.cascade_predict(lambda t, x, u: neural.f(x, u), x_train_q, train_flights.Ts, quad_N,
+                                  F.Gains(L, beta), u=u_train_q)
         return float(F.n_step_errors(z[..., :3], x_train_q[..., :3], quad_N).mean())
     return F.sweep_gains(cost, quad_hand_L_grid, quad_hand_beta_grid)
 

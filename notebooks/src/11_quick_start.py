@@ -58,7 +58,8 @@ tuned = F.tune_gains(model, y[2], Ts, N,
                      recipe=F.TuneRecipe(L0=1.0, beta0=0.05, settle=T // 4, iterations=tune_iterations, lr=0.2),
                      u=u[2], observer=observer)  # the gains tuned on a third log, after the start-up
 preds = {"open loop": observer.predict(y[3], N, u[3]),
-         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.L, tuned.beta, u=u[3], observer=observer)}
+         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.schedule(), u=u[3],
+                                              observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
     preds[name] = kf(model, Ts, 2, [1e-6, 1e-6, 1e-3], noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[3], N, u[3])

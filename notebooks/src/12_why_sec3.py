@@ -131,7 +131,7 @@ stds3 = [0.0, *s3_noise]
 xm3 = torch.stack([xs_test + std * unit for std in stds3])  # (levels, T, 2S)
 err3_nn = F.n_step_errors(split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
 betas3 = torch.tensor([0.0, *s3_beta], dtype=torch.float64)
-err3_fb = F.n_step_errors(split(F.cascade_sweep(ens, xm3, Ts, N, L, betas3)), x_test, N).mean(-1)  # (S, B, levels)
+err3_fb = F.n_step_errors(split(F.cascade_sweep(ens, xm3, Ts, N, F.Gains.sweep(L, betas3))), x_test, N).mean(-1)  # (S, B, levels)
 
 # %%
 holds3 = np.zeros((len(s3_noise), len(s3_beta)), bool)
@@ -201,7 +201,7 @@ xs5 = split(x5)  # (S, P, T, 2): the true states (the same for every seed)
 with torch.no_grad():
     f5 = split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
     gamma5 = (f5 - split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
-fb5 = F.LinearFeedback(ens64, L, Ts, 2 * S).observe(x5)
+fb5 = F.LinearFeedback(ens64, Ts, gains=F.Gains(L), n=2 * S).observe(x5)
 lim5 = (xs5[:, None] - split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
 lim5 = lim5[..., last_half].amax(-1)  # (S, G, P)
 err5 = {k: ((xs5 - split(e.x_hat)).norm(dim=-1), (f5 - split(e.f_hat)).norm(dim=-1))
@@ -262,7 +262,7 @@ rate8_fb = F.rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
 
 # %%
 ms8_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T  # (12, S)
-ms8_fb = F.n_step_errors(split(F.cascade_sweep(ens, xs8, Ts, N, gains8, beta)), x8, N).mean(-1)  # (S, G, 12)
+ms8_fb = F.n_step_errors(split(F.cascade_sweep(ens, xs8, Ts, N, F.Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
 holds8 = np.stack([why_sec3.s8_levels(rate_neural_ode=rate8_nn, rate_feedback=rate8_fb[:, g].T,
                                       err_N_neural_ode=ms8_nn, err_N_feedback=ms8_fb[:, g].T,
                                       offsets=res_levels) for g in range(len(s8_L))], axis=1)  # (12, G)
@@ -308,8 +308,8 @@ def rmse9(z, pool):
     return F.n_step_errors(split(z), x_test, N).pow(2).mean(pool).sqrt()
 
 
-clean9 = rmse9(F.cascade_sweep(ens, xs_test, Ts, N, L, betas9), -1)  # (S, B)
-noisy9 = torch.stack([rmse9(F.cascade_sweep(ens, xs_test + std * unit9, Ts, N, L, betas9), (2, 3))
+clean9 = rmse9(F.cascade_sweep(ens, xs_test, Ts, N, F.Gains.sweep(L, betas9)), -1)  # (S, B)
+noisy9 = torch.stack([rmse9(F.cascade_sweep(ens, xs_test + std * unit9, Ts, N, F.Gains.sweep(L, betas9)), (2, 3))
                       for std in s9_noise])  # (noise, S, B)
 
 # %%
@@ -352,12 +352,12 @@ x10 = sw.simulate(torch.tensor(x0), t)
 f10 = sw.rate(t, x10).float()
 x10 = x10.float()
 xs10 = F.stack_members(x10, S)
-est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
+est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 with torch.no_grad():
     e10_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
 e10 = {"x": (t, F.error_norm(split(est10.x_hat), x10.expand(S, -1, -1))),
        "f": (t, F.error_norm(split(est10.f_hat), f10.expand(S, -1, -1))),
-       "multistep": (t[:-N], F.n_step_errors(split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), x10, N))}
+       "multistep": (t[:-N], F.n_step_errors(split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), x10, N))}
 peak10 = {k: err[:, tt >= t_switch].amax(-1).tolist() for k, (tt, err) in e10.items()}
 
 

@@ -87,7 +87,7 @@ def o1_errors(model, E: int, L: float, beta: float) -> torch.Tensor:
     """Each network's O1 error per test throw, (E, throws): mean 0.5 s position error over every start.
     ``L = 0`` is the open-loop neural ODE (the cascade without feedback equals the Euler rollout)."""
     starts = F.stack_members(x_test, E)[:, :-N]  # the cascade is causal: these rows are those of the whole run
-    z = F.split_members(F.cascade_predict(model, starts, Ts, N, L, beta), E)  # (E, throws, T - N, 6)
+    z = F.split_members(F.cascade_predict(model, starts, Ts, N, F.Gains(L, beta)), E)  # (E, throws, T - N, 6)
     return F.error_norm(z[..., :3], x_test[:, N:, :3].expand_as(z[..., :3])).mean(-1)
 
 

@@ -91,7 +91,7 @@ def tuned_on(seed: int, net, N_tune: int) -> F.TunedGains:
 
 def test_errors(net, L, beta: float) -> torch.Tensor:
     """Each test throw's O1 error (mean 0.5 s position error over every start) with gains (L, beta)."""
-    z = F.cascade_predict(net, x_test[:, :-bN], Ts, bN, torch.as_tensor(L), beta)
+    z = F.cascade_predict(net, x_test[:, :-bN], Ts, bN, F.Gains(torch.as_tensor(L), beta))
     return F.error_norm(z[..., :3], x_test[:, bN:, :3].expand_as(z[..., :3])).mean(-1)
 
 

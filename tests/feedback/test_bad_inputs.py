@@ -44,7 +44,7 @@ def test_inputs_rows_off_are_refused_before_the_loop(plant):
     mf = F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     CountingPlant.calls = 0
     for call in (lambda: ekf.predict(y, 5, u_short), lambda: ukf.observe(y, u_short), lambda: mf.predict(y, 5, u_short),
-                 lambda: F.cascade_predict(plant, y, TS, 5, 1.0, u=u_short, observer=mf),
+                 lambda: F.cascade_predict(plant, y, TS, 5, F.Gains(1.0), u=u_short, observer=mf),
                  lambda: F.rollout_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, u=u_short),
                  lambda: F.tune_gains(plant, torch.zeros(T, 2, dtype=F64), TS, 3, u=u_short, recipe=F.DEFAULT_TUNE_RECIPE)):
         with pytest.raises(ValueError, match=r"inputs u have 34 rows but .* has 40 samples: give one input row per sample"):
@@ -72,7 +72,7 @@ def test_dtype_errors_are_clear(plant):
         F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A).observe(torch.zeros(T, 1, dtype=F64),
                                                                                      torch.zeros(T, 1))
     with pytest.raises(TypeError, match="must be a floating-point tensor"):
-        F.cascade_predict(plant, torch.zeros(T, 2, dtype=torch.int64), TS, 3, 1.0)
+        F.cascade_predict(plant, torch.zeros(T, 2, dtype=torch.int64), TS, 3, F.Gains(1.0))
 
 
 def test_nan_truth_in_n_step_errors_is_refused():

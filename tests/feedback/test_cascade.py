@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import Spiral, cascade_predict, cascade_predict_loop, rollout_predict
+from fnnlib import Gains, cascade_depths, Spiral, cascade_predict, cascade_predict_loop, rollout_predict
 
 F64 = torch.float64
 TS = 0.1
@@ -50,9 +50,9 @@ def streaming_reference(f, x, Ts, N, L, beta):
 
 @pytest.mark.parametrize("N", [1, 4])
 def test_zero_gain_equals_euler_rollout(f, x, N):
-    torch.testing.assert_close(cascade_predict(f, x, TS, N, 0.0), rollout_predict(f, x, TS, N, method="euler"),
+    torch.testing.assert_close(cascade_predict(f, x, TS, N, Gains(0.0)), rollout_predict(f, x, TS, N, method="euler"),
                                rtol=0, atol=1e-6)
-    torch.testing.assert_close(cascade_predict(f, x, TS, N, 0.0, return_all=True),
+    torch.testing.assert_close(cascade_depths(f, x, TS, N, Gains(0.0)),
                                rollout_predict(f, x, TS, N, method="euler", return_all=True), rtol=0, atol=1e-6)
 
 
@@ -60,8 +60,8 @@ def test_zero_gain_equals_euler_rollout(f, x, N):
 @pytest.mark.parametrize("beta", [0.0, 0.05])
 @pytest.mark.parametrize("gain", list(GAINS))
 def test_vectorised_equals_loop(f, x, gain, beta, N):
-    fast = cascade_predict(f, x, TS, N, GAINS[gain], beta)
-    slow = cascade_predict_loop(f, x, TS, N, GAINS[gain], beta)
+    fast = cascade_predict(f, x, TS, N, Gains(GAINS[gain], beta))
+    slow = cascade_predict_loop(f, x, TS, N, Gains(GAINS[gain], beta))
     torch.testing.assert_close(fast, slow, rtol=0, atol=1e-6)
 
 
@@ -69,29 +69,29 @@ def test_vectorised_equals_loop(f, x, gain, beta, N):
 @pytest.mark.parametrize("beta", [0.0, 0.05])
 @pytest.mark.parametrize("gain", list(GAINS))
 def test_vectorised_equals_streaming_reference(f, x, gain, beta, N):
-    fast = cascade_predict(f, x, TS, N, GAINS[gain], beta)
+    fast = cascade_predict(f, x, TS, N, Gains(GAINS[gain], beta))
     torch.testing.assert_close(fast, streaming_reference(f, x, TS, N, GAINS[gain], beta), rtol=0, atol=1e-6)
 
 
 def test_return_all_shapes_and_depths(f, x):
     xb = torch.stack([x, 0.5 * x, -x]).reshape(3, 1, *x.shape).expand(3, 2, *x.shape)  # (3, 2, T, n)
     N = 4
-    all_depths = cascade_predict(f, xb, TS, N, GAINS["full_spd"], 0.05, return_all=True)
+    all_depths = cascade_depths(f, xb, TS, N, Gains(GAINS["full_spd"], 0.05))
     assert all_depths.shape == (N + 1, 3, 2, *x.shape)
     assert torch.equal(all_depths[0], xb)
-    torch.testing.assert_close(all_depths[-1], cascade_predict(f, xb, TS, N, GAINS["full_spd"], 0.05),
+    torch.testing.assert_close(all_depths[-1], cascade_predict(f, xb, TS, N, Gains(GAINS["full_spd"], 0.05)),
                                rtol=0, atol=1e-14)
     # depth d of an N-deep cascade is the d-deep cascade (later layers do not feed back)
-    torch.testing.assert_close(all_depths[2], cascade_predict(f, xb, TS, 2, GAINS["full_spd"], 0.05),
+    torch.testing.assert_close(all_depths[2], cascade_predict(f, xb, TS, 2, Gains(GAINS["full_spd"], 0.05)),
                                rtol=0, atol=1e-14)
 
 
 def test_batched_equals_per_trajectory(f, x):
     xb = torch.stack([x, x.flip(0), 0.3 * x])  # (3, T, n)
-    out = cascade_predict(f, xb, TS, 3, GAINS["vector"], 0.05)
+    out = cascade_predict(f, xb, TS, 3, Gains(GAINS["vector"], 0.05))
     roll = rollout_predict(f, xb, TS, 3)
     for i in range(3):
-        torch.testing.assert_close(out[i], cascade_predict(f, xb[i], TS, 3, GAINS["vector"], 0.05),
+        torch.testing.assert_close(out[i], cascade_predict(f, xb[i], TS, 3, Gains(GAINS["vector"], 0.05)),
                                    rtol=0, atol=1e-13)
         torch.testing.assert_close(roll[i], rollout_predict(f, xb[i], TS, 3), rtol=0, atol=1e-13)
 
@@ -100,32 +100,32 @@ def test_batched_equals_per_trajectory(f, x):
 def test_bad_N(f, x, N):
     for fn in (cascade_predict, cascade_predict_loop):
         with pytest.raises(ValueError, match="number of prediction steps N must be an integer >= 1"):
-            fn(f, x, TS, N, 1.0)
+            fn(f, x, TS, N, Gains(1.0))
     with pytest.raises(ValueError, match="number of prediction steps N must be an integer >= 1"):
         rollout_predict(f, x, TS, N)
 
 
 def test_bad_inputs(f, x):
     with pytest.raises(ValueError, match="Ts must be a finite positive"):
-        cascade_predict(f, x, 0.0, 2, 1.0)
+        cascade_predict(f, x, 0.0, 2, Gains(1.0))
     with pytest.raises(ValueError, match="decay rate beta must be finite and >= 0"):
-        cascade_predict(f, x, TS, 2, 1.0, beta=-0.1)
+        cascade_predict(f, x, TS, 2, Gains(1.0, -0.1))
     with pytest.raises(TypeError, match="must be a torch.Tensor"):
-        cascade_predict(f, x.tolist(), TS, 2, 1.0)
+        cascade_predict(f, x.tolist(), TS, 2, Gains(1.0))
     bad = x.clone()
     bad[4, 0] = float("inf")  # a NaN is a missing sample (tests/feedback/test_gaps.py); inf is an error
     with pytest.raises(ValueError, match="x holds an infinite value"):
-        cascade_predict(f, bad, TS, 2, 1.0)
+        cascade_predict(f, bad, TS, 2, Gains(1.0))
     with pytest.raises(ValueError, match="x holds a NaN value"):
-        cascade_predict_loop(f, torch.where(torch.isinf(bad), float("nan"), bad), TS, 2, 1.0)
+        cascade_predict_loop(f, torch.where(torch.isinf(bad), float("nan"), bad), TS, 2, Gains(1.0))
     with pytest.raises(ValueError, match="not positive definite"):
-        cascade_predict(f, x, TS, 2, -1.0)
+        cascade_predict(f, x, TS, 2, Gains(-1.0))
     with pytest.raises(ValueError, match="one trajectory of shape"):
-        cascade_predict_loop(f, x[None], TS, 2, 1.0)
+        cascade_predict_loop(f, x[None], TS, 2, Gains(1.0))
 
 
 def test_allow_unstable_passes_through(f, x):
-    out = cascade_predict(f, x, TS, 2, -1.0, allow_unstable=True)
+    out = cascade_predict(f, x, TS, 2, Gains(-1.0, allow_unstable=True))
     assert out.shape == x.shape
 
 
@@ -144,6 +144,6 @@ def test_perfect_model_on_spiral_is_at_euler_level():
     roll_err = (rollout_predict(spiral, x, Ts, N)[:-N] - truth).norm(dim=-1)[after]
     assert float(roll_err.max()) <= bound
     for L in (1.0, 5.0, 20.0):
-        casc_err = (cascade_predict(spiral, x, Ts, N, L)[:-N] - truth).norm(dim=-1)[after]
+        casc_err = (cascade_predict(spiral, x, Ts, N, Gains(L))[:-N] - truth).norm(dim=-1)[after]
         assert float(casc_err.max()) <= bound
         assert float(casc_err.mean()) <= float(roll_err.mean()) + 1e-12

@@ -63,12 +63,12 @@ def test_cascade_through_a_gap_full_state_equals_the_paper_cascade_outside_it():
     x, u = _data()
     x_gap = x.clone()
     x_gap[50:55] = float("nan")
-    z = F.cascade_predict(PLANT, x_gap, TS, 4, 3.0, 0.1, u=u)
-    ref = F.cascade_predict(PLANT, x, TS, 4, 3.0, 0.1, u=u)
+    z = F.cascade_predict(PLANT, x_gap, TS, 4, F.Gains(3.0, 0.1), u=u)
+    ref = F.cascade_predict(PLANT, x, TS, 4, F.Gains(3.0, 0.1), u=u)
     assert bool(torch.isfinite(z).all())
     torch.testing.assert_close(z[:50], ref[:50], rtol=0, atol=1e-12)  # the gap loop is the scan's recursion
     torch.testing.assert_close(z[90:], ref[90:], rtol=0, atol=1e-9)  # exact data: the model is right, so are both
-    sweep = F.cascade_sweep(PLANT, x_gap, TS, 4, torch.tensor([1.0, 3.0]), 0.1, u=u)
+    sweep = F.cascade_sweep(PLANT, x_gap, TS, 4, F.Gains.sweep(torch.tensor([1.0, 3.0]), 0.1), u=u)
     torch.testing.assert_close(sweep[1], z, rtol=0, atol=1e-12)
 
 
@@ -77,7 +77,7 @@ def test_cascade_with_C_predicts_a_partially_measured_plant():
     y = x @ C.T
     y[30:45] = float("nan")
     obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
-    z = F.cascade_predict(PLANT, y, TS, 5, 3.0, 0.05, u=u, observer=obs)
+    z = F.cascade_predict(PLANT, y, TS, 5, F.Gains(3.0, 0.05), u=u, observer=obs)
     assert z.shape == (T, 2) and bool(torch.isfinite(z).all())
     torch.testing.assert_close(z[100:-5], x[105:], rtol=0, atol=1e-6)
 
@@ -158,12 +158,12 @@ def test_cascade_sweep_with_an_observer_sweeps_the_layers_after_it():
     y = x @ C.T
     y[30:45] = float("nan")
     obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
-    sweep = F.cascade_sweep(PLANT, y, TS, 5, torch.tensor([1.0, 3.0]), [0.05, 0.2], u=u, observer=obs)
+    sweep = F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(torch.tensor([1.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
     assert sweep.shape == (2, T, 2)
     for g, (L, beta) in enumerate([(1.0, 0.05), (3.0, 0.2)]):
-        torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, L, beta, u=u, observer=obs),
+        torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, F.Gains(L, beta), u=u, observer=obs),
                                    rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="do not pair up"):
-        F.cascade_sweep(PLANT, y, TS, 5, torch.tensor([1.0, 2.0, 3.0]), [0.05, 0.2], u=u, observer=obs)
+        F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(torch.tensor([1.0, 2.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
     with pytest.raises(TypeError, match="observer must be a fnnlib.MeasuredFeedback"):
-        F.cascade_sweep(PLANT, y, TS, 5, 1.0, 0.1, u=u, observer="C")
+        F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(1.0, 0.1), u=u, observer="C")

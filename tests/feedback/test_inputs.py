@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
+from fnnlib import Gains, KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
 from fnnlib.feedback.layer import shift_inputs
 
 F64 = torch.float64
@@ -55,7 +55,7 @@ def test_cascade_with_inputs_and_an_exact_model_equals_the_euler_closed_form(L):
     u = _inputs()
     x = _euler_data(torch.tensor([1.0, -0.5], dtype=F64), u)
     plant, N = LinearSystem(A, B), 7
-    z = cascade_predict(plant, x, TS, N, L, 0.05, u=u)
+    z = cascade_predict(plant, x, TS, N, Gains(L, 0.05), u=u)
     Ad = torch.eye(2, dtype=F64) + TS * A
     for k in (0, 13, T - N - 1):  # x_{k+N} = Ad^N x_k + sum_j Ad^{N-1-j} Ts B u_{k+j}
         ref = torch.linalg.matrix_power(Ad, N) @ x[k]
@@ -67,9 +67,9 @@ def test_cascade_with_inputs_and_an_exact_model_equals_the_euler_closed_form(L):
 def test_layer_i_uses_the_input_i_samples_ahead():
     u = _inputs()
     x = _euler_data(torch.tensor([1.0, -0.5], dtype=F64), u)
-    z = cascade_predict(LinearSystem(A, B), x, TS, 5, 2.0, u=u)
+    z = cascade_predict(LinearSystem(A, B), x, TS, 5, Gains(2.0), u=u)
     torch.testing.assert_close(z[:-5], x[5:], rtol=0, atol=1e-11)  # every start, exact
-    unshifted = cascade_predict(LinearSystem(A, B), x, TS, 1, 2.0, u=u)  # one layer: u_k itself
+    unshifted = cascade_predict(LinearSystem(A, B), x, TS, 1, Gains(2.0), u=u)  # one layer: u_k itself
     torch.testing.assert_close(unshifted[:-1], x[1:], rtol=0, atol=1e-12)
     assert torch.equal(shift_inputs(u, 3)[0], u[3]) and torch.equal(shift_inputs(u, 3)[-1], u[-1])
 
@@ -106,7 +106,8 @@ def test_bad_inputs_get_clear_errors():
 def test_linear_feedback_takes_inputs():
     u = _inputs()
     x = _euler_data(torch.tensor([1.0, -0.5], dtype=F64), u)
-    fb = LinearFeedback(LinearSystem(A, B), 3.0, TS, beta=0.1)
+    fb = LinearFeedback(LinearSystem(A, B), TS, gains=Gains(3.0, 0.1))
     est = fb.observe(x, u)
     torch.testing.assert_close(est.x_hat, x, rtol=0, atol=1e-12)  # exact model on its own Euler data: no error
-    torch.testing.assert_close(fb.predict(x, 4, u), cascade_predict(LinearSystem(A, B), x, TS, 4, 3.0, 0.1, u=u))
+    torch.testing.assert_close(fb.predict(x, 4, u), cascade_predict(LinearSystem(A, B), x, TS, 4, Gains(3.0, 0.1),
+                                                                    u=u))

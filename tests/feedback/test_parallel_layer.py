@@ -145,7 +145,7 @@ def test_cascade_with_an_observer_is_its_layer_then_the_paper_cascade():
     obs = F.MeasuredFeedback(f, TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     z_hat = obs.observe_loop(y, u).x_hat
     first = z_hat[..., 1:, :]
-    all_depths = F.cascade_predict(f, y, TS, 6, 2.0, 0.1, u=u, observer=obs, return_all=True)
+    all_depths = F.cascade_depths(f, y, TS, 6, F.Gains(2.0, 0.1), u=u, observer=obs)
     torch.testing.assert_close(all_depths[0], z_hat, rtol=0, atol=1e-10)
     torch.testing.assert_close(all_depths[1][..., :-1, :], first, rtol=0, atol=1e-10)
     rest = run_cascade(f, all_depths[1], [torch.full((2,), 2.0 * math.exp(-0.1 * i),
@@ -153,7 +153,7 @@ def test_cascade_with_an_observer_is_its_layer_then_the_paper_cascade():
     torch.testing.assert_close(all_depths[-1], rest, rtol=0, atol=1e-12)
     # L = 0 after the observer: the open-loop Euler rollout from the observer's one-step estimate
     open_loop = obs.predict(y, 6, u)
-    zero = F.cascade_predict(f, y, TS, 6, 0.0, u=u, observer=obs)
+    zero = F.cascade_predict(f, y, TS, 6, F.Gains(0.0), u=u, observer=obs)
     torch.testing.assert_close(zero, open_loop, rtol=0, atol=1e-10)
 
 

@@ -38,12 +38,13 @@ def test_a_record_with_no_present_sample_is_refused(plant):
     y = x[..., :1]
     mf = F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     hide = torch.zeros(T, dtype=torch.bool)
-    for call in (lambda: F.cascade_predict(plant, x, TS, 3, 1.0),
-                 lambda: F.cascade_predict(plant, y, TS, 3, 1.0, observer=mf),
+    for call in (lambda: F.cascade_predict(plant, x, TS, 3, F.Gains(1.0)),
+                 lambda: F.cascade_predict(plant, y, TS, 3, F.Gains(1.0), observer=mf),
                  lambda: mf.observe(y),
                  lambda: mf.predict(y, 3),
                  lambda: F.tune_gains(plant, x, TS, 3, recipe=F.DEFAULT_TUNE_RECIPE),
-                 lambda: F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, 1.0, mask=hide),
+                 lambda: F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, F.Gains(1.0),
+                                           measurement=F.Measurement(mask=hide)),
                  lambda: mf.observe(torch.zeros(T, 1, dtype=F64), mask=hide)):
         with pytest.raises(ValueError, match="no present sample at all"):
             call()
@@ -63,14 +64,14 @@ def test_a_bad_first_estimate_is_refused(plant, x0, match):
 @pytest.mark.parametrize("beta", [float("nan"), float("inf"), -0.1])
 def test_a_bad_decay_rate_is_refused(plant, beta):
     with pytest.raises(ValueError, match="decay rate beta must be finite and >= 0"):
-        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, 1.0, beta)
+        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, F.Gains(1.0, beta))
     assert Counting.calls == 0
 
 
 @pytest.mark.parametrize("L", ["2.0", ["1", "2"], [[1.0, "a"], [0.0, 1.0]]])
 def test_gains_given_as_text_are_refused(plant, L):
     with pytest.raises(TypeError, match="gain L must be a number, a vector or a matrix of numbers"):
-        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, L)
+        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, F.Gains(L))
     with pytest.raises(TypeError, match="gain L must be a number"):
         F.MeasuredFeedback(plant, TS, L=L, measurement=F.Measurement(C=C))
     assert Counting.calls == 0
@@ -79,5 +80,5 @@ def test_gains_given_as_text_are_refused(plant, L):
 @pytest.mark.parametrize("N", [True, False, 2.5, 0, "3"])
 def test_N_must_be_an_integer(plant, N):
     with pytest.raises((TypeError, ValueError), match="N must be an integer >= 1"):
-        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, N, 1.0)
+        F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, N, F.Gains(1.0))
     assert Counting.calls == 0

@@ -31,22 +31,25 @@ def test_uniform_times_equal_the_step_path():
     x, u = _data()
     t = torch.arange(T, dtype=F64) * TS
     for N, L, beta in [(1, 2.0, 0.0), (6, 3.0, 0.1)]:
-        a = F.cascade_predict(PLANT, x, TS, N, L, beta, u=u, return_all=True)
-        b = F.cascade_predict(PLANT, x, None, N, L, beta, u=u, t=t, return_all=True)
+        a = F.cascade_depths(PLANT, x, TS, N, F.Gains(L, beta), u=u)
+        b = F.cascade_depths(PLANT, x, None, N, F.Gains(L, beta), u=u, measurement=F.Measurement(t=t))
         torch.testing.assert_close(a, b, rtol=0, atol=1e-12)
     gap = x.clone()
     gap[:, 20:30] = float("nan")
-    torch.testing.assert_close(F.cascade_predict(PLANT, gap, TS, 5, 3.0, 0.1, u=u),
-                               F.cascade_predict(PLANT, gap, None, 5, 3.0, 0.1, u=u, t=t), rtol=0, atol=1e-12)
+    torch.testing.assert_close(F.cascade_predict(PLANT, gap, TS, 5, F.Gains(3.0, 0.1), u=u),
+                               F.cascade_predict(PLANT, gap, None, 5, F.Gains(3.0, 0.1), u=u,
+                                                 measurement=F.Measurement(t=t)), rtol=0, atol=1e-12)
     obs_ts = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     obs_t = F.MeasuredFeedback(PLANT, None, L=_gain(), measurement=F.Measurement(C=C), A=A)
     y = x @ C.T
     torch.testing.assert_close(obs_ts.observe(y, u).x_hat, obs_t.observe(y, u, t=t).x_hat, rtol=0, atol=1e-12)
-    torch.testing.assert_close(F.cascade_predict(PLANT, y, TS, 5, 2.0, 0.1, u=u, observer=obs_ts),
-                               F.cascade_predict(PLANT, y, None, 5, 2.0, 0.1, u=u, t=t, observer=obs_t),
+    torch.testing.assert_close(F.cascade_predict(PLANT, y, TS, 5, F.Gains(2.0, 0.1), u=u, observer=obs_ts),
+                               F.cascade_predict(PLANT, y, None, 5, F.Gains(2.0, 0.1), u=u,
+                                                 measurement=F.Measurement(t=t), observer=obs_t),
                                rtol=0, atol=1e-12)
-    torch.testing.assert_close(F.cascade_sweep(PLANT, x, TS, 4, torch.tensor([1.0, 2.0]), 0.1, u=u),
-                               F.cascade_sweep(PLANT, x, None, 4, torch.tensor([1.0, 2.0]), 0.1, u=u, t=t),
+    torch.testing.assert_close(F.cascade_sweep(PLANT, x, TS, 4, F.Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u),
+                               F.cascade_sweep(PLANT, x, None, 4, F.Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u,
+                                               measurement=F.Measurement(t=t)),
                                rtol=0, atol=1e-12)
     for method in ("euler", "rk4"):
         torch.testing.assert_close(F.rollout_predict(PLANT, x, TS, 4, u=u, method=method),
@@ -72,7 +75,7 @@ def test_a_linear_plant_at_random_intervals_matches_its_closed_form():
     exact = F.rollout_predict(PLANT, x, None, N, t=t, u=u, method="dopri5", rtol=1e-11, atol=1e-12)
     torch.testing.assert_close(exact[:, : T - N], x[:, N:], rtol=0, atol=1e-8)
     # the cascade with L = 0 is the Euler discretisation at the record's own steps: prod (I + Delta_k A)
-    euler = F.cascade_predict(PLANT, x, None, N, 0.0, t=t, u=u)
+    euler = F.cascade_predict(PLANT, x, None, N, F.Gains(0.0), u=u, measurement=F.Measurement(t=t))
     ref = x.clone()
     for j in range(N):
         idx = torch.clamp(torch.arange(T) + j, max=T - 2)  # the last interval repeated past the end
@@ -84,9 +87,10 @@ def test_one_batched_call_for_records_with_their_own_times():
     x, u = _data(3)
     g = torch.Generator().manual_seed(2)
     t = torch.cumsum(TS * (0.5 + torch.rand(3, T, generator=g, dtype=F64)), -1)
-    both = F.cascade_predict(PLANT, x, None, 5, 2.0, 0.1, u=u, t=t)
+    both = F.cascade_predict(PLANT, x, None, 5, F.Gains(2.0, 0.1), u=u, measurement=F.Measurement(t=t))
     for b in range(3):
-        torch.testing.assert_close(both[b], F.cascade_predict(PLANT, x[b], None, 5, 2.0, 0.1, u=u[b], t=t[b]),
+        torch.testing.assert_close(both[b], F.cascade_predict(PLANT, x[b], None, 5, F.Gains(2.0, 0.1), u=u[b],
+                                                              measurement=F.Measurement(t=t[b])),
                                    rtol=0, atol=1e-12)
 
 
@@ -107,7 +111,8 @@ def test_bad_times_are_refused_before_any_work(bad, match):
         return PLANT(tt, xx, uu)
 
     obs = F.MeasuredFeedback(counting, None, L=_gain(), measurement=F.Measurement(C=C), A=A)
-    for call in (lambda: F.cascade_predict(counting, x[0], None, 3, 1.0, t=bad(t), u=u[0]),
+    for call in (lambda: F.cascade_predict(counting, x[0], None, 3, F.Gains(1.0), u=u[0],
+                                           measurement=F.Measurement(t=bad(t))),
                  lambda: obs.observe(x[0] @ C.T, u[0], t=bad(t)),
                  lambda: F.rollout_predict(counting, x[0], None, 3, t=bad(t), u=u[0]),
                  lambda: F.tune_gains(counting, x[0], None, 3, u=u[0], recipe=F.DEFAULT_TUNE_RECIPE,
@@ -120,8 +125,9 @@ def test_bad_times_are_refused_before_any_work(bad, match):
 def test_t_together_with_Ts_is_refused():
     x, _ = _data(1)
     with pytest.raises(TypeError, match="either the sample step Ts or the sample times t, not both"):
-        F.cascade_predict(PLANT, x[0], TS, 3, 1.0, t=torch.arange(T, dtype=F64) * TS)
+        F.cascade_predict(PLANT, x[0], TS, 3, F.Gains(1.0),
+                          measurement=F.Measurement(t=torch.arange(T, dtype=F64) * TS))
     with pytest.raises(TypeError, match="give the sample step Ts or the sample times t"):
-        F.cascade_predict(PLANT, x[0], None, 3, 1.0)
+        F.cascade_predict(PLANT, x[0], None, 3, F.Gains(1.0))
     with pytest.raises(ValueError, match="at least 2 samples"):
         check_times(torch.zeros(1, dtype=F64), None, torch.zeros(1, 2, dtype=F64))

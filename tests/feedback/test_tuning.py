@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import (CascadeGains, GainWarning, LinearSystem, NeuralODE, add_measurement_noise, cascade_forward,
+from fnnlib import (Gains, CascadeGains, GainWarning, LinearSystem, NeuralODE, add_measurement_noise, cascade_forward,
                     cascade_predict, check_gain, make_generator, n_step_errors, spectral_radius, tune_gains,
                     TuneRecipe)
 from fnnlib.feedback.tuning import prediction_loss
@@ -55,7 +55,7 @@ def test_forward_equals_cascade_predict(full):
     L = torch.tensor(vals["L"], dtype=F64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GainWarning)
-        ref = cascade_predict(model, x, Ts, N, L, vals["beta"])
+        ref = cascade_predict(model, x, Ts, N, Gains(L, vals["beta"]))
     torch.testing.assert_close(cascade_forward(model, x, Ts, N, gains).detach(), ref, rtol=0, atol=1e-12)
 
 
@@ -89,7 +89,7 @@ def test_tuned_gains_beat_hand_picked_ones_and_the_open_loop_on_noisy_data():
     assert tuned.loss[-1] < tuned.loss[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GainWarning)
-        err = {name: float(n_step_errors(cascade_predict(model, y_eval, Ts, N, L, b, u=u), x_eval, N).mean())
+        err = {name: float(n_step_errors(cascade_predict(model, y_eval, Ts, N, Gains(L, b), u=u), x_eval, N).mean())
                for name, L, b in [("open", 0.0, 0.0), ("hand", 40.0, 0.0), ("tuned", tuned.L, tuned.beta)]}
     assert err["tuned"] < 0.9 * err["open"] and err["tuned"] < 0.9 * err["hand"], err
 

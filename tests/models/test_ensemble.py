@@ -23,9 +23,9 @@ def test_members_start_from_their_seeds_weights_and_evaluate_alone(batch: int) -
 def test_cascade_on_the_stacked_state_equals_each_member_alone() -> None:
     ens = F.NeuralODEEnsemble(2, [8], "relu", [0, 1, 2])
     x = torch.randn(40, 2)
-    z = F.split_members(F.cascade_predict(ens, F.stack_members(x, 3), 0.01, 5, 20.0, 0.02), 3)
+    z = F.split_members(F.cascade_predict(ens, F.stack_members(x, 3), 0.01, 5, F.Gains(20.0, 0.02)), 3)
     for e in range(3):
-        torch.testing.assert_close(z[e], F.cascade_predict(ens.member(e), x, 0.01, 5, 20.0, 0.02), atol=1e-5, rtol=0)
+        torch.testing.assert_close(z[e], F.cascade_predict(ens.member(e), x, 0.01, 5, F.Gains(20.0, 0.02)), atol=1e-5, rtol=0)
 
 
 def test_member_gradients_do_not_mix() -> None:

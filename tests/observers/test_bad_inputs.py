@@ -137,8 +137,8 @@ def test_a_diverging_ukf_stops_with_the_sample():
 
 
 def test_the_neural_feedback_refuses_bad_measurements():
-    obs = F.NeuralFeedbackObserver(F.LinearSystem(A, torch.zeros(2, 0, dtype=F64)), NeuralFeedback(2, (4,), "tanh").double(),
-                                   TS, 2)
+    obs = F.NeuralFeedbackObserver(F.LinearSystem(A, torch.zeros(2, 0, dtype=F64)), TS,
+                                   h=NeuralFeedback(2, (4,), "tanh").double(), n=2)
     x, _ = _data(1)
     y = x[0].clone()
     y[3, 0] = float("nan")

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
+from fnnlib import Gains, LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
 from fnnlib.feedback import Estimate
 from fnnlib.observers import (
     ExtendedKalmanObserver,
@@ -27,7 +27,7 @@ Q, R = [1e-8, 1e-8, 1e-2, 1e-2], 1e-4
 
 def _observers() -> dict[str, Observer]:
     return {
-        "linear feedback": LinearFeedback(MODEL, 20.0, TS, 2, beta=0.02),
+        "linear feedback": LinearFeedback(MODEL, TS, gains=Gains(20.0, 0.02), n=2),
         "luenberger": LuenbergerObserver(MODEL, TS, 2, [0.5, 0.5, 0.8, 0.8]),
         "kalman": KalmanObserver(MODEL, TS, 2, Q, R),
         "kalman_ss": KalmanObserver(MODEL, TS, 2, Q, R, steady_state=True),
@@ -73,8 +73,8 @@ def test_comparison_is_a_loop(problem):
 
 def test_linear_feedback_predicts_by_the_cascade(problem):
     _, y, _ = problem
-    fb = LinearFeedback(MODEL, 20.0, TS, 2, beta=0.02)
-    torch.testing.assert_close(fb.predict(y, N), cascade_predict(MODEL, y, TS, N, 20.0, 0.02), rtol=0, atol=0)
+    fb = LinearFeedback(MODEL, TS, gains=Gains(20.0, 0.02), n=2)
+    torch.testing.assert_close(fb.predict(y, N), cascade_predict(MODEL, y, TS, N, Gains(20.0, 0.02)), rtol=0, atol=0)
 
 
 def test_rollout_with_no_disturbance_is_the_euler_rollout(problem):
@@ -96,4 +96,4 @@ def test_bad_calls_are_refused(problem):
     with pytest.raises(ValueError, match="same shape|differ in shape"):
         rollout_corrected(MODEL, x, torch.zeros(2), TS, N)
     with pytest.raises(ValueError, match="beta"):
-        LinearFeedback(MODEL, 20.0, TS, 2, beta=-0.1)
+        LinearFeedback(MODEL, TS, gains=Gains(20.0, -0.1), n=2)

@@ -16,7 +16,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import LinearFeedback, spectral_radius
+from fnnlib import Gains, LinearFeedback, spectral_radius
 from fnnlib.stability import discrete_residual, iss_bound
 
 F64 = torch.float64
@@ -110,7 +110,7 @@ def test_library_observer_obeys_eq25_and_its_bound(lam1, lam2, angle, gamma, see
     for dk in d:
         x.append(x[-1] + TS * (f(0.0, x[-1][None])[0] + dk))
     x = torch.stack(x)
-    est = LinearFeedback(f, L, TS, 2).observe(x)
+    est = LinearFeedback(f, TS, gains=Gains(L), n=2).observe(x)
     resid = discrete_residual(x, f(0.0, x), TS)
     torch.testing.assert_close(resid, d, rtol=0, atol=1e-9)  # 1e-9: (x_{k+1} - x_k)/Ts cancels O(1) values
     err = (x - est.x_hat).norm(dim=-1)

@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import DynamicalSystem, GainError, GainWarning, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
+from fnnlib import Gains, DynamicalSystem, GainError, GainWarning, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
 
 F64 = torch.float64
 
@@ -43,7 +43,7 @@ def test_observer_equations_by_hand():
     assert xh1 == pytest.approx([0.95, -0.1])
 
     Wt = torch.tensor(W, dtype=F64)
-    est = LinearFeedback(lambda t, x: x @ Wt.T, torch.tensor(L, dtype=F64), Ts, 2).observe(torch.tensor(xs, dtype=F64))
+    est = LinearFeedback(lambda t, x: x @ Wt.T, Ts, gains=Gains(torch.tensor(L, dtype=F64)), n=2).observe(torch.tensor(xs, dtype=F64))
     torch.testing.assert_close(est.x_hat, torch.tensor([xh0, xh1, xh2], dtype=F64), rtol=0, atol=1e-14)
     torch.testing.assert_close(est.f_hat, torch.tensor([fh0, fh1, fh2], dtype=F64), rtol=0, atol=1e-14)
 
@@ -51,7 +51,7 @@ def test_observer_equations_by_hand():
 def test_zero_gain_is_open_loop_euler():
     f = Spiral(2.0, 0.1, 0.0)
     x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([1.0, 0.0]), torch.linspace(0, 1, 11))
-    est = LinearFeedback(f, 0.0, 0.1, 2).observe(x)
+    est = LinearFeedback(f, 0.1, gains=Gains(0.0), n=2).observe(x)
     xh = [x[0]]
     for k in range(10):
         xh.append(xh[-1] + 0.1 * f(0.0, x[k][None])[0])  # x_hat_{k+1} = x_hat_k + Ts f(x_k)
@@ -62,7 +62,7 @@ def test_zero_gain_is_open_loop_euler():
 def test_batched_observe_equals_per_trajectory():
     x = Spiral(2.0, 0.1, 0.0).simulate(torch.randn(2, 3, 2, dtype=F64, generator=torch.Generator().manual_seed(0)),
                           torch.linspace(0, 2, 21))
-    obs = LinearFeedback(Spiral(2.0, 0.3, 0.0), torch.tensor([3.0, 5.0]), 0.1, 2)
+    obs = LinearFeedback(Spiral(2.0, 0.3, 0.0), 0.1, gains=Gains(torch.tensor([3.0, 5.0])), n=2)
     est = obs.observe(x)
     assert est.x_hat.shape == est.f_hat.shape == (2, 3, 21, 2)
     for i in range(2):
@@ -124,7 +124,7 @@ def _theorem1_case(gamma: float, L: torch.Tensor, Ts: float, t_end: float, x: to
     xdot = x @ A_TRUE.T + system.d(t)
     ddot = gamma * torch.stack([torch.cos(t), -torch.sin(t)], dim=-1)
     M2 = 1.05 * float((xdot @ A_TRUE.T + ddot).norm(dim=-1).max())  # 5 %: sup between samples vs at samples
-    est = LinearFeedback(lambda _t, z: z @ A_TRUE.T, L, Ts, 2).observe(x)
+    est = LinearFeedback(lambda _t, z: z @ A_TRUE.T, Ts, gains=Gains(L), n=2).observe(x)
     Lm = L if L.ndim == 2 else (torch.diag(L) if L.ndim == 1 else L * torch.eye(2, dtype=F64))
     eigs = torch.linalg.eigvalsh(Lm)
     lam_min, lam_max = float(eigs.min()), float(eigs.max())
@@ -198,8 +198,8 @@ def test_allow_unstable_lets_bad_gains_through_and_the_error_diverges(L):
     t = torch.arange(801, dtype=F64) * Ts
     x = Disturbed(A_TRUE, gamma).exact(X0, t)
     with pytest.raises(GainError):
-        LinearFeedback(lambda _t, z: z @ A_TRUE.T, L, Ts, 2)
-    est = LinearFeedback(lambda _t, z: z @ A_TRUE.T, L, Ts, 2, allow_unstable=True).observe(x)
+        LinearFeedback(lambda _t, z: z @ A_TRUE.T, Ts, gains=Gains(L), n=2)
+    est = LinearFeedback(lambda _t, z: z @ A_TRUE.T, Ts, gains=Gains(L, allow_unstable=True), n=2).observe(x)
     err = (x - est.x_hat).norm(dim=-1)
     # a stable gain with lambda = 1 keeps the error under gamma + slack; these blow far past it
     assert float(err[-1]) > 100 * gamma
@@ -209,7 +209,7 @@ def test_allow_unstable_lets_bad_gains_through_and_the_error_diverges(L):
 def test_zero_gain_is_accepted():
     M = check_gain(0.0, 2, 0.1)
     assert torch.equal(M, torch.zeros(2, 2, dtype=F64))
-    LinearFeedback(Spiral(2.0, 0.1, 0.0), torch.zeros(2, 2), 0.1, 2)
+    LinearFeedback(Spiral(2.0, 0.1, 0.0), 0.1, gains=Gains(torch.zeros(2, 2)), n=2)
 
 
 def test_check_gain_returns_matrix_forms():
@@ -228,7 +228,7 @@ def test_decayed_gains_follow_eq11():
 # --- bad inputs -------------------------------------------------------------------------------------------------
 
 def _obs(L=1.0, Ts=0.1, n=2, **kw):
-    return LinearFeedback(Spiral(2.0, 0.1, 0.0), L, Ts, n, **kw)
+    return LinearFeedback(Spiral(2.0, 0.1, 0.0), Ts, gains=Gains(L), n=n, **kw)
 
 
 @pytest.mark.parametrize("L", [-1.0, torch.tensor([[1.0, 3.0], [3.0, 1.0]])], ids=["negative", "indefinite"])
@@ -264,9 +264,11 @@ def test_gain_with_nan():
         _obs(float("nan"))
 
 
-@pytest.mark.parametrize("L", [torch.ones(3), torch.ones(2, 3), torch.ones(2, 2, 2)])
-def test_wrong_gain_shape(L):
-    with pytest.raises(ValueError, match=r"gain L must be a scalar, a vector of length 2 or an \(2, 2\) matrix"):
+@pytest.mark.parametrize("L, match", [(torch.ones(3), r"gain L must be a scalar, a vector of length 2 or an \(2, 2\)"),
+                                      (torch.ones(2, 3), r"Gains.L must be a scalar, a vector \(n,\) or a square"),
+                                      (torch.ones(2, 2, 2), r"Gains.L must be a scalar, a vector \(n,\) or a square")])
+def test_wrong_gain_shape(L, match):
+    with pytest.raises(ValueError, match=match):
         _obs(L)
 
 
@@ -315,6 +317,6 @@ def test_bad_decay_rate(beta):
 
 
 def test_vector_field_with_wrong_output_shape():
-    obs = LinearFeedback(lambda t, x: x[:, :1], 1.0, 0.1, 2)
+    obs = LinearFeedback(lambda t, x: x[:, :1], 0.1, gains=Gains(1.0), n=2)
     with pytest.raises(ValueError, match=r"vector field returned shape \(5, 1\) for input \(5, 2\)"):
         obs.observe(torch.zeros(5, 2, dtype=F64))

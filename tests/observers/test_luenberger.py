@@ -10,7 +10,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import LinearFeedback, Spiral, add_measurement_noise, make_generator
+from fnnlib import Gains, LinearFeedback, Spiral, add_measurement_noise, make_generator
 from fnnlib.observers import LuenbergerObserver, augmented_matrices, linear_feedback_gain, place_observer_gain
 
 F64 = torch.float64
@@ -76,7 +76,7 @@ def test_linear_feedback_is_the_luenberger_observer_with_its_gain(L):
     x = Spiral(3.0, 0.05, 10.0).simulate(torch.tensor([9.0, 0.0]), t)
     y = add_measurement_noise(x, 0.01, make_generator(0))
     model = Spiral(2.0, 0.1, 0.0)  # a "learned" model with a large residual
-    fb = LinearFeedback(model, L, TS, 2).observe(y)
+    fb = LinearFeedback(model, TS, gains=Gains(L), n=2).observe(y)
     lu = LuenbergerObserver(model, TS, 2, L=linear_feedback_gain(L, TS, 2))
     est = lu.estimate(y)
     torch.testing.assert_close(est.f_hat, fb.f_hat, rtol=0, atol=1e-9)  # Eq. (7)'s f_hat

@@ -28,7 +28,7 @@ class Zero(torch.nn.Module):
 
 def test_interface_and_shapes():
     f, h = _nets()
-    obs = NeuralFeedbackObserver(f, h, TS, 2)
+    obs = NeuralFeedbackObserver(f, TS, h=h, n=2)
     assert isinstance(obs, Observer)
     x = _traj((3, 2))
     est = obs.observe(x)
@@ -39,7 +39,7 @@ def test_interface_and_shapes():
 def test_observe_is_the_recursion():
     f, h = _nets()
     x = _traj()
-    est = NeuralFeedbackObserver(f, h, TS, 2).observe(x)
+    est = NeuralFeedbackObserver(f, TS, h=h, n=2).observe(x)
     x_hat = x[0].clone()
     with torch.no_grad():
         for k in range(x.shape[0]):
@@ -52,14 +52,14 @@ def test_observe_is_the_recursion():
 @pytest.mark.parametrize("T,N,beta", [(30, 5, 0.0), (6, 9, 0.1), (12, 1, 0.0), (1, 3, 0.0)])
 def test_wavefront_cascade_equals_double_loop(T, N, beta):
     f, h = _nets()
-    obs = NeuralFeedbackObserver(f, h, TS, 2, beta=beta)
+    obs = NeuralFeedbackObserver(f, TS, h=h, n=2, beta=beta)
     x = _traj(T=T)
     torch.testing.assert_close(obs.predict(x, N), obs.predict_loop(x, N), rtol=0, atol=1e-6)
 
 
 def test_batched_cascade_equals_per_trajectory():
     f, h = _nets()
-    obs = NeuralFeedbackObserver(f, h, TS, 2)
+    obs = NeuralFeedbackObserver(f, TS, h=h, n=2)
     x = _traj((2, 3))
     z = obs.predict(x, 6)
     for a in range(2):
@@ -70,7 +70,7 @@ def test_batched_cascade_equals_per_trajectory():
 def test_zero_feedback_is_the_euler_rollout():
     f, _ = _nets()
     x = _traj((2,))
-    obs = NeuralFeedbackObserver(f, Zero(), TS, 2)
+    obs = NeuralFeedbackObserver(f, TS, h=Zero(), n=2)
     torch.testing.assert_close(obs.predict(x, 7), rollout_predict(f, x, TS, 7, method="euler"), rtol=0, atol=1e-10)
     with torch.no_grad():
         torch.testing.assert_close(obs.observe(x).f_hat, f(0.0, x.reshape(-1, 2)).reshape(x.shape))
@@ -79,8 +79,8 @@ def test_zero_feedback_is_the_euler_rollout():
 def test_bad_inputs():
     f, h = _nets()
     with pytest.raises(ValueError, match="Ts"):
-        NeuralFeedbackObserver(f, h, 0.0, 2)
+        NeuralFeedbackObserver(f, 0.0, h=h, n=2)
     with pytest.raises(ValueError, match="beta"):
-        NeuralFeedbackObserver(f, h, TS, 2, beta=-1.0)
+        NeuralFeedbackObserver(f, TS, h=h, n=2, beta=-1.0)
     with pytest.raises(ValueError, match="N must be"):
-        NeuralFeedbackObserver(f, h, TS, 2).predict(_traj(), 0)
+        NeuralFeedbackObserver(f, TS, h=h, n=2).predict(_traj(), 0)

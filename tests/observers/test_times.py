@@ -187,8 +187,8 @@ def test_rollout_and_prediction_step_along_the_record_times():
 
 def _neural(seed=0):
     torch.manual_seed(seed)
-    return NeuralFeedbackObserver(NeuralODE(2, (16,), "tanh").double(), NeuralFeedback(2, (16,), "tanh").double(), TS, 2,
-                                  beta=0.2)
+    return NeuralFeedbackObserver(NeuralODE(2, (16,), "tanh").double(), TS,
+                                  h=NeuralFeedback(2, (16,), "tanh").double(), n=2, beta=0.2)
 
 
 def test_neural_feedback_with_times():
@@ -251,8 +251,8 @@ def test_bad_times_are_refused_before_the_model_runs(kind, what):
            "ukf_C": lambda: F.UnscentedKalmanObserver(f, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw),
            "luenberger": lambda: F.LuenbergerObserver(f, TS, 2, [0.5, 0.6, 0.7, 0.8]),
            "luenberger_C": lambda: F.LuenbergerObserver(f, TS, 2, [0.7, 0.75, 0.8], **kw),
-           "neural": lambda: NeuralFeedbackObserver(lambda t, x: f(t, x), NeuralFeedback(2, (4,), "tanh").double(),
-                                                    TS, 2)}[kind]()
+           "neural": lambda: NeuralFeedbackObserver(lambda t, x: f(t, x), TS,
+                                                    h=NeuralFeedback(2, (4,), "tanh").double(), n=2)}[kind]()
     x, u = _records(1)
     y = x[0] @ C.T if kind.endswith("_C") else x[0]
     f.calls = 0
@@ -275,7 +275,7 @@ def test_times_with_a_step_are_refused():
     with pytest.raises(ValueError, match="one grid"):
         _neural().observe(x[0], t=_uniform_times(3))
     with pytest.raises(ValueError, match="one grid"):
-        F.LinearFeedback(PLANT, 3.0, TS, 2).observe(x[0], u[0], t=_uniform_times(3))
+        F.LinearFeedback(PLANT, TS, gains=F.Gains(3.0), n=2).observe(x[0], u[0], t=_uniform_times(3))
     with pytest.raises(TypeError, match="floating-point"):
         F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=torch.arange(T))
 
@@ -284,7 +284,7 @@ def test_linear_feedback_with_times():
     """LinearFeedback: uniform times equal Ts; random times follow x_hat_{k+1} = x_hat_k + Delta_k f_hat_k and the
     cascade's own times; a gain stable at Ts but not at the longest interval is refused (Eq. (25))."""
     x, u = _records(2)
-    obs = F.LinearFeedback(PLANT, 3.0, TS2, 2)
+    obs = F.LinearFeedback(PLANT, TS2, gains=F.Gains(3.0), n=2)
     tu = _uniform_times(2)
     for a, b in zip(obs.observe(x, u), obs.observe(x, u, t=tu)):
         torch.testing.assert_close(b, a, **TOL)
@@ -293,9 +293,10 @@ def test_linear_feedback_with_times():
     est = obs.observe(x, u, t=t)
     torch.testing.assert_close(est.x_hat[:, 1:], est.x_hat[:, :-1] + t.diff(dim=-1)[..., None] * est.f_hat[:, :-1],
                                **TOL)
-    torch.testing.assert_close(obs.predict(x, 3, u, t=t), F.cascade_predict(PLANT, x, None, 3, 3.0, t=t, u=u), **TOL)
+    torch.testing.assert_close(obs.predict(x, 3, u, t=t), F.cascade_predict(PLANT, x, None, 3, F.Gains(3.0), u=u,
+                                                                            measurement=F.Measurement(t=t)), **TOL)
     with pytest.raises(F.feedback.gains.GainError):
-        F.LinearFeedback(PLANT, 25.0, TS, 2).observe(x, u, t=t * 2)  # rho(I - Delta L) > 1 at the longest interval
+        F.LinearFeedback(PLANT, TS, gains=F.Gains(25.0), n=2).observe(x, u, t=t * 2)  # rho(I - Delta L) > 1 at the longest interval
 
 
 def test_the_varying_gain_scan_equals_its_loop():

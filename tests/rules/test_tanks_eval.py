@@ -83,7 +83,7 @@ def test_depths_are_the_cascade_and_the_open_loop_at_every_horizon() -> None:
     assert d.shape == (6, 2, rec.y_val.shape[0], 2)
     for N in (1, 3, 6):
         torch.testing.assert_close(d[N - 1, 0], obs.predict(rec.y_val, N, rec.u_val))
-        ref = F.cascade_predict(model, rec.y_val, rec.Ts, N, 0.03, 0.2, u=rec.u_val, observer=obs)
+        ref = F.cascade_predict(model, rec.y_val, rec.Ts, N, F.Gains(0.03, 0.2), u=rec.u_val, observer=obs)
         torch.testing.assert_close(d[N - 1, 1], ref)
 
 
