@@ -128,8 +128,10 @@ def main() -> None:
                                   u=u_cal, observer=obs)
             q_d = 1e-3
             R = max(noise, 0.005) ** 2
-            ekf = F.ExtendedKalmanObserver(model, TS, 2, [1e-6, 1e-6, q_d], R, C=C, disturbance=[1], A=A)
-            ukf = F.UnscentedKalmanObserver(model, TS, 2, [1e-6, 1e-6, q_d], R, C=C, disturbance=[1], A=A)
+            ekf = F.ExtendedKalmanObserver(model, TS, n=2, cov=F.Covariances([1e-6, 1e-6, q_d], R), C=C,
+                                           disturbance=[1], A=A)
+            ukf = F.UnscentedKalmanObserver(model, TS, n=2, cov=F.Covariances([1e-6, 1e-6, q_d], R), C=C,
+                                            disturbance=[1], A=A)
             row = {"N": N, "noise": noise, "hand L": L_hand, "tuned L": [round(v, 3) for v in tuned.L],
                    "tuned beta": round(tuned.beta, 3),
                    "cascade, hand gains": score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand, 0.05), u=u[1],

@@ -113,7 +113,7 @@ from fnnlib.feedback import (
     model_jacobian,
     output_jacobian,
 )
-from fnnlib.observers import UnscentedKalmanObserver
+from fnnlib.observers import Covariances, SigmaPoints, UnscentedKalmanObserver
 
 __all__ = [
     "CascadeGains", "GainWarning", "MeasuredFeedback", "check_output_gain", "LinearSystem", "NOISE_AMPLIFICATION_LIMIT", "Pendulum", "QUICK_RECIPE",
@@ -159,7 +159,7 @@ __all__ += [
 ]
 
 __all__ += [  # a real plant
-    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Gains", "Measurement", "TuneRecipe", "UnscentedKalmanObserver", "check_detectable",
+    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Gains", "Measurement", "TuneRecipe", "Covariances", "SigmaPoints", "UnscentedKalmanObserver", "check_detectable",
     "check_measurements", "model_jacobian", "output_jacobian",
 ]
 

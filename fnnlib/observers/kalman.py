@@ -57,6 +57,7 @@ from fnnlib.observers.augmented import (
     split_estimate,
     steps_per_record,
 )
+from fnnlib.observers.options import Covariances
 
 #: Beyond this magnitude the squared deviations a filter forms overflow float64 (its largest value is ~1.8e308).
 SQUARE_LIMIT = 1e150
@@ -304,17 +305,30 @@ class _OutputModel(AugmentedObserver):
 
 
 class _KalmanBase(_OutputModel):
-    """Shared set-up of the Kalman filters: :class:`_OutputModel` (``C``, ``E``, detectability) and Q, R, P0."""
+    """Shared set-up of the Kalman filters: :class:`_OutputModel` (``C``, ``E``, detectability) and their
+    :class:`~fnnlib.observers.options.Covariances` ``cov`` (Q, R, P0)."""
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None):
-        super().__init__(f, Ts, n, C=C, disturbance=disturbance, A=A)
+    def __init__(self, f: VectorField, Ts: float, *, n: int | None = None, cov: Covariances, C=None,
+                 disturbance=None, A=None):
+        if not isinstance(cov, Covariances):
+            raise TypeError(f"cov must be a fnnlib.Covariances(Q=..., R=..., P0=...), got {type(cov).__name__}")
+        super().__init__(f, Ts, _state_dimension(f, n), C=C, disturbance=disturbance, A=A)
         q, m = self.q, self.n + self.q
+        Q, R, P0 = cov.Q, cov.R, cov.P0
         self.Q = as_covariance(Q, m, name="Q")
         self.R = as_covariance(R, self.p, name="R", definite=True)
         if P0 is None:  # first measurement's noise on x (unit variance on unmeasured states); d of order 10
             x_part = self.R if C is None else torch.eye(self.n, dtype=torch.float64)
             P0 = torch.block_diag(x_part, 100.0 * torch.eye(q, dtype=torch.float64))
         self.P0 = as_covariance(P0, m, name="P0")
+
+
+def _state_dimension(f: VectorField, n: int | None) -> int:
+    """``n``, or the model's own ``f.n`` (a :class:`~fnnlib.models.NeuralODE` or a system has it)."""
+    n = n if n is not None else getattr(f, "n", None)
+    if n is None:
+        raise ValueError("pass the state dimension n (f has no `n` attribute to take it from)")
+    return int(n)
 
 
 def disturbance_matrix(E, n: int) -> Tensor:
@@ -335,17 +349,19 @@ def disturbance_matrix(E, n: int) -> Tensor:
 class KalmanObserver(_KalmanBase):
     r"""Kalman filter on the augmented learned model (filterpy ``KalmanFilter``).
 
+    Every observer is built as ``(f, Ts, *, ...)``: the model and the nominal sample step by position, the rest
+    by name.
+
     Parameters
     ----------
-    f, Ts, n
-        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
-    Q : float, Tensor (2n,) or (2n, 2n)
-        Process noise covariance of :math:`z = [x; d]`.
-    R : float, Tensor (n,) or (n, n)
-        Measurement noise covariance (the noise variance, e.g. ``std**2``).
-    P0 : float, Tensor (2n,) or (2n, 2n), optional
-        Prior covariance at k = 0 (around :math:`[y_0; 0]`); default
-        ``blockdiag(R, 100 I)``.
+    f, Ts
+        Learned field and sampling step, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
+    n : int, optional
+        State dimension; by default ``f.n``.
+    cov : Covariances
+        ``Q`` (float, (2n,) or (2n, 2n)): process noise covariance of :math:`z = [x; d]`; ``R`` (float, (n,) or
+        (n, n)): measurement noise covariance (the noise variance, e.g. ``std**2``); ``P0`` (float, (2n,) or
+        (2n, 2n), optional): prior covariance at k = 0 (around :math:`[y_0; 0]`), default ``blockdiag(R, 100 I)``.
     steady_state : bool
         Use the stationary gain (:func:`steady_state_gain`) in one scan over
         time instead of filterpy's time-varying filter (a Python loop inside
@@ -358,9 +374,9 @@ class KalmanObserver(_KalmanBase):
         then be True), and it takes gaps (``mask`` or NaN). Without them the full-state filter above is unchanged.
     """
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, steady_state: bool = False,
-                 C=None, disturbance=None, A=None):
-        super().__init__(f, Ts, n, Q, R, P0=P0, C=C, disturbance=disturbance, A=A)
+    def __init__(self, f: VectorField, Ts: float, *, n: int | None = None, cov: Covariances,
+                 steady_state: bool = False, C=None, disturbance=None, A=None):
+        super().__init__(f, Ts, n=n, cov=cov, C=C, disturbance=disturbance, A=A)
         self.steady_state = bool(steady_state)
         self.output_form = C is not None or disturbance is not None
         if self.output_form:
@@ -463,7 +479,8 @@ class ExtendedKalmanObserver(_KalmanBase):
     update is linear (:math:`H = C`). The change rate is the model's own,
     :math:`\hat f_k = f_{neural}(\hat x_{k|k}) + \hat d_{k|k}`.
 
-    Parameters are those of :class:`KalmanObserver` (no ``steady_state``), and ``C`` (p, n): measure
+    Parameters are those of :class:`KalmanObserver`, ``(f, Ts, *, n, cov, C, disturbance, A)`` (no
+    ``steady_state``), and ``C`` (p, n): measure
     only :math:`y = C x` (default: every state; then ``R`` is (p, p) and the default ``P0`` puts unit
     variance on the state). The model is evaluated at the estimate, so partial measurements need no
     full state (the :class:`~fnnlib.feedback.measured.MeasuredFeedback` of the same ``C`` is its

@@ -37,7 +37,7 @@ from fnnlib.feedback.gains import gain_matrix
 from fnnlib.feedback.types import VectorField
 from fnnlib._validation import as_trajectory
 from fnnlib.observers.augmented import DisturbanceEstimate, observer_steps, steps_per_record
-from fnnlib.observers.kalman import _OutputModel
+from fnnlib.observers.kalman import _OutputModel, _state_dimension
 
 
 def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: Sequence[complex], *,
@@ -118,14 +118,17 @@ class LuenbergerObserver(_OutputModel):
     measurement (as Eq. (7) does), so the design needs no linearisation and
     the placed poles are the true error poles.
 
+    Every observer is built as ``(f, Ts, *, ...)``: the model and the nominal sample step by position, the rest
+    by name. :meth:`with_gain` builds one from a ready gain instead of poles.
+
     Parameters
     ----------
-    f, Ts, n
-        Learned field, sampling step, state dimension, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
-    poles : sequence of 2n complex, optional
+    f, Ts
+        Learned field and sampling step, as :class:`~fnnlib.observers.augmented.AugmentedObserver`.
+    n : int, optional
+        State dimension; by default ``f.n``.
+    poles : sequence of 2n complex
         Discrete poles of :math:`A - LC`, placed by :func:`place_observer_gain`.
-    L : Tensor, shape (2n, n), optional
-        A ready gain instead of ``poles`` (e.g. :func:`linear_feedback_gain`).
     allow_unstable : bool
         Accept poles on or outside the unit circle.
     C, disturbance, A : optional
@@ -144,11 +147,24 @@ class LuenbergerObserver(_OutputModel):
         Observer gain (predictor form).
     """
 
-    def __init__(self, f: VectorField, Ts: float, n: int, poles: Sequence[complex] | None = None, *,
-                 L: Tensor | None = None, allow_unstable: bool = False, C=None, disturbance=None, A=None):
-        super().__init__(f, Ts, n, C=C, disturbance=disturbance, A=A)
-        if (poles is None) == (L is None):
-            raise ValueError("give exactly one of poles (to place) or L (a ready observer gain)")
+    def __init__(self, f: VectorField, Ts: float, *, n: int | None = None, poles: Sequence[complex],
+                 allow_unstable: bool = False, C=None, disturbance=None, A=None):
+        self._build(f, Ts, n, poles, None, allow_unstable, C, disturbance, A)
+
+    @classmethod
+    def with_gain(cls, f: VectorField, Ts: float, *, n: int | None = None, L: Tensor, allow_unstable: bool = False,
+                  C=None, disturbance=None, A=None) -> LuenbergerObserver:
+        """The observer with a ready gain ``L`` (n + q, p) (e.g. :func:`linear_feedback_gain`) instead of placed
+        poles; its poles are then :meth:`error_poles`, refused outside the unit disc unless ``allow_unstable``."""
+        obs = cls.__new__(cls)
+        obs._build(f, Ts, n, None, L, allow_unstable, C, disturbance, A)
+        return obs
+
+    def _build(self, f, Ts, n, poles, L, allow_unstable, C, disturbance, A) -> None:
+        """The set-up of :meth:`__init__` (``poles``) and :meth:`with_gain` (``L``)."""
+        super().__init__(f, Ts, _state_dimension(f, n), C=C, disturbance=disturbance, A=A)
+        if poles is None and L is None:
+            raise ValueError("LuenbergerObserver needs its poles (or LuenbergerObserver.with_gain and a ready L)")
         self.output_form = C is not None or disturbance is not None
         self.J = self._jacobian(A) if self.output_form else None  # the model Jacobian the output form is linearised at
         self.Phi = self._linearised(self.J) if self.output_form else self.A  # the transition the poles are placed for

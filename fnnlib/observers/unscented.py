@@ -22,6 +22,7 @@ from torch import Tensor
 from fnnlib.feedback.types import VectorField
 from fnnlib.observers.augmented import DisturbanceEstimate
 from fnnlib.observers.kalman import SQUARE_LIMIT, _KalmanBase
+from fnnlib.observers.options import Covariances, SigmaPoints
 
 
 class _BatchedUKF(UnscentedKalmanFilter):
@@ -38,19 +39,20 @@ class _BatchedUKF(UnscentedKalmanFilter):
 class UnscentedKalmanObserver(_KalmanBase):
     r"""Unscented Kalman filter on the learned model with a constant-disturbance state (filterpy).
 
-    Parameters are those of :class:`~fnnlib.observers.ExtendedKalmanObserver` (``Q``, ``R``, ``P0``, ``C``,
-    ``disturbance``, ``A``), and ``alpha``, ``beta``, ``kappa`` of the scaled sigma points.
+    Parameters are those of :class:`~fnnlib.observers.ExtendedKalmanObserver` (``f``, ``Ts``, then by name ``n``,
+    ``cov``, ``C``, ``disturbance``, ``A``), and ``sigma``, the :class:`~fnnlib.observers.options.SigmaPoints`
+    (``alpha``, ``beta``, ``kappa`` of the scaled sigma points).
     :meth:`estimate` takes inputs ``u`` (..., T, m) and gaps (NaN or ``mask``) like the EKF.
     """
 
     takes_gaps = True
 
-    def __init__(self, f: VectorField, Ts: float, n: int, Q, R, *, P0=None, C=None, disturbance=None, A=None,
-                 alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
-        super().__init__(f, Ts, n, Q, R, P0=P0, C=C, disturbance=disturbance, A=A)
-        if not float(alpha) > 0:
-            raise ValueError(f"alpha must be > 0, got {alpha!r}")
-        self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
+    def __init__(self, f: VectorField, Ts: float, *, n: int | None = None, cov: Covariances, C=None,
+                 disturbance=None, A=None, sigma: SigmaPoints = SigmaPoints()):
+        if not isinstance(sigma, SigmaPoints):
+            raise TypeError(f"sigma must be a fnnlib.SigmaPoints(alpha, beta, kappa), got {type(sigma).__name__}")
+        super().__init__(f, Ts, n=n, cov=cov, C=C, disturbance=disturbance, A=A)
+        self.alpha, self.beta, self.kappa = sigma.alpha, sigma.beta, sigma.kappa
 
     def _fx(self, sigmas: np.ndarray, dtype: torch.dtype, u: Tensor | None, h: float | None = None) -> np.ndarray:
         """:math:`\\Phi_h` of every sigma point (S, n + q) in one model call (step ``h``, default ``Ts``)."""

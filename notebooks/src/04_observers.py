@@ -109,11 +109,11 @@ def make_observers(model, q_d):
     return {
         "neural ODE": F.LinearFeedback(model, Ts, gains=F.Gains(0.0), n=2),
         "linear feedback": F.LinearFeedback(model, Ts, gains=F.Gains(L, beta), n=2),
-        "Luenberger (as LF)": F.LuenbergerObserver(model, Ts, 2, L=F.linear_feedback_gain(L, Ts, 2)),
-        "Luenberger": F.LuenbergerObserver(model, Ts, 2, luenberger_poles),
-        "Kalman": F.KalmanObserver(model, Ts, 2, Q, R, P0=P0),
-        "Kalman, steady state": F.KalmanObserver(model, Ts, 2, Q, R, P0=P0, steady_state=True),
-        "EKF": F.ExtendedKalmanObserver(model, Ts, 2, Q, R, P0=P0),
+        "Luenberger (as LF)": F.LuenbergerObserver.with_gain(model, Ts, n=2, L=F.linear_feedback_gain(L, Ts, 2)),
+        "Luenberger": F.LuenbergerObserver(model, Ts, n=2, poles=luenberger_poles),
+        "Kalman": F.KalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0)),
+        "Kalman, steady state": F.KalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0), steady_state=True),
+        "EKF": F.ExtendedKalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0)),
     }
 
 

@@ -146,8 +146,9 @@ def pendulum_model(seed: int, t, x_train, u_train) -> F.NeuralODE:
 # %%
 def pendulum_predictions(model, y_eval, u_eval, hand: F.GainSweep, tuned: F.TunedGains) -> dict:
     """Each observer's N-step predictions on the evaluation measurements ``y_eval`` (n_test, 2)."""
-    kalman = F.KalmanObserver(model, Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2,
-                              P0=[noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
+    kalman = F.KalmanObserver(model, Ts, n=2, cov=F.Covariances([kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2,
+                                                           P0=[noise_std ** 2] * 2 + [kf_p0_d] * 2),
+                              steady_state=True)
     with torch.no_grad():
         return {"open_loop": F.cascade_predict(model, y_eval, Ts, N, F.Gains(0.0), u=u_eval),
                 "hand": F.cascade_predict(model, y_eval, Ts, N, F.Gains(hand.L, hand.beta), u=u_eval),
@@ -201,8 +202,10 @@ x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples
 # %%
 def spiral_predictions(model_s, y, hand: F.GainSweep, tuned: F.TunedGains) -> dict:
     """Each observer's N-step predictions on the spiral's judged measurements ``y`` (T, 2)."""
-    kalman_s = F.KalmanObserver(model_s, spiral_Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
-                                P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2, steady_state=True)
+    kalman_s = F.KalmanObserver(model_s, spiral_Ts, n=2,
+                                cov=F.Covariances([kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
+                                                  P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2),
+                                steady_state=True)
     with torch.no_grad():
         return {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(0.0)),
                 "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(hand.L, hand.beta)),
@@ -294,8 +297,9 @@ gen = F.make_generator(2000 + seeds[0])
 y_full = F.add_measurement_noise(x_s, spiral_noise_std, gen)
 lost = torch.rand(y_full.shape[0], generator=gen) < 0.3
 y_drop = torch.where(lost[:, None], torch.tensor(float("nan")), y_full)
-ekf_s = F.ExtendedKalmanObserver(model_s, spiral_Ts, 2, [kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
-                                 P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2)
+ekf_s = F.ExtendedKalmanObserver(model_s, spiral_Ts, n=2,
+                                 cov=F.Covariances([kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
+                                                   P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2))
 
 # %%
 with torch.no_grad():

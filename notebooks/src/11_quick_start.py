@@ -62,7 +62,8 @@ preds = {"open loop": observer.predict(y[3], N, u[3]),
                                               observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
-    preds[name] = kf(model, Ts, 2, [1e-6, 1e-6, 1e-3], noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[3], N, u[3])
+    preds[name] = kf(model, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], noise_std ** 2), C=C, disturbance=[1],
+                     A=A).predict(y[3], N, u[3])
 errors = {k: float(F.n_step_errors(z @ C.T, x[3] @ C.T, N)[T // 4:].mean()) for k, z in preds.items()}
 
 # %% [markdown]

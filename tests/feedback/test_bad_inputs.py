@@ -39,8 +39,8 @@ def _check_no_work():
 
 def test_inputs_rows_off_are_refused_before_the_loop(plant):
     y, u_short = torch.zeros(T, 1, dtype=F64), torch.zeros(T - 6, 1, dtype=F64)
-    ekf = F.ExtendedKalmanObserver(plant, TS, 2, [1e-6] * 3, 1e-4, C=C, disturbance=[1], A=A)
-    ukf = F.UnscentedKalmanObserver(plant, TS, 2, [1e-6] * 3, 1e-4, C=C, disturbance=[1], A=A)
+    ekf = F.ExtendedKalmanObserver(plant, TS, n=2, cov=F.Covariances([1e-6] * 3, 1e-4), C=C, disturbance=[1], A=A)
+    ukf = F.UnscentedKalmanObserver(plant, TS, n=2, cov=F.Covariances([1e-6] * 3, 1e-4), C=C, disturbance=[1], A=A)
     mf = F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
     CountingPlant.calls = 0
     for call in (lambda: ekf.predict(y, 5, u_short), lambda: ukf.observe(y, u_short), lambda: mf.predict(y, 5, u_short),
@@ -56,7 +56,7 @@ def test_transposed_C_is_named(plant):
     with pytest.raises(ValueError, match=r"C has shape \(2, 1\) .*looks transposed: pass C.T"):
         F.MeasuredFeedback(plant, TS, L=_gain(), measurement=F.Measurement(C=C.T), A=A)
     with pytest.raises(ValueError, match=r"looks transposed"):
-        F.ExtendedKalmanObserver(plant, TS, 2, 1e-6, 1e-4, C=C.T)
+        F.ExtendedKalmanObserver(plant, TS, n=2, cov=F.Covariances(1e-6, 1e-4), C=C.T)
     _check_no_work()
 
 
@@ -65,7 +65,7 @@ def test_dtype_errors_are_clear(plant):
     x64 = torch.zeros(T, 2, dtype=F64)
     with pytest.raises(TypeError, match=r"model's parameters are torch.float32 but the states are torch.float64"):
         F.rollout_predict(net, x64, TS, 3)
-    ekf = F.ExtendedKalmanObserver(net, TS, 2, 1e-6, 1e-4)
+    ekf = F.ExtendedKalmanObserver(net, TS, n=2, cov=F.Covariances(1e-6, 1e-4))
     with pytest.raises(TypeError, match=r"model's parameters are torch.float32"):
         ekf.predict(x64, 3)
     with pytest.raises(TypeError, match=r"inputs u are torch.float32 but y is torch.float64"):
@@ -101,5 +101,5 @@ def test_kalman_and_luenberger_refuse_gaps_with_a_pointer():
     f = F.LinearSystem(A, B)
     x = torch.zeros(T, 2, dtype=F64)
     with pytest.raises(NotImplementedError, match="for gaps use ExtendedKalmanObserver, UnscentedKalmanObserver"):
-        F.KalmanObserver(lambda t, z: z @ A.T, TS, 2, 1e-6, 1e-4).predict(x, 3, mask=torch.ones(T, dtype=torch.bool))
+        F.KalmanObserver(lambda t, z: z @ A.T, TS, n=2, cov=F.Covariances(1e-6, 1e-4)).predict(x, 3, mask=torch.ones(T, dtype=torch.bool))
     del f

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import Gains, KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
+from fnnlib import Covariances, Gains, KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
 from fnnlib.feedback.layer import shift_inputs
 
 F64 = torch.float64
@@ -77,7 +77,8 @@ def test_layer_i_uses_the_input_i_samples_ahead():
 def test_kalman_with_inputs_predicts_exact_euler_data():
     u = _inputs()
     x = _euler_data(torch.tensor([1.0, -0.5], dtype=F64), u)
-    kf = KalmanObserver(LinearSystem(A, B), TS, 2, [1e-8] * 2 + [1e-4] * 2, 1e-6, steady_state=True)
+    kf = KalmanObserver(LinearSystem(A, B), TS, n=2, cov=Covariances([1e-8] * 2 + [1e-4] * 2, 1e-6),
+                        steady_state=True)
     z = kf.predict(x, 6, u=u)
     torch.testing.assert_close(z[:-6], x[6:], rtol=0, atol=1e-6)  # d_hat stays ~0 on exact data
 

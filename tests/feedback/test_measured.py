@@ -58,7 +58,7 @@ def test_checks_name_what_fails():
 
 
 def test_ekf_takes_the_same_C_and_refuses_an_undetectable_disturbance_layout():
-    from fnnlib import DetectabilityError, ExtendedKalmanObserver
+    from fnnlib import Covariances, DetectabilityError, ExtendedKalmanObserver
 
     f = LinearSystem(A, torch.zeros(2, 1, dtype=F64))
     x = _euler(torch.tensor([1.0, -2.0], dtype=F64), torch.zeros(T, 1, dtype=F64))
@@ -66,11 +66,11 @@ def test_ekf_takes_the_same_C_and_refuses_an_undetectable_disturbance_layout():
     # a disturbance on both states with only the position measured: a velocity offset and a position
     # disturbance are indistinguishable ([C 0] does not observe the augmented state), refused with the PBH mode
     with pytest.raises(DetectabilityError, match=r"eigenvalue 1\+0j .*direction .*x1.*d0"):
-        ExtendedKalmanObserver(field, TS, 2, [1e-10] * 4, 1e-8, C=C)
-    ekf = ExtendedKalmanObserver(field, TS, 2, [1e-10] * 3, 1e-8, C=C, disturbance=[1])  # on the velocity only
+        ExtendedKalmanObserver(field, TS, n=2, cov=Covariances([1e-10] * 4, 1e-8), C=C)
+    ekf = ExtendedKalmanObserver(field, TS, n=2, cov=Covariances([1e-10] * 3, 1e-8), C=C, disturbance=[1])  # on the velocity only
     est = ekf.estimate(x @ C.T)
     assert float((est.x_hat[50:] - x[50:]).abs().max()) < 1e-6  # now the whole state
     z = ekf.predict(x @ C.T, 10)
     torch.testing.assert_close(z[50:-10], x[60:], rtol=0, atol=1e-6)
     with pytest.raises(ValueError, match=r"C has shape \(1, 3\) but must be \(p, n\) with n = 2"):
-        ExtendedKalmanObserver(f, TS, 2, 1e-4, 1e-4, C=torch.ones(1, 3))
+        ExtendedKalmanObserver(f, TS, n=2, cov=Covariances(1e-4, 1e-4), C=torch.ones(1, 3))

@@ -36,13 +36,14 @@ def _data(R=2):
 
 def _make(kind, f):
     kw = dict(C=C, disturbance=[1], A=A)
-    return {"kf": lambda: F.KalmanObserver(f, TS, 2, 1e-6, 1e-4),
-            "kf_C": lambda: F.KalmanObserver(f, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, steady_state=True, **kw),
-            "ekf": lambda: F.ExtendedKalmanObserver(f, TS, 2, 1e-6, 1e-4),
-            "ekf_C": lambda: F.ExtendedKalmanObserver(f, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw),
-            "ukf_C": lambda: F.UnscentedKalmanObserver(f, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw),
-            "luenberger": lambda: F.LuenbergerObserver(f, TS, 2, [0.5, 0.6, 0.7, 0.8]),
-            "luenberger_C": lambda: F.LuenbergerObserver(f, TS, 2, [0.7, 0.75, 0.8], **kw)}[kind]()
+    return {"kf": lambda: F.KalmanObserver(f, TS, n=2, cov=F.Covariances(1e-6, 1e-4)),
+            "kf_C": lambda: F.KalmanObserver(f, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4),
+                                             steady_state=True, **kw),
+            "ekf": lambda: F.ExtendedKalmanObserver(f, TS, n=2, cov=F.Covariances(1e-6, 1e-4)),
+            "ekf_C": lambda: F.ExtendedKalmanObserver(f, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), **kw),
+            "ukf_C": lambda: F.UnscentedKalmanObserver(f, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), **kw),
+            "luenberger": lambda: F.LuenbergerObserver(f, TS, n=2, poles=[0.5, 0.6, 0.7, 0.8]),
+            "luenberger_C": lambda: F.LuenbergerObserver(f, TS, n=2, poles=[0.7, 0.75, 0.8], **kw)}[kind]()
 
 
 KINDS = ["kf", "kf_C", "ekf", "ekf_C", "ukf_C", "luenberger", "luenberger_C"]
@@ -131,7 +132,8 @@ def test_a_diverging_ukf_stops_with_the_sample():
         return 1e80 * x ** 3
 
     x, u = _data(1)
-    ukf = F.UnscentedKalmanObserver(wild, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, C=C, disturbance=[1], A=A)
+    ukf = F.UnscentedKalmanObserver(wild, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), C=C, disturbance=[1],
+                                    A=A)
     with pytest.raises(RuntimeError, match="the UKF"):
         ukf.estimate(x[0] @ C.T, u[0])
 
@@ -149,10 +151,10 @@ def test_the_neural_feedback_refuses_bad_measurements():
 def test_settings_given_as_text_are_refused():
     plant = F.LinearSystem(A, B)
     with pytest.raises(TypeError, match="observer gain L must be a matrix of numbers"):
-        F.LuenbergerObserver(plant, TS, 2, L="abc")
+        F.LuenbergerObserver.with_gain(plant, TS, n=2, L="abc")
     with pytest.raises(TypeError, match="poles must be numbers"):
-        F.LuenbergerObserver(plant, TS, 2, ["a", "b", "c", "d"])
+        F.LuenbergerObserver(plant, TS, n=2, poles=["a", "b", "c", "d"])
     with pytest.raises(TypeError, match="Q must be a number"):
-        F.KalmanObserver(plant, TS, 2, "abc", 1e-4)
+        F.KalmanObserver(plant, TS, n=2, cov=F.Covariances("abc", 1e-4))
     with pytest.raises(TypeError, match="R must be a number"):
-        F.ExtendedKalmanObserver(plant, TS, 2, 1e-6, ["x", "y"])
+        F.ExtendedKalmanObserver(plant, TS, n=2, cov=F.Covariances(1e-6, ["x", "y"]))

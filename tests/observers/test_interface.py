@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import Gains, LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
+from fnnlib import Covariances, Gains, LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
 from fnnlib.feedback import Estimate
 from fnnlib.observers import (
     ExtendedKalmanObserver,
@@ -28,10 +28,10 @@ Q, R = [1e-8, 1e-8, 1e-2, 1e-2], 1e-4
 def _observers() -> dict[str, Observer]:
     return {
         "linear feedback": LinearFeedback(MODEL, TS, gains=Gains(20.0, 0.02), n=2),
-        "luenberger": LuenbergerObserver(MODEL, TS, 2, [0.5, 0.5, 0.8, 0.8]),
-        "kalman": KalmanObserver(MODEL, TS, 2, Q, R),
-        "kalman_ss": KalmanObserver(MODEL, TS, 2, Q, R, steady_state=True),
-        "ekf": ExtendedKalmanObserver(MODEL, TS, 2, Q, R),
+        "luenberger": LuenbergerObserver(MODEL, TS, n=2, poles=[0.5, 0.5, 0.8, 0.8]),
+        "kalman": KalmanObserver(MODEL, TS, n=2, cov=Covariances(Q, R)),
+        "kalman_ss": KalmanObserver(MODEL, TS, n=2, cov=Covariances(Q, R), steady_state=True),
+        "ekf": ExtendedKalmanObserver(MODEL, TS, n=2, cov=Covariances(Q, R)),
     }
 
 

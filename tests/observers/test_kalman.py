@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib import Spiral, add_measurement_noise, make_generator
+from fnnlib import Covariances, Spiral, add_measurement_noise, make_generator
 from fnnlib.observers import ExtendedKalmanObserver, KalmanObserver, augmented_matrices, steady_state_gain
 
 F64 = torch.float64
@@ -62,7 +62,7 @@ def test_steady_state_gain_equals_dlqe(case):
 
 
 def test_filterpy_gain_converges_to_the_stationary_gain():
-    kf = KalmanObserver(Spiral(2.0, 0.1, 0.0), TS, 2, Q_AUG, R_AUG)
+    kf = KalmanObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, cov=Covariances(Q_AUG, R_AUG))
     K = kf.gain_history(400)
     err = np.abs(K - kf.stationary.K).max(axis=(1, 2)) / np.abs(kf.stationary.K).max()
     assert err[0] > 1e-2  # started away from it (P0 large on d)
@@ -80,9 +80,9 @@ def test_scan_equals_filterpy_when_started_at_steady_state():
     # with P0 = the stationary prior, filterpy's time-varying filter is the stationary one from k = 0
     _, y = _data()
     model = Spiral(2.0, 0.1, 0.0)
-    P_ss = KalmanObserver(model, TS, 2, Q_AUG, R_AUG).stationary.P
-    loop = KalmanObserver(model, TS, 2, Q_AUG, R_AUG, P0=torch.as_tensor(P_ss)).estimate(y)
-    scan = KalmanObserver(model, TS, 2, Q_AUG, R_AUG, P0=torch.as_tensor(P_ss), steady_state=True).estimate(y)
+    P_ss = KalmanObserver(model, TS, n=2, cov=Covariances(Q_AUG, R_AUG)).stationary.P
+    loop = KalmanObserver(model, TS, n=2, cov=Covariances(Q_AUG, R_AUG, P0=torch.as_tensor(P_ss))).estimate(y)
+    scan = KalmanObserver(model, TS, n=2, cov=Covariances(Q_AUG, R_AUG, P0=torch.as_tensor(P_ss)), steady_state=True).estimate(y)
     torch.testing.assert_close(scan.x_hat, loop.x_hat, rtol=0, atol=1e-9)
     torch.testing.assert_close(scan.d_hat, loop.d_hat, rtol=0, atol=1e-7)
 
@@ -92,14 +92,15 @@ def test_kalman_learns_a_constant_disturbance_of_its_own_model():
     xs = [torch.tensor([9.0, 0.0], dtype=F64)]
     for _ in range(399):
         xs.append(xs[-1] + TS * (model(0.0, xs[-1][None])[0] + d))  # x_{k+1} = x_k + Ts (f(x_k) + d)
-    for obs in (KalmanObserver(model, TS, 2, Q_AUG, R_AUG), ExtendedKalmanObserver(model, TS, 2, Q_AUG, R_AUG)):
+    for obs in (KalmanObserver(model, TS, n=2, cov=Covariances(Q_AUG, R_AUG)), ExtendedKalmanObserver(model, TS, n=2,
+                                                                                   cov=Covariances(Q_AUG, R_AUG))):
         est = obs.estimate(torch.stack(xs))
         assert float((est.d_hat[-1] - d).norm()) < 1e-6, type(obs).__name__
 
 
 def test_ekf_jacobian_is_the_model_jacobian():
     model = Spiral(2.0, 0.1, 3.0)  # f(x) = A x + b: J = A everywhere
-    ekf = ExtendedKalmanObserver(model, TS, 2, Q_AUG, R_AUG)
+    ekf = ExtendedKalmanObserver(model, TS, n=2, cov=Covariances(Q_AUG, R_AUG))
     z = np.array([[1.0], [2.0], [0.5], [-0.25]])
     z_next, F = ekf._step(z, F64)
     A, _, _ = augmented_matrices(2, TS)
@@ -114,7 +115,7 @@ def test_ekf_jacobian_is_the_model_jacobian():
 
 def test_ekf_batched_equals_per_trajectory():
     x, y = _data(T=40)
-    ekf = ExtendedKalmanObserver(Spiral(2.0, 0.1, 0.0), TS, 2, Q_AUG, R_AUG)
+    ekf = ExtendedKalmanObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, cov=Covariances(Q_AUG, R_AUG))
     batch = ekf.estimate(torch.stack([y, x]))
     torch.testing.assert_close(batch.d_hat[0], ekf.estimate(y).d_hat, rtol=0, atol=1e-12)
     torch.testing.assert_close(batch.d_hat[1], ekf.estimate(x).d_hat, rtol=0, atol=1e-12)
@@ -129,10 +130,9 @@ def test_ekf_batched_equals_per_trajectory():
 ], ids=["Q_negative", "Q_not_symmetric", "R_zero", "R_nan", "P0_shape"])
 def test_bad_covariances_are_refused(kwargs, match):
     args = {"Q": Q_AUG, "R": R_AUG} | kwargs
-    P0 = args.pop("P0", None)
     for cls in (KalmanObserver, ExtendedKalmanObserver):
-        with pytest.raises(ValueError, match=match):
-            cls(Spiral(2.0, 0.1, 0.0), TS, 2, args["Q"], args["R"], P0=P0)
+        with pytest.raises(ValueError, match=match):  # the covariances refuse what they can see on their own
+            cls(Spiral(2.0, 0.1, 0.0), TS, n=2, cov=Covariances(**args))
 
 
 def test_an_undetectable_pair_has_no_stationary_gain():

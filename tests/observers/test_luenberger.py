@@ -32,7 +32,7 @@ def _eig_error(A, L, C, poles) -> float:
 ], ids=["repeated", "deadbeat_state", "distinct", "complex_pair"])
 def test_augmented_poles_equal_the_requested_ones(poles):
     A, _, C = augmented_matrices(2, TS)
-    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, poles)
+    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, poles=poles)
     assert obs.L.shape == (4, 2)
     assert _eig_error(A, obs.L, C, poles) < 1e-9
     assert _eig_error(A, obs.L, C, obs.error_poles()) < 1e-12
@@ -77,7 +77,7 @@ def test_linear_feedback_is_the_luenberger_observer_with_its_gain(L):
     y = add_measurement_noise(x, 0.01, make_generator(0))
     model = Spiral(2.0, 0.1, 0.0)  # a "learned" model with a large residual
     fb = LinearFeedback(model, TS, gains=Gains(L), n=2).observe(y)
-    lu = LuenbergerObserver(model, TS, 2, L=linear_feedback_gain(L, TS, 2))
+    lu = LuenbergerObserver.with_gain(model, TS, n=2, L=linear_feedback_gain(L, TS, 2))
     est = lu.estimate(y)
     torch.testing.assert_close(est.f_hat, fb.f_hat, rtol=0, atol=1e-9)  # Eq. (7)'s f_hat
     torch.testing.assert_close(est.x_hat, y, rtol=0, atol=1e-9)  # deadbeat state part: x_hat_{k|k} = y_k
@@ -100,7 +100,7 @@ def test_observer_converges_on_its_own_model():
     xs = [torch.tensor([9.0, 0.0], dtype=F64)]
     for _ in range(299):
         xs.append(xs[-1] + TS * (model(0.0, xs[-1][None])[0] + d))
-    est = LuenbergerObserver(model, TS, 2, [0.5, 0.5, 0.8, 0.8]).estimate(torch.stack(xs))
+    est = LuenbergerObserver(model, TS, n=2, poles=[0.5, 0.5, 0.8, 0.8]).estimate(torch.stack(xs))
     err = (est.d_hat - d).norm(dim=-1)
     assert float(err[-1]) < 1e-9 * float(d.norm())  # 0.8^300 ~ 1e-29, up to a polynomial factor
     assert float(err[0]) > 0.5 * float(d.norm())  # it did start from d_hat = 0
@@ -110,7 +110,7 @@ def test_observer_converges_on_its_own_model():
 def test_batched_estimate_equals_per_trajectory():
     x = Spiral(2.0, 0.1, 0.0).simulate(torch.randn(3, 2, dtype=F64, generator=torch.Generator().manual_seed(1)),
                           torch.arange(40, dtype=F64) * TS)
-    obs = LuenbergerObserver(Spiral(2.0, 0.3, 0.0), TS, 2, [0.2, 0.2, 0.7, 0.7])
+    obs = LuenbergerObserver(Spiral(2.0, 0.3, 0.0), TS, n=2, poles=[0.2, 0.2, 0.7, 0.7])
     est = obs.estimate(x)
     for i in range(3):
         one = obs.estimate(x[i])
@@ -137,23 +137,23 @@ def test_unobservable_pair_is_refused():
 ], ids=["outside", "on_circle", "count", "not_conjugate", "repeated_3x", "nan"])
 def test_bad_poles_are_refused(poles, match):
     with pytest.raises(ValueError, match=match):
-        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, poles)
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, poles=poles)
 
 
 def test_allow_unstable_places_poles_outside_the_disc():
-    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, [0.5, 0.5, 0.8, 1.2], allow_unstable=True)
+    obs = LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, poles=[0.5, 0.5, 0.8, 1.2], allow_unstable=True)
     assert float(np.abs(obs.error_poles()).max()) == pytest.approx(1.2)
 
 
-def test_gain_or_poles_exactly_one():
-    with pytest.raises(ValueError, match="exactly one"):
-        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2)
-    with pytest.raises(ValueError, match="exactly one"):
-        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, [0.5, 0.5, 0.8, 0.8], L=linear_feedback_gain(20.0, TS, 2))
+def test_poles_or_a_ready_gain_each_by_its_own_constructor():
+    with pytest.raises(TypeError, match="poles"):
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, n=2)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'L'"):
+        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, n=2, poles=[0.5, 0.5, 0.8, 0.8], L=linear_feedback_gain(20.0, TS, 2))
 
 
 def test_bad_ready_gains_are_refused():
     with pytest.raises(ValueError, match="shape"):
-        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, L=torch.zeros(2, 2))
+        LuenbergerObserver.with_gain(Spiral(2.0, 0.1, 0.0), TS, n=2, L=torch.zeros(2, 2))
     with pytest.raises(ValueError, match="unstable"):
-        LuenbergerObserver(Spiral(2.0, 0.1, 0.0), TS, 2, L=linear_feedback_gain(250.0, TS, 2))  # pole 1 - Ts L = -1.5
+        LuenbergerObserver.with_gain(Spiral(2.0, 0.1, 0.0), TS, n=2, L=linear_feedback_gain(250.0, TS, 2))  # pole 1 - Ts L = -1.5

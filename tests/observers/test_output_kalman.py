@@ -23,7 +23,8 @@ def _data(d=0.3):
 
 
 def _kf():
-    return F.KalmanObserver(PLANT, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, C=C, disturbance=[1], A=A, steady_state=True)
+    return F.KalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), C=C, disturbance=[1], A=A,
+                            steady_state=True)
 
 
 def _linear_recursion(kf, y, u, present):
@@ -69,9 +70,9 @@ def test_a_gap_moves_the_estimate_open_loop_and_no_nan_reaches_it():
 
 def test_undetectable_layouts_and_bad_settings_are_refused():
     with pytest.raises(DetectabilityError):  # a disturbance on both states, only the position measured
-        F.KalmanObserver(PLANT, TS, 2, 1e-4, 1e-4, C=C, A=A, steady_state=True)
+        F.KalmanObserver(PLANT, TS, n=2, cov=F.Covariances(1e-4, 1e-4), C=C, A=A, steady_state=True)
     with pytest.raises(ValueError, match="steady_state=True"):
-        F.KalmanObserver(PLANT, TS, 2, 1e-4, 1e-4, C=C, disturbance=[1], A=A)
+        F.KalmanObserver(PLANT, TS, n=2, cov=F.Covariances(1e-4, 1e-4), C=C, disturbance=[1], A=A)
     with pytest.raises(ValueError, match="C has 1 rows"):
         _kf().estimate(torch.zeros(T, 2, dtype=F64), _data()[1])
 
@@ -79,7 +80,7 @@ def test_undetectable_layouts_and_bad_settings_are_refused():
 def test_the_full_state_filter_is_unchanged():
     """No C, no layout: the Eq. (7) filter of before (evaluated at the measurement), gaps refused."""
     x, u = _data()
-    kf = F.KalmanObserver(PLANT, TS, 2, 1e-4, 1e-4, steady_state=True)
+    kf = F.KalmanObserver(PLANT, TS, n=2, cov=F.Covariances(1e-4, 1e-4), steady_state=True)
     assert not kf.output_form and np.allclose(kf.stationary.K, F.observers.kalman.steady_state_gain(
         kf.A, kf.C, kf.Q, kf.R).K)
     with pytest.raises(NotImplementedError, match="needs every sample"):
@@ -88,7 +89,7 @@ def test_the_full_state_filter_is_unchanged():
 
 def test_output_luenberger_places_the_poles_of_the_linearised_model_and_tracks():
     poles = [0.7, 0.75, 0.8]
-    obs = F.LuenbergerObserver(PLANT, TS, 2, poles, C=C, disturbance=[1], A=A)
+    obs = F.LuenbergerObserver(PLANT, TS, n=2, poles=poles, C=C, disturbance=[1], A=A)
     np.testing.assert_allclose(np.sort(obs.error_poles().real), poles, atol=1e-9)
     assert obs.L.shape == (3, 1)
     x, u = _data()
@@ -99,6 +100,6 @@ def test_output_luenberger_places_the_poles_of_the_linearised_model_and_tracks()
     y[50:70] = float("nan")
     assert bool(torch.isfinite(obs.estimate(y, u).x_hat).all())
     with pytest.raises(DetectabilityError):
-        F.LuenbergerObserver(PLANT, TS, 2, [0.7, 0.75, 0.8, 0.85], C=C, A=A)
+        F.LuenbergerObserver(PLANT, TS, n=2, poles=[0.7, 0.75, 0.8, 0.85], C=C, A=A)
     with pytest.raises(ValueError, match=r"observer gain L must have shape \(3, 1\)"):
-        F.LuenbergerObserver(PLANT, TS, 2, L=torch.zeros(4, 2), C=C, disturbance=[1], A=A)
+        F.LuenbergerObserver.with_gain(PLANT, TS, n=2, L=torch.zeros(4, 2), C=C, disturbance=[1], A=A)

@@ -44,14 +44,15 @@ def _observers(Ts=TS):
     """Every augmented observer: full state (measured y = x) and with C (y = position)."""
     kw = dict(C=C, disturbance=[1], A=A)
     return {
-        "kf": (F.KalmanObserver(PLANT, Ts, 2, 1e-6, 1e-4), False),
-        "kf_steady": (F.KalmanObserver(PLANT, Ts, 2, 1e-6, 1e-4, steady_state=True), False),
-        "kf_C": (F.KalmanObserver(PLANT, Ts, 2, [1e-6, 1e-6, 1e-3], 1e-4, steady_state=True, **kw), True),
-        "ekf": (F.ExtendedKalmanObserver(PLANT, Ts, 2, 1e-6, 1e-4), False),
-        "ekf_C": (F.ExtendedKalmanObserver(PLANT, Ts, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw), True),
-        "ukf_C": (F.UnscentedKalmanObserver(PLANT, Ts, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw), True),
-        "luenberger": (F.LuenbergerObserver(PLANT, Ts, 2, [0.5, 0.6, 0.7, 0.8]), False),
-        "luenberger_C": (F.LuenbergerObserver(PLANT, Ts, 2, [0.7, 0.75, 0.8], **kw), True),
+        "kf": (F.KalmanObserver(PLANT, Ts, n=2, cov=F.Covariances(1e-6, 1e-4)), False),
+        "kf_steady": (F.KalmanObserver(PLANT, Ts, n=2, cov=F.Covariances(1e-6, 1e-4), steady_state=True), False),
+        "kf_C": (F.KalmanObserver(PLANT, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), steady_state=True,
+                                  **kw), True),
+        "ekf": (F.ExtendedKalmanObserver(PLANT, Ts, n=2, cov=F.Covariances(1e-6, 1e-4)), False),
+        "ekf_C": (F.ExtendedKalmanObserver(PLANT, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), **kw), True),
+        "ukf_C": (F.UnscentedKalmanObserver(PLANT, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), **kw), True),
+        "luenberger": (F.LuenbergerObserver(PLANT, Ts, n=2, poles=[0.5, 0.6, 0.7, 0.8]), False),
+        "luenberger_C": (F.LuenbergerObserver(PLANT, Ts, n=2, poles=[0.7, 0.75, 0.8], **kw), True),
     }
 
 
@@ -106,7 +107,7 @@ def test_open_loop_prediction_at_random_intervals_is_the_closed_form():
     """With zero gain the filter only predicts: z_{k+1} = expm(M Delta_k) [z_k; f(y_k)], random Delta_k."""
     x, u = _records(1)
     t = _random_times(1)[0]
-    obs = F.LuenbergerObserver(PLANT, TS, 2, L=torch.zeros(4, 2), allow_unstable=True)  # poles at 1: no correction
+    obs = F.LuenbergerObserver.with_gain(PLANT, TS, n=2, L=torch.zeros(4, 2), allow_unstable=True)  # poles at 1: no correction
     est = obs.estimate(x[0], u[0], t=t)
     n = 2
     Mc = np.zeros((3 * n, 3 * n))
@@ -130,7 +131,7 @@ def test_a_ramp_sampled_at_random_times_is_tracked_exactly(steady):
     t = _random_times(1, seed=3)[0] * 2
     d = torch.tensor([0.4, -1.5], dtype=F64)
     y = torch.tensor([1.0, 2.0], dtype=F64) + t[:, None] * d
-    kf = F.KalmanObserver(zero, TS, 2, [1e-10, 1e-10, 1e-4, 1e-4], 1e-8, steady_state=steady)
+    kf = F.KalmanObserver(zero, TS, n=2, cov=F.Covariances([1e-10, 1e-10, 1e-4, 1e-4], 1e-8), steady_state=steady)
     est = kf.estimate(y, t=t)
     torch.testing.assert_close(est.d_hat[-1], d, rtol=0, atol=1e-6)
     torch.testing.assert_close(est.x_hat[-1], y[-1], rtol=0, atol=1e-8)
@@ -141,8 +142,8 @@ def test_process_noise_scales_with_the_interval():
     """Q is given per nominal step: a filter at intervals 2 Ts equals one at Ts with 2 Q and twice the step."""
     y, u = _records(1)
     t = torch.arange(T, dtype=F64) * 2 * TS2
-    a = F.ExtendedKalmanObserver(PLANT, TS2, 2, 1e-6, 1e-4).estimate(y[0], u[0], t=t)
-    b = F.ExtendedKalmanObserver(PLANT, 2 * TS2, 2, 2e-6, 1e-4).estimate(y[0], u[0])
+    a = F.ExtendedKalmanObserver(PLANT, TS2, n=2, cov=F.Covariances(1e-6, 1e-4)).estimate(y[0], u[0], t=t)
+    b = F.ExtendedKalmanObserver(PLANT, 2 * TS2, n=2, cov=F.Covariances(2e-6, 1e-4)).estimate(y[0], u[0])
     torch.testing.assert_close(a.x_hat, b.x_hat, rtol=0, atol=1e-12)
 
 
@@ -150,13 +151,13 @@ def test_luenberger_poles_hold_per_sample():
     """Full state: L_Delta = diag(I, Ts/Delta I) L has the poles of L for every Delta (closed form); with C the
     poles are placed for each distinct interval."""
     poles = [0.5, 0.6, 0.7, 0.8]
-    obs = F.LuenbergerObserver(PLANT, TS, 2, poles)
+    obs = F.LuenbergerObserver(PLANT, TS, n=2, poles=poles)
     A_, B_, C_ = augmented_matrices(2, TS)
     for h in (0.01, 0.13, 0.4):
         Ah = augmented_step(A_, B_, TS, torch.tensor(h, dtype=F64))[0]
         L_h = torch.diag(torch.tensor([1.0, 1.0, TS / h, TS / h], dtype=F64)) @ obs.L
         np.testing.assert_allclose(np.sort(np.linalg.eigvals((Ah - L_h @ C_).numpy()).real), poles, atol=1e-9)
-    obs_C = F.LuenbergerObserver(PLANT, TS, 2, [0.7, 0.75, 0.8], C=C, disturbance=[1], A=A)
+    obs_C = F.LuenbergerObserver(PLANT, TS, n=2, poles=[0.7, 0.75, 0.8], C=C, disturbance=[1], A=A)
     hs = np.array([[0.02, 0.11, 0.02]])
     K = obs_C.interval_gains(hs)
     assert K.shape == (1, 4, 3, 1)
@@ -211,7 +212,8 @@ def test_neural_feedback_with_times():
 def test_evaluate_observer_takes_times():
     x, u = _records(1)
     t = _random_times(1)[0]
-    obs = F.ExtendedKalmanObserver(PLANT, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, C=C, disturbance=[1], A=A)
+    obs = F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), C=C, disturbance=[1],
+                                   A=A)
     f_true = PLANT.rate(0.0, x[0], u[0])
     rep = F.evaluate_observer(obs, x[0] @ C.T, x[0], f_true, 3, repeats=1, u=u[0], t=t)
     torch.testing.assert_close(rep.estimate.x_hat, obs.observe(x[0] @ C.T, u[0], t=t).x_hat, rtol=0, atol=0)
@@ -245,12 +247,12 @@ def _bad_times():
 def test_bad_times_are_refused_before_the_model_runs(kind, what):
     f = _Counting()
     kw = dict(C=C, disturbance=[1], A=A)
-    obs = {"kf": lambda: F.KalmanObserver(f, TS, 2, 1e-6, 1e-4),
-           "kf_steady": lambda: F.KalmanObserver(f, TS, 2, 1e-6, 1e-4, steady_state=True),
-           "ekf": lambda: F.ExtendedKalmanObserver(f, TS, 2, 1e-6, 1e-4),
-           "ukf_C": lambda: F.UnscentedKalmanObserver(f, TS, 2, [1e-6, 1e-6, 1e-3], 1e-4, **kw),
-           "luenberger": lambda: F.LuenbergerObserver(f, TS, 2, [0.5, 0.6, 0.7, 0.8]),
-           "luenberger_C": lambda: F.LuenbergerObserver(f, TS, 2, [0.7, 0.75, 0.8], **kw),
+    obs = {"kf": lambda: F.KalmanObserver(f, TS, n=2, cov=F.Covariances(1e-6, 1e-4)),
+           "kf_steady": lambda: F.KalmanObserver(f, TS, n=2, cov=F.Covariances(1e-6, 1e-4), steady_state=True),
+           "ekf": lambda: F.ExtendedKalmanObserver(f, TS, n=2, cov=F.Covariances(1e-6, 1e-4)),
+           "ukf_C": lambda: F.UnscentedKalmanObserver(f, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), **kw),
+           "luenberger": lambda: F.LuenbergerObserver(f, TS, n=2, poles=[0.5, 0.6, 0.7, 0.8]),
+           "luenberger_C": lambda: F.LuenbergerObserver(f, TS, n=2, poles=[0.7, 0.75, 0.8], **kw),
            "neural": lambda: NeuralFeedbackObserver(lambda t, x: f(t, x), TS,
                                                     h=NeuralFeedback(2, (4,), "tanh").double(), n=2)}[kind]()
     x, u = _records(1)
@@ -269,15 +271,15 @@ def test_times_with_a_step_are_refused():
     with pytest.raises(TypeError, match="not both"):
         rollout_corrected(PLANT, x[0], x[0], TS, 2, u[0], t=_uniform_times(1)[0])
     with pytest.raises(ValueError, match="one grid"):  # more time grids than records
-        F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=_uniform_times(3))
+        F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances(1e-6, 1e-4)).observe(x[0], u[0], t=_uniform_times(3))
     with pytest.raises(ValueError, match="one grid"):
-        F.LuenbergerObserver(PLANT, TS, 2, [0.5, 0.6, 0.7, 0.8]).observe(x[0], u[0], t=_uniform_times(3))
+        F.LuenbergerObserver(PLANT, TS, n=2, poles=[0.5, 0.6, 0.7, 0.8]).observe(x[0], u[0], t=_uniform_times(3))
     with pytest.raises(ValueError, match="one grid"):
         _neural().observe(x[0], t=_uniform_times(3))
     with pytest.raises(ValueError, match="one grid"):
         F.LinearFeedback(PLANT, TS, gains=F.Gains(3.0), n=2).observe(x[0], u[0], t=_uniform_times(3))
     with pytest.raises(TypeError, match="floating-point"):
-        F.ExtendedKalmanObserver(PLANT, TS, 2, 1e-6, 1e-4).observe(x[0], u[0], t=torch.arange(T))
+        F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances(1e-6, 1e-4)).observe(x[0], u[0], t=torch.arange(T))
 
 
 def test_linear_feedback_with_times():
@@ -323,7 +325,7 @@ def test_ackermann_per_interval_equals_pole_placement():
     """With one output the gain placing given poles is unique: the batched Ackermann gains equal control.place's."""
     from fnnlib.observers.luenberger import _ackermann, place_observer_gain
 
-    obs = F.LuenbergerObserver(PLANT, TS, 2, [0.7, 0.75, 0.8], C=C, disturbance=[1], A=A)
+    obs = F.LuenbergerObserver(PLANT, TS, n=2, poles=[0.7, 0.75, 0.8], C=C, disturbance=[1], A=A)
     hs = [0.01, 0.03, 0.2]
     Phis = np.stack([obs._linearised(A, h).numpy() for h in hs])
     L = _ackermann(Phis, C.numpy() @ np.eye(2, 3), [0.7, 0.75, 0.8])

@@ -22,8 +22,8 @@ def _data():
 
 def _filters():
     kw = dict(C=C, disturbance=[1], A=A)
-    return (F.ExtendedKalmanObserver(PLANT, TS, 2, [1e-8] * 3, 1e-4, **kw),
-            F.UnscentedKalmanObserver(PLANT, TS, 2, [1e-8] * 3, 1e-4, **kw))
+    return (F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-8] * 3, 1e-4), **kw),
+            F.UnscentedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-8] * 3, 1e-4), **kw))
 
 
 def test_ukf_equals_the_ekf_on_a_linear_plant_with_inputs_and_gaps():
