@@ -172,7 +172,7 @@ def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tens
     nf = F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E, beta=beta)
     with torch.no_grad():
         f_nn = _per_seed(F.eval_field(f, xs), E)
-    z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N, method="euler"), E),
+    z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N), E),
          "neural_feedback": _per_seed(nf.predict(xs, setup.N), E)}
     rate = {"neural_ode": f_nn, "neural_feedback": _per_seed(nf.observe(xs).f_hat, E)}
     out = {f"rate_{k}": F.rmse_over_time(v, f_true.expand_as(v)).numpy() for k, v in rate.items()}

@@ -38,6 +38,7 @@ from fnnlib.feedback import (
     eval_field,
     gain_matrix,
     observe_gains,
+    rollout_depths,
     rollout_predict,
     spectral_radius,
 )
@@ -107,6 +108,7 @@ from fnnlib.feedback import (
     DetectabilityError,
     Gains,
     Measurement,
+    Solver,
     TuneRecipe,
     check_detectable,
     check_measurements,
@@ -133,7 +135,7 @@ __all__ = [
     "cascade_predict_loop",
     "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
-    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_depths", "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
     "OutputFit", "OutputRecipe", "free_run", "train_from_outputs", "init_parameters",
 ]
@@ -159,7 +161,7 @@ __all__ += [
 ]
 
 __all__ += [  # a real plant
-    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Gains", "Measurement", "TuneRecipe", "Covariances", "SigmaPoints", "UnscentedKalmanObserver", "check_detectable",
+    "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Gains", "Measurement", "Solver", "TuneRecipe", "Covariances", "SigmaPoints", "UnscentedKalmanObserver", "check_detectable",
     "check_measurements", "model_jacobian", "output_jacobian",
 ]
 

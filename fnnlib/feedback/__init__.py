@@ -4,6 +4,7 @@
 * :mod:`~fnnlib.feedback.options`: the option objects ``Gains`` (``L``, ``beta`` of Eq. (11)) and ``Measurement``
   (``C`` or ``h``, gaps, first estimate, sample times), each checked on construction.
 * :mod:`~fnnlib.feedback.gains`: the base gain ``L`` (shapes, Theorem 1 / Eq. (25) checks).
+* :mod:`~fnnlib.feedback.noise`: the cascade's noise amplification (the quick bound and the exact factor).
 * :mod:`~fnnlib.feedback.decay`: Eq. (11), ``L_stack[i] = L e^{-beta i}``, and the checks on N and beta.
 * :mod:`~fnnlib.feedback.layer`: Eqs. (7)-(8) along a sequence, one gain or a batch of gains.
 * :mod:`~fnnlib.feedback.cascade`: the N-layer cascade (Sec. 3.3), one gain or a sweep.
@@ -25,8 +26,6 @@ from fnnlib.feedback.gains import (
     gain_batch,
     gain_compact,
     gain_matrix,
-    noise_amplification,
-    noise_amplification_exact,
     spectral_radius,
 )
 from fnnlib.feedback.layer import eval_field, feedback_layer, observe_gains
@@ -39,8 +38,9 @@ from fnnlib.feedback.measurement import (
     model_jacobian,
     output_jacobian,
 )
-from fnnlib.feedback.options import Gains, Measurement
-from fnnlib.feedback.rollout import rollout_predict
+from fnnlib.feedback.noise import noise_amplification, noise_amplification_exact
+from fnnlib.feedback.options import Gains, Measurement, Solver
+from fnnlib.feedback.rollout import rollout_depths, rollout_predict
 from fnnlib.feedback.tuning import (
     DEFAULT_TUNE_RECIPE,
     CascadeGains,
@@ -56,7 +56,7 @@ from fnnlib.feedback.tuning import (
 )
 from fnnlib.feedback.types import Estimate, Feedback, VectorField
 
-__all__ = ["Gains", "Measurement", "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
+__all__ = ["Gains", "Measurement", "Solver", "rollout_depths", "DEFAULT_TUNE_RECIPE", "DetectabilityError", "Measurements", "TuneRecipe", "check_detectable",
            "check_measurements", "model_jacobian", "output_jacobian", "MeasuredFeedback", "check_output_gain", "CascadeGains", "NOISE_AMPLIFICATION_LIMIT", "GainWarning", "TunedGains", "cascade_forward",
            "noise_amplification", "noise_amplification_exact", "prediction_loss", "sweep_gains", "choose_gain", "GainChoice", "tune_gains", "GainSweep", "Estimate", "Feedback", "GainError", "VectorField", "cascade_depths", "cascade_predict", "cascade_predict_loop",
            "cascade_sweep", "check_N", "check_beta", "check_betas", "check_gain", "decay_factors", "decayed_gains", "eval_field",

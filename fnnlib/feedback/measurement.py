@@ -90,8 +90,7 @@ def _check_mask(mask: Tensor, y: Tensor, name: str) -> Tensor:
 
 
 def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None, u: Tensor | None = None,
-                       mask: Tensor | None = None, f=None, missing: bool = True, name: str = "y",
-                       min_samples: int = 1) -> Measurements:
+                       mask: Tensor | None = None, f=None, missing: bool = True, name: str = "y") -> Measurements:
     """The one check of measurements ``y`` (..., T, p) before any work; see the module docstring.
 
     ``n`` is the state dimension; ``C`` (p, n), a callable ``h`` or ``None`` (every state measured, p = n);
@@ -99,8 +98,8 @@ def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None
     measurement"; without it, NaN is refused. Raises ``TypeError`` / ``ValueError`` naming what is wrong.
     """
     as_series(y, name=name, last="p")
-    if y.shape[-2] < int(min_samples):
-        raise ValueError(f"{name} needs at least {int(min_samples)} samples, got shape {tuple(y.shape)}")
+    if y.shape[-2] < 1:
+        raise ValueError(f"{name} needs at least one sample, got shape {tuple(y.shape)}")
     h, Cm = (C, None) if callable(C) and not isinstance(C, Tensor) else (None, C)
     if h is not None:
         with torch.no_grad():

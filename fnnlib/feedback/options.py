@@ -6,6 +6,8 @@ clear error before any work (before a model is evaluated or a tuner started):
 * :class:`Gains`: the base gain :math:`L` and the decay rate :math:`\beta` of Eq. (11),
   :math:`L_i = L e^{-\beta i}`, the schedule of the cascade of Sec. 3.3 and of the linear feedback of
   Eqs. (7)-(8) (``allow_unstable`` accepts a gain failing Theorem 1 or Eq. (25), to show divergence).
+* :class:`Solver`: the torchdiffeq method of the open-loop rollout of Eq. (2) and, for an adaptive one, its
+  tolerances.
 * :class:`Measurement`: :math:`y_k = C x_k` (or :math:`h(x_k)`), the missing samples (``mask``), the first
   estimate :math:`\hat x_0` (``x0``) and the sample times ``t``. The measurement model (``C``, ``x0``) belongs
   to the observer that reads it (:class:`~fnnlib.feedback.measured.MeasuredFeedback`); the record's gaps and
@@ -150,6 +152,47 @@ class Measurement:
                 raise ValueError("Measurement.t: the sample times t must be strictly increasing; sort the record or drop "
                                  "repeated times")
 
+
+
+#: torchdiffeq's fixed-step methods: they step at ``Ts`` (or each interval) and take no tolerances.
+FIXED_METHODS = ("euler", "midpoint", "rk4")
+#: torchdiffeq's adaptive methods: they take ``rtol`` and ``atol``.
+ADAPTIVE_METHODS = ("dopri5", "dopri8", "bosh3", "fehlberg2", "adaptive_heun")
+
+
+@dataclass(frozen=True)
+class Solver:
+    """How the open-loop neural ODE of Eq. (2) is integrated by :func:`~fnnlib.feedback.rollout.rollout_predict`.
+
+    ``method``: a torchdiffeq method; a fixed-step one (``"euler"``, the discretisation the cascade uses,
+    ``"midpoint"``, ``"rk4"``, ...) steps at the sample step, an adaptive one (``"dopri5"``, ...) integrates to
+    the tolerances ``rtol`` and ``atol`` (default 1e-7 and 1e-9), which a fixed-step method refuses.
+    """
+
+    method: str = "euler"
+    rtol: float | None = None
+    atol: float | None = None
+
+    def __post_init__(self):
+        if self.method not in FIXED_METHODS + ADAPTIVE_METHODS:
+            raise ValueError(f"Solver.method must be one of {FIXED_METHODS + ADAPTIVE_METHODS}, got {self.method!r}")
+        adaptive = self.method in ADAPTIVE_METHODS
+        for name, default in (("rtol", 1e-7), ("atol", 1e-9)):
+            v = getattr(self, name)
+            if v is None:
+                object.__setattr__(self, name, default if adaptive else None)
+                continue
+            if not adaptive:
+                raise ValueError(f"Solver.{name}: the fixed-step method {self.method!r} takes no tolerance (it steps "
+                                 "at the sample step); tolerances are for the adaptive methods")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise ValueError(f"Solver.{name} must be a finite number > 0, got {v!r}")
+            object.__setattr__(self, name, float(v))
+
+    @property
+    def fixed(self) -> bool:
+        """Whether the method steps at a fixed step (and takes no tolerance)."""
+        return self.method in FIXED_METHODS
 
 
 def record_sampling(measurement: Measurement | None) -> tuple[Tensor | None, Tensor | None]:

@@ -10,36 +10,59 @@ from fnnlib._validation import as_trajectory
 from fnnlib.feedback.decay import check_N
 from fnnlib.feedback.layer import shift_inputs
 from fnnlib.feedback.measurement import check_measurements
+from fnnlib.feedback.options import Measurement, Solver, record_sampling
 from fnnlib.feedback.sampling import check_times, row_steps
 from fnnlib.feedback.types import VectorField
 
 
 @torch.no_grad()
-def rollout_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, *, method: str = "euler",
-                    return_all: bool = False, rtol: float = 1e-7, atol: float = 1e-9,
-                    u: Tensor | None = None, t: Tensor | None = None) -> Tensor:
+def rollout_predict(f: VectorField, x: Tensor, Ts: float | None, N: int, *, solver: Solver = Solver(),
+                    u: Tensor | None = None, measurement: Measurement | None = None) -> Tensor:
     """N-step open-loop neural-ODE prediction (Eq. (2)) from every sample of ``x``.
 
     Parameters
     ----------
     x : Tensor, shape (..., T, n)
         Start states.
-    method : str
-        torchdiffeq solver; ``"euler"`` steps at ``Ts`` (the discretisation
-        the cascade uses), adaptive solvers integrate accurately.
+    Ts : float or None
+        Sample step; ``None`` with ``measurement.t``.
+    N : int
+        Prediction steps.
+    solver : Solver
+        The torchdiffeq method: ``Solver("euler")`` (the default) steps at ``Ts`` (the discretisation the
+        cascade uses), an adaptive one (``Solver("dopri5", rtol=..., atol=...)``) integrates accurately.
     u : Tensor, shape (..., T, m), optional
         Inputs of a controlled model ``f(t, x, u)``: step ``j`` from start ``k`` holds ``u_{k+j}``
         (the last one held), integrated one sample interval at a time.
-    t : Tensor, shape (..., T), optional
-        Sample times instead of ``Ts`` (uneven sampling): step ``j`` from start ``k`` integrates over
-        :math:`[t_{k+j}, t_{k+j+1}]` (the last interval repeated past the record's end), so row k predicts the
-        state at the record's own :math:`t_{k+N}`.
+    measurement : Measurement, optional
+        The sample times ``t`` (..., T) instead of ``Ts`` (uneven sampling): step ``j`` from start ``k``
+        integrates over :math:`[t_{k+j}, t_{k+j+1}]` (the last interval repeated past the record's end), so row k
+        predicts the state at the record's own :math:`t_{k+N}`. The rollout starts from every sample, so it
+        takes no gaps (``mask``).
 
     Returns
     -------
-    Tensor, shape (..., T, n) (row k predicts ``t_{k+N}``), or with
-    ``return_all`` (N+1, ..., T, n).
+    Tensor, shape (..., T, n): row k predicts ``t_{k+N}``. :func:`rollout_depths` returns every step.
     """
+    return _rollout(f, x, Ts, N, solver, u, measurement, return_all=False)
+
+
+@torch.no_grad()
+def rollout_depths(f: VectorField, x: Tensor, Ts: float | None, N: int, *, solver: Solver = Solver(),
+                   u: Tensor | None = None, measurement: Measurement | None = None) -> Tensor:
+    """Every step of :func:`rollout_predict` (same arguments), shape (N+1, ..., T, n); step 0 is ``x``."""
+    return _rollout(f, x, Ts, N, solver, u, measurement, return_all=True)
+
+
+def _rollout(f: VectorField, x: Tensor, Ts: float | None, N: int, solver: Solver, u: Tensor | None,
+             measurement: Measurement | None, *, return_all: bool) -> Tensor:
+    """Eq. (2) from every sample, for :func:`rollout_predict` and :func:`rollout_depths`."""
+    if not isinstance(solver, Solver):
+        raise TypeError(f"solver must be a fnnlib.Solver(method, rtol, atol), got {type(solver).__name__}")
+    t, mask = record_sampling(measurement)
+    if mask is not None:
+        raise ValueError("the open-loop rollout starts from every sample and takes no gaps (mask)")
+    method, rtol, atol = solver.method, solver.rtol, solver.atol
     N = check_N(N)
     x = as_trajectory(x, x.shape[-1] if isinstance(x, Tensor) else None)
     meas = check_measurements(x, x.shape[-1], u=u, f=f, missing=False, name="x")

@@ -255,7 +255,7 @@ def tune_gains(f: VectorField, y: Tensor, Ts: float | None, N: int, recipe: Tune
     :func:`prediction_loss` of :func:`cascade_forward` against the measured samples ``y`` N steps later.
     The targets are measurements, noisy like the inputs: with noise independent of the state, the
     expected loss is the error against the truth plus a constant, so minimising it trades the
-    correction the feedback brings against the noise it amplifies (:func:`~fnnlib.feedback.gains.noise_amplification`).
+    correction the feedback brings against the noise it amplifies (:func:`~fnnlib.feedback.noise.noise_amplification`).
     Tune on data kept apart from the data you evaluate on: ``y`` is the tuning set only.
 
     Parameters

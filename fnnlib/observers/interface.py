@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from fnnlib.metrics import error_norm, rmse
+from fnnlib.feedback.options import Measurement, record_sampling
 from fnnlib.feedback.sampling import check_times
 from fnnlib.feedback.types import Estimate
 
@@ -63,9 +64,9 @@ def _best_seconds(fn, repeats: int):
     return out, best
 
 
-def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Tensor, N: int, *,
+def evaluate_observer(observer: Observer, y: Tensor, truth: tuple[Tensor, Tensor], N: int, *,
                       settle: int = 0, repeats: int = 3, u: Tensor | None = None,
-                      mask: Tensor | None = None, t: Tensor | None = None) -> ObserverReport:
+                      measurement: Measurement | None = None) -> ObserverReport:
     """Run ``observer`` on measurements ``y`` and score it against the truth.
 
     Parameters
@@ -74,15 +75,15 @@ def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Ten
     y : Tensor, shape (T, p)
         Measurements (noisy states, or p outputs ``y = C x`` of an observer built with that ``C``;
         NaN where a sample is missing, for the observers that take gaps).
-    x_true, f_true : Tensor, shape (T, n)
+    truth : (x_true, f_true), each a Tensor of shape (T, n)
         Clean states and true change rates at the same samples.
     u : Tensor, shape (T, m), optional
         Inputs of a controlled model, passed to ``observe`` and ``predict``.
-    mask : Tensor of bool, shape (T,) or (T, p), optional
-        Missing samples, passed to ``observe`` and ``predict``.
-    t : Tensor, shape (T,), optional
-        The sample times (uneven sampling), passed to ``observe`` and ``predict`` instead of the observer's
-        ``Ts``; checked here before any work (:func:`~fnnlib.feedback.sampling.check_times`).
+    measurement : Measurement, optional
+        The record's missing samples (``mask`` (T,) or (T, p)) and its sample times ``t`` (T,) (uneven
+        sampling), passed to ``observe`` and ``predict`` (``mask=``, ``t=``; the times instead of the observer's
+        ``Ts``), checked here before any work (:func:`~fnnlib.feedback.sampling.check_times`). The measurement
+        model (``C``) is the observer's own.
     N : int
         Prediction horizon.
     settle : int
@@ -102,6 +103,10 @@ def evaluate_observer(observer: Observer, y: Tensor, x_true: Tensor, f_true: Ten
         sample) and ``us_per_start`` (predicting N steps from every sample,
         filtering included, per start).
     """
+    t, mask = record_sampling(measurement)
+    if not isinstance(truth, (tuple, list)) or len(truth) != 2:
+        raise TypeError("truth must be the pair (x_true, f_true), each of shape (T, n)")
+    x_true, f_true = truth
     if not isinstance(observer, Observer):
         raise TypeError(f"{type(observer).__name__} does not implement the Observer interface "
                         "(n, Ts, observe, predict)")

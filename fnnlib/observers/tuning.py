@@ -54,7 +54,7 @@ def disturbance_drift_variance(x: Tensor, Ts: float, field: VectorField, u: Tens
     if isinstance(x, Tensor) and (x.ndim not in (2, 3) or x.shape[-2] < 3):
         raise ValueError(f"x must be (T, n) or (B, T, n) with T >= 3, got shape {tuple(x.shape)}")
     meas = check_measurements(x, x.shape[-1] if isinstance(x, Tensor) else 0, u=u, f=field, missing=False,
-                              name="x", min_samples=3)
+                              name="x")  # T >= 3 checked above
     dt = None if t is None else check_times(t, None, x, name="x")[..., None]  # (..., T-1, 1)
     u_k = None if meas.u is None else meas.u[..., :-1, :]
     with torch.no_grad():

@@ -147,8 +147,8 @@ rate_fb = [F.rmse(f_hat[e], f_test) for e in range(E)]
 t0 = time.perf_counter()
 z_fb = per_seed(F.cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
 cascade_s = time.perf_counter() - t0
-z_nn = per_seed(F.rollout_predict(ens, xs_test, Ts, N_max, method="euler", return_all=True))
-z_nn_dp = per_seed(F.rollout_predict(ens, xs_test, Ts, N, method="dopri5", rtol=rtol, atol=atol))
+z_nn = per_seed(F.rollout_depths(ens, xs_test, Ts, N_max))
+z_nn_dp = per_seed(F.rollout_predict(ens, xs_test, Ts, N, solver=F.Solver("dopri5", rtol=rtol, atol=atol)))
 e_nn, e_fb = F.n_step_errors(z_nn[:, N], x_test, N), F.n_step_errors(z_fb[:, N], x_test, N)  # (E, T - N)
 e_dp = F.n_step_errors(z_nn_dp, x_test, N)
 

@@ -213,7 +213,7 @@ with torch.no_grad():
 f8_fb = split(F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs8).f_hat)
 f8s = f8.expand_as(f8_nn)  # the true rates, the same for every seed
 rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8s).T, F.rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
-ms_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T
+ms_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T
 ms_fb = F.n_step_errors(split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
 
 # %%
@@ -315,7 +315,8 @@ f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same
 with torch.no_grad():
     e_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
 e_x, e_f = F.error_norm(split(est10.x_hat), x10s), F.error_norm(split(est10.f_hat), f10s)
-z_fb10, z_nn10 = split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), split(F.rollout_predict(ens, xs10, Ts, N, method="euler"))
+z_fb10 = split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta)))
+z_nn10 = split(F.rollout_predict(ens, xs10, Ts, N))
 e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 

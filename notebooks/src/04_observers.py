@@ -135,9 +135,9 @@ observers[0]
 # %%
 reports, tables = [], []  # per seed
 for e, obs_e in enumerate(observers):
-    rep = {name: F.evaluate_observer(obs, y[e], x, f_true, N, settle=settle, repeats=repeats if e == 0 else 1)
+    rep = {name: F.evaluate_observer(obs, y[e], (x, f_true), N, settle=settle, repeats=repeats if e == 0 else 1)
            for name, obs in obs_e.items()}
-    clean = {name: F.evaluate_observer(obs, x, x, f_true, N, repeats=1).metrics for name, obs in obs_e.items()}
+    clean = {name: F.evaluate_observer(obs, x, (x, f_true), N, repeats=1).metrics for name, obs in obs_e.items()}
     reports.append(rep)
     tables.append({name: r.metrics | {"rate_rmse_clean": clean[name]["rate_rmse"],
                                       "err_N_mean_clean": clean[name]["err_N_mean"]} for name, r in rep.items()})

@@ -274,7 +274,7 @@ def level_errors(x_levels, f_levels):
     t0 = time.perf_counter()
     z_nf = per_seed(nf.predict(xs, N))
     seconds = time.perf_counter() - t0
-    z = {"neural_ode": per_seed(F.rollout_predict(f_ens, xs, Ts, N, method="euler")), "neural_feedback": z_nf,
+    z = {"neural_ode": per_seed(F.rollout_predict(f_ens, xs, Ts, N)), "neural_feedback": z_nf,
          "linear_feedback": per_seed(F.cascade_predict(f_ens, xs, Ts, N, F.Gains(L, beta)))}
     multistep = {k: F.n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}
     return rate, multistep, seconds

@@ -50,16 +50,13 @@ A_guess = torch.tensor([[0.0, 1.0], [-1.0, 0.0]], dtype=f64)  # a rough guess (a
 L_y = F.place_observer_gain(torch.eye(2, dtype=f64) + Ts * A_guess, Ts * C, [0.8, 0.85])  # the observer's gain
 model = F.init_parameters(F.NeuralODE(2, (16, 16), "tanh", n_input=1).double(), gen)
 F.train_from_outputs(model, y[:2], C, F.OutputRecipe(iterations=train_iterations, L=L_y.tolist()), Ts=Ts, u=u[:2])
-# learned from y, u alone: the first layer
-observer = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=C), allow_unstable=True)
+observer = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=C), allow_unstable=True)  # layer 0
 
 # %%
-tuned = F.tune_gains(model, y[2], Ts, N,
-                     recipe=F.TuneRecipe(L0=1.0, beta0=0.05, settle=T // 4, iterations=tune_iterations, lr=0.2),
-                     u=u[2], observer=observer)  # the gains tuned on a third log, after the start-up
+tuned = F.tune_gains(model, y[2], Ts, N, F.TuneRecipe(L0=1.0, beta0=0.05, settle=T // 4, iterations=tune_iterations,
+                     lr=0.2), u=u[2], observer=observer)  # the gains tuned on a third log, after the start-up
 preds = {"open loop": observer.predict(y[3], N, u[3]),
-         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.schedule(), u=u[3],
-                                              observer=observer)}
+         "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.schedule(), u=u[3], observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
     preds[name] = kf(model, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], noise_std ** 2), C=C, disturbance=[1],

@@ -261,7 +261,7 @@ rate8_nn = F.rmse_over_time(f8_nn, f8.expand_as(f8_nn)).T  # (12, S)
 rate8_fb = F.rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
 
 # %%
-ms8_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T  # (12, S)
+ms8_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T  # (12, S)
 ms8_fb = F.n_step_errors(split(F.cascade_sweep(ens, xs8, Ts, N, F.Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
 holds8 = np.stack([why_sec3.s8_levels(rate_neural_ode=rate8_nn, rate_feedback=rate8_fb[:, g].T,
                                       err_N_neural_ode=ms8_nn, err_N_feedback=ms8_fb[:, g].T,

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import Gains, cascade_depths, Spiral, cascade_predict, cascade_predict_loop, rollout_predict
+from fnnlib import Gains, cascade_depths, rollout_depths, Spiral, cascade_predict, cascade_predict_loop, rollout_predict
 
 F64 = torch.float64
 TS = 0.1
@@ -50,10 +50,10 @@ def streaming_reference(f, x, Ts, N, L, beta):
 
 @pytest.mark.parametrize("N", [1, 4])
 def test_zero_gain_equals_euler_rollout(f, x, N):
-    torch.testing.assert_close(cascade_predict(f, x, TS, N, Gains(0.0)), rollout_predict(f, x, TS, N, method="euler"),
+    torch.testing.assert_close(cascade_predict(f, x, TS, N, Gains(0.0)), rollout_predict(f, x, TS, N),
                                rtol=0, atol=1e-6)
     torch.testing.assert_close(cascade_depths(f, x, TS, N, Gains(0.0)),
-                               rollout_predict(f, x, TS, N, method="euler", return_all=True), rtol=0, atol=1e-6)
+                               rollout_depths(f, x, TS, N), rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("N", [1, 3, 7])

@@ -52,8 +52,9 @@ def test_uniform_times_equal_the_step_path():
                                                measurement=F.Measurement(t=t)),
                                rtol=0, atol=1e-12)
     for method in ("euler", "rk4"):
-        torch.testing.assert_close(F.rollout_predict(PLANT, x, TS, 4, u=u, method=method),
-                                   F.rollout_predict(PLANT, x, None, 4, u=u, t=t, method=method), rtol=0, atol=1e-12)
+        torch.testing.assert_close(F.rollout_predict(PLANT, x, TS, 4, solver=F.Solver(method), u=u),
+                                   F.rollout_predict(PLANT, x, None, 4, solver=F.Solver(method), u=u,
+                                                     measurement=F.Measurement(t=t)), rtol=0, atol=1e-12)
     recipe = F.TuneRecipe(L0=2.0, beta0=0.1, iterations=3, lr=0.1)
     a = F.tune_gains(PLANT, x, TS, 5, u=u, recipe=recipe)
     b = F.tune_gains(PLANT, x, None, 5, u=u, recipe=recipe, measurement=F.Measurement(t=t))
@@ -72,7 +73,8 @@ def test_a_linear_plant_at_random_intervals_matches_its_closed_form():
     x = torch.stack(xs, -2)
     N = 3
     u = torch.zeros(3, T, 1, dtype=F64)
-    exact = F.rollout_predict(PLANT, x, None, N, t=t, u=u, method="dopri5", rtol=1e-11, atol=1e-12)
+    exact = F.rollout_predict(PLANT, x, None, N, solver=F.Solver("dopri5", rtol=1e-11, atol=1e-12), u=u,
+                              measurement=F.Measurement(t=t))
     torch.testing.assert_close(exact[:, : T - N], x[:, N:], rtol=0, atol=1e-8)
     # the cascade with L = 0 is the Euler discretisation at the record's own steps: prod (I + Delta_k A)
     euler = F.cascade_predict(PLANT, x, None, N, F.Gains(0.0), u=u, measurement=F.Measurement(t=t))
@@ -114,7 +116,7 @@ def test_bad_times_are_refused_before_any_work(bad, match):
     for call in (lambda: F.cascade_predict(counting, x[0], None, 3, F.Gains(1.0), u=u[0],
                                            measurement=F.Measurement(t=bad(t))),
                  lambda: obs.observe(x[0] @ C.T, u[0], t=bad(t)),
-                 lambda: F.rollout_predict(counting, x[0], None, 3, t=bad(t), u=u[0]),
+                 lambda: F.rollout_predict(counting, x[0], None, 3, u=u[0], measurement=F.Measurement(t=bad(t))),
                  lambda: F.tune_gains(counting, x[0], None, 3, u=u[0], recipe=F.DEFAULT_TUNE_RECIPE,
                                       measurement=F.Measurement(t=bad(t)))):
         with pytest.raises((ValueError, TypeError), match=match):

@@ -57,7 +57,7 @@ def test_observer_satisfies_the_interface(name, problem):
 
 def test_comparison_is_a_loop(problem):
     x, y, f = problem
-    reports = {name: evaluate_observer(obs, y, x, f, N, settle=10, repeats=1) for name, obs in _observers().items()}
+    reports = {name: evaluate_observer(obs, y, (x, f), N, settle=10, repeats=1) for name, obs in _observers().items()}
     keys = {"state_rmse", "rate_rmse", "state_rmse_settled", "rate_rmse_settled", "err_N_mean", "us_per_step",
             "us_per_start"}
     for name, rep in reports.items():
@@ -80,19 +80,19 @@ def test_linear_feedback_predicts_by_the_cascade(problem):
 def test_rollout_with_no_disturbance_is_the_euler_rollout(problem):
     x, _, _ = problem
     torch.testing.assert_close(rollout_corrected(MODEL, x, torch.zeros_like(x), TS, N),
-                               rollout_predict(MODEL, x, TS, N, method="euler"), rtol=0, atol=1e-12)
+                               rollout_predict(MODEL, x, TS, N), rtol=0, atol=1e-12)
 
 
 def test_bad_calls_are_refused(problem):
     x, y, f = problem
     with pytest.raises(TypeError, match="Observer interface"):
-        evaluate_observer(object(), y, x, f, N)
+        evaluate_observer(object(), y, (x, f), N)
     with pytest.raises(ValueError, match=r"need y \(T, p\) and x_true, f_true \(T, n\)"):
-        evaluate_observer(_observers()["luenberger"], y, x[:-1], f, N)
+        evaluate_observer(_observers()["luenberger"], y, (x[:-1], f), N)
     with pytest.raises(ValueError, match="1 <= N < T"):
-        evaluate_observer(_observers()["luenberger"], y, x, f, T)
+        evaluate_observer(_observers()["luenberger"], y, (x, f), T)
     with pytest.raises(ValueError, match="settle"):
-        evaluate_observer(_observers()["luenberger"], y, x, f, N, settle=T)
+        evaluate_observer(_observers()["luenberger"], y, (x, f), N, settle=T)
     with pytest.raises(ValueError, match="same shape|differ in shape"):
         rollout_corrected(MODEL, x, torch.zeros(2), TS, N)
     with pytest.raises(ValueError, match="beta"):

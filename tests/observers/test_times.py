@@ -215,10 +215,11 @@ def test_evaluate_observer_takes_times():
     obs = F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), C=C, disturbance=[1],
                                    A=A)
     f_true = PLANT.rate(0.0, x[0], u[0])
-    rep = F.evaluate_observer(obs, x[0] @ C.T, x[0], f_true, 3, repeats=1, u=u[0], t=t)
+    rep = F.evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0], measurement=F.Measurement(t=t))
     torch.testing.assert_close(rep.estimate.x_hat, obs.observe(x[0] @ C.T, u[0], t=t).x_hat, rtol=0, atol=0)
     with pytest.raises(ValueError, match="strictly increasing"):
-        F.evaluate_observer(obs, x[0] @ C.T, x[0], f_true, 3, repeats=1, u=u[0], t=t.flip(0))
+        F.evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0],
+                            measurement=F.Measurement(t=t.flip(0)))
 
 
 class _Counting(torch.nn.Module):

@@ -47,6 +47,6 @@ def test_evaluate_observer_scores_a_partially_measured_system():
     y = x @ C.T + 0.001 * torch.randn(T, 1, generator=torch.Generator().manual_seed(0), dtype=F64)
     f_true = PLANT.rate(0.0, x, u)
     _, ukf = _filters()
-    report = F.evaluate_observer(ukf, y, x, f_true, 5, settle=40, repeats=1, u=u)
+    report = F.evaluate_observer(ukf, y, (x, f_true), 5, settle=40, repeats=1, u=u)
     assert report.z_N.shape == (T, 2)
     assert report.metrics["state_rmse_settled"] < 0.01 and report.metrics["err_N_mean"] < 0.05
