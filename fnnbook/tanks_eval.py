@@ -241,10 +241,9 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
     t0 = time.perf_counter()
     model = field(seeds)  # trained through its observer: Eqs. (7)-(8) first, the N-step output error descended
     ye = tile(rec.y_est)
-    tuned = F.tune_gains(model, ye, Ts, int(s["train_N"]),
-                         recipe=F.TuneRecipe(L0=s["L_start"], beta0=s["beta_start"], iterations=int(s["train_iterations"]),
-                                             lr=s["train_lr"], train_model=True, members=E),
-                         u=rec.u_est, observer=observer(model, ye))
+    recipe = F.TuneRecipe(L0=s["L_start"], beta0=s["beta_start"], iterations=int(s["train_iterations"]),
+                          lr=s["train_lr"], train_model=True, members=E)
+    tuned = F.tune_gains(model, ye, Ts, int(s["train_N"]), recipe, u=rec.u_est, observer=observer(model, ye))
     clock["train_observer"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     free = _free_starts(rec, seeds, s, field(seeds), C) if "free" in s["baseline_starts"] else None

@@ -65,8 +65,8 @@ class GainWarning(UserWarning):
 
 
 #: :func:`check_gain` warns when white measurement noise reaches the N-step prediction more than this many
-#: times larger than it enters (:func:`~fnnlib.feedback.noise.noise_amplification`); an open-loop rollout from the same noisy sample
-#: passes it with factor about 1.
+#: times larger than it enters (:func:`~fnnlib.feedback.noise.noise_amplification`); an open-loop rollout from
+#: the same noisy sample passes it with factor about 1.
 NOISE_AMPLIFICATION_LIMIT = 10.0
 
 
@@ -105,8 +105,8 @@ def check_gain(L: float | Tensor | list, n: int | None, Ts: float, *, allow_unst
     follows the model alone), and Eq. (25) is checked on the corrected directions only. Pass
     ``allow_semidefinite=False`` to refuse it.
 
-    With ``N`` (the cascade depth) the noise amplification of the cascade, :func:`~fnnlib.feedback.noise.noise_amplification`
-    for ``N`` and ``beta``, is computed, and a :class:`GainWarning` is raised when it exceeds
+    With ``N`` (the cascade depth) the noise amplification of the cascade,
+    :func:`~fnnlib.feedback.noise.noise_amplification` for ``N`` and ``beta``, is computed, and a :class:`GainWarning` is raised when it exceeds
     :data:`NOISE_AMPLIFICATION_LIMIT`. ``n`` may be ``None`` when ``L`` is a vector or matrix.
     """
     if not (math.isfinite(float(Ts)) and float(Ts) > 0):

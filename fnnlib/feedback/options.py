@@ -147,10 +147,11 @@ class Measurement:
             if t.shape[-1] < 2:
                 raise ValueError("Measurement.t needs at least 2 sample times to define a step")
             if not bool(torch.isfinite(t).all()):
-                raise ValueError("Measurement.t: the sample times t hold a NaN or an infinite time; drop that sample instead")
+                raise ValueError("Measurement.t: the sample times t hold a NaN or an infinite time; drop that "
+                                 "sample instead")
             if bool((torch.diff(t, dim=-1) <= 0).any()):
-                raise ValueError("Measurement.t: the sample times t must be strictly increasing; sort the record or drop "
-                                 "repeated times")
+                raise ValueError("Measurement.t: the sample times t must be strictly increasing; sort the record "
+                                 "or drop repeated times")
 
 
 

@@ -26,8 +26,8 @@ def _covariance(M, name: str, definite: bool) -> Tensor:
         raise ValueError(f"Covariances.{name} must be a scalar, a vector (a diagonal) or a square matrix, got shape "
                          f"{tuple(t.shape)}")
     if not bool(torch.isfinite(t).all()):
-        raise ValueError(f"Covariances.{name}: {name} must be a finite symmetric matrix (or a finite scalar or vector), "
-                         "got NaN or infinite entries")
+        raise ValueError(f"Covariances.{name}: {name} must be a finite symmetric matrix (or a finite scalar or "
+                         "vector), got NaN or infinite entries")
     if t.ndim == 2:
         if not torch.allclose(t, t.T):
             raise ValueError(f"{name} must be a finite symmetric matrix, got {t.tolist()}")
