@@ -131,3 +131,11 @@ def test_a_misplaced_option_is_refused_before_the_model_runs():
     with pytest.raises(TypeError, match="cov must be a fnnlib.Covariances"):
         F.KalmanObserver(model, 0.1, n=2, cov=(1e-6, 1e-4))
     assert not calls
+
+
+def test_a_jacobian_without_an_output_form_is_refused():
+    A = torch.zeros(2, 2, dtype=F64)
+    with pytest.raises(ValueError, match="the full-state observer needs none"):
+        F.ExtendedKalmanObserver(F.Spiral(2.0, 0.1, 0.0), 0.1, n=2, cov=F.Covariances(1e-6, 1e-4), A=A)
+    with pytest.raises(ValueError, match="the full-state observer needs none"):
+        F.LuenbergerObserver(F.Spiral(2.0, 0.1, 0.0), 0.1, n=2, poles=[0.5, 0.6, 0.7, 0.8], A=A)

@@ -133,10 +133,14 @@ class _OutputModel(AugmentedObserver):
 
     ``disturbance`` ``E`` (n, q) (or a list of the q states it acts on): :math:`\dot x = f(x, u) + E d`,
     default every state (E = I). With a ``C`` or an ``E``, the augmented pair is checked for detectability
-    at the model's Jacobian ``A`` (default: at the origin) and refused with the PBH reason.
+    at the model's Jacobian ``A`` (default: at the origin) and refused with the PBH reason. Without either the
+    full-state plant needs no Jacobian, and an ``A`` is refused rather than ignored.
     """
 
     def __init__(self, f: VectorField, Ts: float, n: int, *, C=None, disturbance=None, A=None):
+        if A is not None and C is None and disturbance is None:
+            raise ValueError("the model Jacobian A is where the output form (C or disturbance) is linearised and "
+                             "checked; the full-state observer needs none: give C or disturbance, or no A")
         super().__init__(f, Ts, n)
         self.C_x = None if C is None else check_output_matrix(C, self.n)  # partial measurements y = C x
         self.E = None if disturbance is None else disturbance_matrix(disturbance, self.n)
