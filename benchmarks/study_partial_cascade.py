@@ -132,16 +132,16 @@ def main() -> None:
                                            disturbance=[1], A=A)
             ukf = F.UnscentedKalmanObserver(model, TS, n=2, cov=F.Covariances([1e-6, 1e-6, q_d], R), C=C,
                                             disturbance=[1], A=A)
-            row = {"N": N, "noise": noise, "hand L": L_hand, "tuned L": [round(v, 3) for v in tuned.L],
+            row = {"N": N, "noise": noise, "hand L": L_hand, "tuned L": [round(v, 3) for v in tuned.L.tolist()],
                    "tuned beta": round(tuned.beta, 3),
                    "cascade, hand gains": score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand, 0.05), u=u[1],
                                                                   observer=obs)),
                    "cascade, tuned gains": score(F.cascade_predict(model, y[1], TS, N,
-                                                                   F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
+                                                                   tuned.schedule(), u=u[1],
                                                                    observer=obs)),
                    "open loop from the observer": score(obs.predict(y[1], N, u[1])),
                    "EKF": score(ekf.predict(y[1], N, u[1])), "UKF": score(ukf.predict(y[1], N, u[1]))}
-            z_tuned_cal = F.cascade_predict(model, y[0], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[0],
+            z_tuned_cal = F.cascade_predict(model, y[0], TS, N, tuned.schedule(), u=u[0],
                                             observer=obs)
             g_hand = F.choose_gain(per_start(sweep))
             g_tuned = F.choose_gain(torch.stack([per_start(sweep[0]), per_start(z_tuned_cal)]))
@@ -149,7 +149,7 @@ def main() -> None:
             row["guarded: hand L, tuned kept"] = [L_guard, bool(g_tuned.index)]
             row["guarded: cascade hand / tuned"] = [
                 round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_guard, 0.05), u=u[1], observer=obs)), 4),
-                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
+                round(score(F.cascade_predict(model, y[1], TS, N, tuned.schedule(), u=u[1],
                                               observer=obs)
                             if g_tuned.index else obs.predict(y[1], N, u[1])), 4)]
             y8 = x8 @ C.T + noise * torch.randn(8, T, 1, generator=gen3, dtype=F64)
@@ -161,7 +161,7 @@ def main() -> None:
             ol8 = per_record(obs.predict(y8, N, u8))
             eight = {"open loop": ol8,
                      "hand": per_record(F.cascade_predict(model, y8, TS, N, F.Gains(L_hand, 0.05), u=u8, observer=obs)),
-                     "tuned": per_record(F.cascade_predict(model, y8, TS, N, F.Gains(tuned.L_tensor, tuned.beta),
+                     "tuned": per_record(F.cascade_predict(model, y8, TS, N, tuned.schedule(),
                                                            u=u8, observer=obs)),
                      "EKF": per_record(ekf.predict(y8, N, u8))}
             y4 = x4 @ C.T + noise * torch.randn(4, T, 1, generator=gen4, dtype=F64)
@@ -183,11 +183,11 @@ def main() -> None:
             row["two calibration records: hand L"] = L_hand2
             row["two calibration records: cascade hand / tuned"] = [
                 round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand2, 0.05), u=u[1], observer=obs)), 4),
-                round(score(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned2.L_tensor, tuned2.beta), u=u[1],
+                round(score(F.cascade_predict(model, y[1], TS, N, tuned2.schedule(), u=u[1],
                                               observer=obs)), 4)]
             row["position only: cascade hand / tuned / open loop"] = [
                 round(position(F.cascade_predict(model, y[1], TS, N, F.Gains(L_hand, 0.05), u=u[1], observer=obs)), 4),
-                round(position(F.cascade_predict(model, y[1], TS, N, F.Gains(tuned.L_tensor, tuned.beta), u=u[1],
+                round(position(F.cascade_predict(model, y[1], TS, N, tuned.schedule(), u=u[1],
                                                  observer=obs)), 4),
                 round(position(obs.predict(y[1], N, u[1])), 4)]
             rows.append(row)

@@ -84,9 +84,9 @@ HORIZON = {"one_step": 1, "multi_step": multi_step_N, "judged": bN}
 def tuned_on(seed: int, net, N_tune: int) -> F.TunedGains:
     """The network's (L, beta) tuned as tuned_gains tunes them, on the N_tune-step error of the whole state."""
     which = torch.randperm(x_train.shape[0], generator=F.make_generator(seed))[:ran_t["bottle_tune_throws"]]
-    return F.tune_gains(net, x_train[which], Ts, N_tune,
-                        recipe=F.TuneRecipe(L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
-                                            lr=ran_t["bottle_tune_lr"]))
+    recipe = F.TuneRecipe(L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
+                          lr=ran_t["bottle_tune_lr"])
+    return F.tune_gains(net, x_train[which], Ts, N_tune, recipe)
 
 
 def test_errors(net, L, beta: float) -> torch.Tensor:
@@ -105,7 +105,7 @@ for obj in tqdm(objectives, desc="objectives"):
     else:
         runs = [tuned_on(s, net, HORIZON[obj]) for s, net in zip(b_seeds, b_nets)]
         tuned = torch.stack([test_errors(net, r.L, r.beta) for net, r in zip(b_nets, runs)]).mean(0).tolist()
-        tuned_at[obj] = [{"seed": s, "L": r.L, "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, runs)]
+        tuned_at[obj] = [{"seed": s, "L": r.L.tolist(), "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, runs)]
     b1_at[obj] = rules.b1({"bottle": {"tuned": tuned, "hand": stored["hand"], "open_loop": stored["open_loop"]}})
     b1_at[obj] = b1_at[obj].replace(numbers={"tuned": tuned})
 b1_seconds = time.perf_counter() - t0
