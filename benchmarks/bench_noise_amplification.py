@@ -1,4 +1,4 @@
-"""``noise_amplification(exact=True)``: its time, and its value against a Monte Carlo run of the cascade on white noise.
+"""``noise_amplification_exact``: its time, and its value against a Monte Carlo run of the cascade on white noise.
 
 Cases: scalar and diagonal gains (n up to 12, N up to 50), and a stable linear model whose Jacobian damps
 the noise (``A=...``). The Monte Carlo figure is what a user measures: the RMS over every component of the
@@ -57,9 +57,9 @@ def main() -> None:
     for name, L, N, beta, A in cases:
         n = A.shape[0]
         with_A = bool(A.abs().sum() > 0)
-        kw = {"n": n, "exact": True, **({"A": A} if with_A else {})}
-        exact = F.noise_amplification(F.Gains(L, beta), Ts, N)
-        ms = best_ms(lambda: F.noise_amplification(F.Gains(L, beta), Ts, N), args.repeats)
+        kw = {"n": n, **({"A": A} if with_A else {})}
+        exact = F.noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw)
+        ms = best_ms(lambda: F.noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw), args.repeats)
         bound = F.noise_amplification(F.Gains(L, beta), Ts, N, n=n)
         worst = F.noise_amplification_exact(F.Gains(L, beta), Ts, N, n=n, reduce="max")
         mc = monte_carlo(L, Ts, N, beta, A)
