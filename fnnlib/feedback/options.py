@@ -1,4 +1,4 @@
-r"""The two option objects of the feedback functions: the gain schedule of Eq. (11) and how a record was measured.
+r"""The option objects of the feedback functions: the gain schedule of Eq. (11), the rollout's solver, a measurement.
 
 Both are small frozen dataclasses that check themselves on construction, so a wrong value is refused with a
 clear error before any work (before a model is evaluated or a tuner started):
