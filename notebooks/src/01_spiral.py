@@ -41,8 +41,8 @@ noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.spiral import SpiralSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = SpiralSettings.from_namespace(globals())
+from fnnbook.tasks.spiral import SpiralSettings
+settings = SpiralSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -34,8 +34,8 @@ rate_tolerance = 0.005
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.theory import TheorySettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = TheorySettings.from_namespace(globals())
+from fnnbook.tasks.theory import TheorySettings
+settings = TheorySettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import copy

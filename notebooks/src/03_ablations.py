@@ -48,8 +48,8 @@ settle_threshold = 0.5
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.ablations import AblationsSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = AblationsSettings.from_namespace(globals())
+from fnnbook.tasks.ablations import AblationsSettings
+settings = AblationsSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 from pathlib import Path

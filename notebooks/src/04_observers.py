@@ -36,8 +36,8 @@ repeats = 3
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.observers import ObserversSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = ObserversSettings.from_namespace(globals())
+from fnnbook.tasks.observers import ObserversSettings
+settings = ObserversSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import math

@@ -54,8 +54,8 @@ nominal = [2.0, 0.1, 0.0]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.neural_feedback import NeuralFeedbackSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = NeuralFeedbackSettings.from_namespace(globals())
+from fnnbook.tasks.neural_feedback import NeuralFeedbackSettings
+settings = NeuralFeedbackSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -33,8 +33,8 @@ synthetic_sizes = [21, 9, 1058]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.bottle import BottleSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = BottleSettings.from_namespace(globals())
+from fnnbook.tasks.bottle import BottleSettings
+settings = BottleSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -43,8 +43,8 @@ mlp_lr = 0.001
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.quadrotor_learning import QuadrotorLearningSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = QuadrotorLearningSettings.from_namespace(globals())
+from fnnbook.tasks.quadrotor_learning import QuadrotorLearningSettings
+settings = QuadrotorLearningSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -56,8 +56,8 @@ validation_vehicle_seed = 1001
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.quadrotor_mpc import QuadrotorMPCSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = QuadrotorMPCSettings.from_namespace(globals())
+from fnnbook.tasks.quadrotor_mpc import QuadrotorMPCSettings
+settings = QuadrotorMPCSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 from pathlib import Path

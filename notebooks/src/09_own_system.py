@@ -55,8 +55,8 @@ hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.2, 0.5]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.own_system import OwnSystemSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = OwnSystemSettings.from_namespace(globals())
+from fnnbook.tasks.own_system import OwnSystemSettings
+settings = OwnSystemSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -52,8 +52,8 @@ quad_hand_beta_grid = [0.02, 0.1]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.tuned_gains import TunedGainsSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = TunedGainsSettings.from_namespace(globals())
+from fnnbook.tasks.tuned_gains import TunedGainsSettings
+settings = TunedGainsSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

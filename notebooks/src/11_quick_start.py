@@ -22,8 +22,8 @@ train_iterations = 200
 tune_iterations = 30
 
 # %% tags=["remove-input"]
-from fnnbook.tasks.quick_start import QuickStartSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = QuickStartSettings.from_namespace(globals())
+from fnnbook.tasks.quick_start import QuickStartSettings
+settings = QuickStartSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %%
 import torch

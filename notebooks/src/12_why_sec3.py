@@ -48,8 +48,8 @@ s10_settle = [0.1, 0.25, 0.5, 1.0]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.why_sec3 import WhySec3Settings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhySec3Settings.from_namespace(globals())
+from fnnbook.tasks.why_sec3 import WhySec3Settings
+settings = WhySec3Settings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import copy

@@ -46,8 +46,8 @@ nominal = [2.0, 0.1, 0.0]
 N = 50
 
 # %%
-from fnnbook.tasks.why_feedback_point import WhyFeedbackPointSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyFeedbackPointSettings.from_namespace(globals())
+from fnnbook.tasks.why_feedback_point import WhyFeedbackPointSettings
+settings = WhyFeedbackPointSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

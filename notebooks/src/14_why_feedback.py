@@ -57,8 +57,8 @@ authors_dr_ode = "Neural_ODE_domran.pt"
 authors_feedback = "FeedbackNN_ite477_loss0.494530_conver.pt"
 
 # %%
-from fnnbook.tasks.why_feedback import WhyFeedbackSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyFeedbackSettings.from_namespace(globals())
+from fnnbook.tasks.why_feedback import WhyFeedbackSettings
+settings = WhyFeedbackSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

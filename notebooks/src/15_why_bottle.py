@@ -28,8 +28,8 @@ beta_grid = [0.005, 0.02, 0.1]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.why_bottle import WhyBottleSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyBottleSettings.from_namespace(globals())
+from fnnbook.tasks.why_bottle import WhyBottleSettings
+settings = WhyBottleSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

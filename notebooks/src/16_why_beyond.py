@@ -27,8 +27,8 @@ min_seeds_grid = [2, 3, 5]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.why_beyond import WhyBeyondSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyBeyondSettings.from_namespace(globals())
+from fnnbook.tasks.why_beyond import WhyBeyondSettings
+settings = WhyBeyondSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

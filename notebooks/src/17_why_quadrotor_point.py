@@ -24,8 +24,8 @@ Gamma_adapnn_grid = [0.16, 0.64, 2.56]
 authors_u_max = [6.0]
 
 # %%
-from fnnbook.tasks.why_quadrotor_point import WhyQuadrotorPointSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyQuadrotorPointSettings.from_namespace(globals())
+from fnnbook.tasks.why_quadrotor_point import WhyQuadrotorPointSettings
+settings = WhyQuadrotorPointSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

@@ -24,8 +24,8 @@ upstream_dirs = {"quadrotor_mpc": "outputs/paper/quadrotor_mpc"}
 # the settings and their paper values, from fnnbook.tasks.why_quadrotor (written by `make notebooks`)
 
 # %%
-from fnnbook.tasks.why_quadrotor import WhyQuadrotorSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyQuadrotorSettings.from_namespace(globals())
+from fnnbook.tasks.why_quadrotor import WhyQuadrotorSettings
+settings = WhyQuadrotorSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

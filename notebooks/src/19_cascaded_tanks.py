@@ -60,8 +60,8 @@ baseline_starts = ["free", "encoder"]
 baseline_horizon = 100
 
 # %% tags=["remove-input"]
-from fnnbook.tasks.cascaded_tanks import CascadedTanksSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = CascadedTanksSettings.from_namespace(globals())
+from fnnbook.tasks.cascaded_tanks import CascadedTanksSettings
+settings = CascadedTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 from pathlib import Path

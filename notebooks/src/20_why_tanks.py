@@ -33,8 +33,8 @@ b5_horizons = [25, 100]
 # %%
 import fnnlib as F
 
-from fnnbook.tasks.why_tanks import WhyTanksSettings  # the settings' checks, as `fnn-pipeline check` runs them
-settings = WhyTanksSettings.from_namespace(globals())
+from fnnbook.tasks.why_tanks import WhyTanksSettings
+settings = WhyTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
