@@ -131,7 +131,7 @@ simulation_figure = F.save_figure(fig, out, "tanks_free_run")
 # record through its feedback observer: Eqs. (7)-(8) with the output gain `observer_gain` estimate the hidden
 # upper level from $y$, and the cascade of Sec. 3.3 (Eq. (11)) predicts `train_N` samples ahead from every
 # estimate; Adam descends on the model and on the cascade's gain and decay rate together
-# (`fnnlib.tune_gains(..., observer=..., train_model=True)`): the gains it ends with are the **tuned gains**.
+# (`fnnlib.tune_gains(..., TuneRecipe(train_model=True), observer=...)`): the gains it ends with are the **tuned gains**.
 # The **hand gains** are, per seed, the best $(L, \beta)$ of a small sweep (`hand_L_grid` x `hand_beta_grid`) by
 # the `train_N`-step error on the estimation record. The seeds train as one stacked ensemble (each member
 # with its own block of the observer, its own gains and decay rate; their losses add, their gradients never mix),
