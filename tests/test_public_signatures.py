@@ -43,7 +43,8 @@ def test_no_public_function_or_constructor_takes_more_than_eight_parameters():
     over = {name: len(_parameters(obj)) for name, obj in _public_callables()
             if len(_parameters(obj)) > MAX_PARAMETERS and name not in OVER_THE_LIMIT}
     assert not over, f"public callables with more than {MAX_PARAMETERS} parameters: {over}"
-    assert all(len(_parameters(getattr(F, name))) > MAX_PARAMETERS for name in OVER_THE_LIMIT)  # no stale entry
+    stale = [name for name in OVER_THE_LIMIT if name in F.__all__ and len(_parameters(getattr(F, name))) <= MAX_PARAMETERS]
+    assert not stale, f"no longer over the limit: drop {stale} from OVER_THE_LIMIT"
 
 
 def test_every_observer_is_built_as_f_Ts_then_keywords():
