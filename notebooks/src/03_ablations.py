@@ -88,11 +88,6 @@ gens = [F.make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S
 
 
 # %%
-def split(z):
-    """Stacked states (..., S*2) -> (S, ..., 2), seed first."""
-    return F.split_members(z, S)
-
-
 def band(ax, xs, v, color, label, style="o-", axis=0):
     """The mean over seeds (axis ``axis`` of ``v``) as a line, the min-max over seeds as a band."""
     v = torch.as_tensor(v)
@@ -141,7 +136,7 @@ def map_errors(z_in, u):
     One level and noise draw at a time: a (gains, T, 2S) batch stays small enough for the cache; all levels
     and draws at once run several times slower.
     """
-    return F.n_step_errors(split(F.cascade_sweep(ens, z_in, Ts, N, gains, beta)), x_lv[u], N).mean(-1)
+    return F.n_step_errors(ens.split(F.cascade_sweep(ens, z_in, Ts, N, gains, beta)), x_lv[u], N).mean(-1)
 
 
 err_clean = torch.stack([map_errors(xs_lv[u], u) for u in range(len(levels))], dim=-1)  # (S, G, U)
@@ -209,12 +204,12 @@ x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
 xs8 = F.stack_members(x8, S)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
-    f8_nn = split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
-f8_fb = split(F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs8).f_hat)
+    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+f8_fb = ens.split(F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs8).f_hat)
 f8s = f8.expand_as(f8_nn)  # the true rates, the same for every seed
 rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8s).T, F.rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
-ms_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T
-ms_fb = F.n_step_errors(split(F.cascade_predict(ens, xs8, Ts, N, L, beta)), x8, N).mean(-1).T
+ms_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T
+ms_fb = F.n_step_errors(ens.split(F.cascade_predict(ens, xs8, Ts, N, L, beta)), x8, N).mean(-1).T
 
 # %%
 s8 = {"seeds": seeds, "offsets": res_levels.tolist(), "rate_rmse_neural_ode": rate_nn.tolist(),
@@ -258,7 +253,7 @@ x9n = F.add_member_noise(x9, noise_std, gens, draws=noise_draws)  # (draws, T, 2
 
 def rmse_N(z, pool):
     """The N-step RMSE per seed and beta from stacked cascade predictions, pooled over the axes ``pool``."""
-    return F.n_step_errors(split(z), x9, N).pow(2).mean(pool).sqrt()
+    return F.n_step_errors(ens.split(z), x9, N).pow(2).mean(pool).sqrt()
 
 
 # %%
@@ -313,9 +308,9 @@ xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
 f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same for every seed
 with torch.no_grad():
-    e_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
-e_x, e_f = F.error_norm(split(est10.x_hat), x10s), F.error_norm(split(est10.f_hat), f10s)
-z_fb10, z_nn10 = split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), split(F.rollout_predict(ens, xs10, Ts, N, method="euler"))
+    e_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
+e_x, e_f = F.error_norm(ens.split(est10.x_hat), x10s), F.error_norm(ens.split(est10.f_hat), f10s)
+z_fb10, z_nn10 = ens.split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), ens.split(F.rollout_predict(ens, xs10, Ts, N, method="euler"))
 e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 

@@ -80,11 +80,6 @@ UNIT = "seed (one ensemble)"  # the spiral task's seeds train side by side on sh
 
 
 # %%
-def split(z):
-    """Stacked states (..., S*2) -> (S, ..., 2), seed first."""
-    return F.split_members(z, S)
-
-
 def profile_claim(task, claim_id):
     """The claim's paper-profile result: its verdict and its readings' verdicts."""
     c = F.read_results(Path(upstream_dirs[task]) / "results.json").claim(claim_id)
@@ -129,9 +124,9 @@ unit = torch.cat([torch.randn(x_test.shape, generator=F.make_generator(s + 1), d
                  dim=-1)  # the spiral task's draw, one per seed
 stds3 = [0.0, *s3_noise]
 xm3 = torch.stack([xs_test + std * unit for std in stds3])  # (levels, T, 2S)
-err3_nn = F.n_step_errors(split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
+err3_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
 betas3 = torch.tensor([0.0, *s3_beta], dtype=torch.float64)
-err3_fb = F.n_step_errors(split(F.cascade_sweep(ens, xm3, Ts, N, L, betas3)), x_test, N).mean(-1)  # (S, B, levels)
+err3_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xm3, Ts, N, L, betas3)), x_test, N).mean(-1)  # (S, B, levels)
 
 # %%
 holds3 = np.zeros((len(s3_noise), len(s3_beta)), bool)
@@ -197,14 +192,14 @@ class PointSpirals:
 # %%
 x0s = F.stack_members(torch.tensor(x0), S).expand(len(points5), -1)
 x5, ct5 = F.observe_continuous(PointSpirals(points5, S), ens64, L, x0s, t)  # (P, T, 2S) each
-xs5 = split(x5)  # (S, P, T, 2): the true states (the same for every seed)
+xs5 = ens.split(x5)  # (S, P, T, 2): the true states (the same for every seed)
 with torch.no_grad():
-    f5 = split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
-    gamma5 = (f5 - split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
+    f5 = ens.split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
+    gamma5 = (f5 - ens.split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
 fb5 = F.LinearFeedback(ens64, L, Ts, 2 * S).observe(x5)
-lim5 = (xs5[:, None] - split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
+lim5 = (xs5[:, None] - ens.split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
 lim5 = lim5[..., last_half].amax(-1)  # (S, G, P)
-err5 = {k: ((xs5 - split(e.x_hat)).norm(dim=-1), (f5 - split(e.f_hat)).norm(dim=-1))
+err5 = {k: ((xs5 - ens.split(e.x_hat)).norm(dim=-1), (f5 - ens.split(e.f_hat)).norm(dim=-1))
         for k, e in (("fb", fb5), ("ct", ct5))}  # (S, P, T) each
 
 
@@ -254,15 +249,15 @@ x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
 xs8 = F.stack_members(x8, S)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
-    f8_nn = split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
 gains8 = torch.tensor(s8_L, dtype=torch.float64)
-f8_fb = split(F.observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
+f8_fb = ens.split(F.observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
 rate8_nn = F.rmse_over_time(f8_nn, f8.expand_as(f8_nn)).T  # (12, S)
 rate8_fb = F.rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
 
 # %%
-ms8_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T  # (12, S)
-ms8_fb = F.n_step_errors(split(F.cascade_sweep(ens, xs8, Ts, N, gains8, beta)), x8, N).mean(-1)  # (S, G, 12)
+ms8_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N, method="euler")), x8, N).mean(-1).T  # (12, S)
+ms8_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xs8, Ts, N, gains8, beta)), x8, N).mean(-1)  # (S, G, 12)
 holds8 = np.stack([why_sec3.s8_levels(rate_neural_ode=rate8_nn, rate_feedback=rate8_fb[:, g].T,
                                       err_N_neural_ode=ms8_nn, err_N_feedback=ms8_fb[:, g].T,
                                       offsets=res_levels) for g in range(len(s8_L))], axis=1)  # (12, G)
@@ -305,7 +300,7 @@ unit9 = F.add_member_noise(x_test, 1.0, gens, draws=noise_draws) - xs_test  # (d
 
 def rmse9(z, pool):
     """The N-step RMSE per seed and beta, pooled over the axes ``pool``."""
-    return F.n_step_errors(split(z), x_test, N).pow(2).mean(pool).sqrt()
+    return F.n_step_errors(ens.split(z), x_test, N).pow(2).mean(pool).sqrt()
 
 
 clean9 = rmse9(F.cascade_sweep(ens, xs_test, Ts, N, L, betas9), -1)  # (S, B)
@@ -354,10 +349,10 @@ x10 = x10.float()
 xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
 with torch.no_grad():
-    e10_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
-e10 = {"x": (t, F.error_norm(split(est10.x_hat), x10.expand(S, -1, -1))),
-       "f": (t, F.error_norm(split(est10.f_hat), f10.expand(S, -1, -1))),
-       "multistep": (t[:-N], F.n_step_errors(split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), x10, N))}
+    e10_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
+e10 = {"x": (t, F.error_norm(ens.split(est10.x_hat), x10.expand(S, -1, -1))),
+       "f": (t, F.error_norm(ens.split(est10.f_hat), f10.expand(S, -1, -1))),
+       "multistep": (t[:-N], F.n_step_errors(ens.split(F.cascade_predict(ens, xs10, Ts, N, L, beta)), x10, N))}
 peak10 = {k: err[:, tt >= t_switch].amax(-1).tolist() for k, (tt, err) in e10.items()}
 
 
