@@ -16,6 +16,7 @@ from torch import Tensor
 
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
+from fnnlib.systems.switched import SwitchedSystem
 
 
 def colon_range(start: float, step: float, stop: float) -> Tensor:
@@ -78,6 +79,31 @@ def offset_spirals(base: Sequence[float], offsets: Tensor) -> list[Spiral]:
         raise ValueError(f"need a base (omega, eta, eps) and offsets of shape (levels, 3); got base {list(base)}, "
                          f"offsets {tuple(offsets.shape)}")
     return [Spiral(*(torch.tensor(base, dtype=torch.float64) + d).tolist()) for d in offsets]
+
+
+def residual_level_runs(base: Sequence[float], offsets: Tensor, x0: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """The runs of the learning-residual levels (App. A.7.1; S8, Fig. S9): each spiral ``base + offsets[j]``
+    (:func:`offset_spirals`) simulated from ``x0`` on ``t``, and its true change rate along that run.
+
+    Returns ``(x, f)``, both float32 of shape (levels, T, 2): the states as the networks read them, and Eq. (26)'s
+    rate evaluated at those float32 states (the reference the feedback's estimate and the network are scored on).
+    """
+    systems = offset_spirals(base, offsets)
+    x = simulate_levels(systems, x0, t).float()
+    return x, torch.stack([s.rate(xj) for s, xj in zip(systems, x)])
+
+
+def switched_spiral_run(before: Sequence[float], after: Sequence[float], t_switch: float, x0: Tensor,
+                        t: Tensor) -> tuple[Tensor, Tensor]:
+    """The run of S10 (App. A.7.2): the spiral Eq. (26) with parameters ``before`` (omega, eta, eps) until
+    ``t_switch`` and ``after`` from then on, simulated from ``x0`` on ``t`` (dopri5 restarted at the switch).
+
+    Returns ``(x, f)``, both float32 of shape (T, 2): the states, and the true rate of the system in force at each
+    time (computed on the float64 run, then rounded).
+    """
+    sw = SwitchedSystem([Spiral(*before), Spiral(*after)], [t_switch])
+    x = sw.simulate(x0, t)
+    return x.float(), sw.rate(t, x).float()
 
 
 def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:

@@ -59,8 +59,7 @@ PENDING: dict[str, set[str]] = {
 }
 
 #: notebook pairs that still share a block (only shrinks)
-PENDING_PAIRS: set[frozenset[str]] = {frozenset(("02_theory", "03_ablations")),
-                                      frozenset(("03_ablations", "12_why_sec3"))}
+PENDING_PAIRS: set[frozenset[str]] = set()
 
 _PLOT_NAME = re.compile(r"^(plot|draw)_")
 _FIGURE_CALLS = {("F", "new_figure"), ("F", "save_figure"), ("F", "plotting")}

@@ -78,10 +78,8 @@ if not (1 <= N < n_samples and steady_window < t_switch < (n_samples - 1) * Ts -
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
-seeds = [s for s, _, _ in nets]
-S = len(seeds)
-ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in nets], seeds)  # every seed's network on the stacked state
+ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
 gens = [F.make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S7 and S9, drawn in that order
@@ -199,10 +197,8 @@ fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
 # the claim holds for a metric when that happens at all 12 levels.
 
 # %%
-systems8 = F.offset_spirals(residual_base, res_levels)
-x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
+x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
 xs8 = F.stack_members(x8, S)
-f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
     f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
 f8_fb = ens.split(F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs8).f_hat)
@@ -300,10 +296,7 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # after it (the same error indexed by the predicted time is reported as well).
 
 # %%
-sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
-x10 = sw.simulate(torch.tensor(x0), t)
-f10 = sw.rate(t, x10).float()
-x10 = x10.float()
+x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
 xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
 f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same for every seed

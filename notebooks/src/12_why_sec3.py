@@ -52,7 +52,6 @@ from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline
 check_notebook_settings("why_sec3", globals())
 
 # %% tags=["hide-input"]
-import copy
 import time
 from pathlib import Path
 
@@ -68,10 +67,8 @@ out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
 started, started_cpu = time.perf_counter(), time.process_time()
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
-seeds = [s for s, _, _ in nets]
-S = len(seeds)
-ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in nets], seeds)  # every seed's network on the stacked state
+ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 x_test = F.Spiral(*test).simulate(torch.tensor(x0), t).float()  # (T, 2): the test spiral of Fig. 4
 xs_test = F.stack_members(x_test, S)
@@ -167,7 +164,7 @@ fig_s3 = F.save_figure(fig, out, "why_s3")
 # continuous observer, the feedback network and the L sweep, float64).
 
 # %%
-ens64 = F.NeuralODEEnsemble.from_members([copy.deepcopy(m).double() for _, m, _ in nets], seeds)
+ens64 = F.load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
 lam_m, lam_M = F.gain_eigen_bounds(L, 2)
 t_tr = transient_time_constants / lam_m
 after_tr, last_half = t >= t_tr, t >= t[-1] / 2
@@ -244,10 +241,8 @@ fig_s5 = F.save_figure(fig, out, "why_s5")
 
 # %%
 res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
-systems8 = F.offset_spirals(residual_base, res_levels)
-x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
+x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
 xs8 = F.stack_members(x8, S)
-f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
     f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
 gains8 = torch.tensor(s8_L, dtype=torch.float64)
@@ -342,10 +337,7 @@ holds9
 # unchanged (strict reading) at each point; the errors are computed once.
 
 # %%
-sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
-x10 = sw.simulate(torch.tensor(x0), t)
-f10 = sw.rate(t, x10).float()
-x10 = x10.float()
+x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
 xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, L, Ts, 2 * S).observe(xs10)
 with torch.no_grad():
