@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
+from fnnlib.models.ensemble import NeuralODEEnsemble
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
 from fnnlib.systems.switched import SwitchedSystem
@@ -124,6 +125,22 @@ def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
             raise ValueError(f"{name} holds a NaN or infinite value among the scored samples (first at index {idx} "
                              "of the scored part); score only samples that were measured")
     return torch.linalg.vector_norm(pred[..., : T - N, :] - truth[..., N:, :], dim=-1)
+
+
+def n_step_rmse(pred: Tensor, truth: Tensor, N: int, dim: int | tuple[int, ...] = -1) -> Tensor:
+    """The root mean square of the :func:`n_step_errors` of ``pred``, over the axes ``dim`` (the starts, and
+    any noise draws or levels pooled with them): the N-step RMSE of Fig. S11 (S9)."""
+    return n_step_errors(pred, truth, N).pow(2).mean(dim).sqrt()
+
+
+def sweep_errors(ensemble: NeuralODEEnsemble, z: Tensor, truth: Tensor, Ts: float, N: int, L: float | Tensor,
+                 beta: float | Tensor = 0.0) -> Tensor:
+    """The mean N-step error of every member of ``ensemble`` at every (gain, decay rate) pair of
+    :func:`fnnlib.feedback.cascade_sweep` (Eq. (11)), from the stacked measurements ``z`` (T, E n) of the
+    trajectory ``truth`` (T, n): shape (E, G), one cell per member and gain of the maps of Fig. 3 (S7)."""
+    from fnnlib.feedback.cascade import cascade_sweep  # noqa: PLC0415 (the sweeps need no cascade to import)
+
+    return n_step_errors(ensemble.split(cascade_sweep(ensemble, z, Ts, N, L, beta)), truth, N).mean(-1)
 
 
 def outward_increase_fraction(err: Tensor, center: int) -> Tensor:

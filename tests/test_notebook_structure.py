@@ -35,7 +35,6 @@ EXEMPT = {
 
 #: definitions still to move into fnnlib or fnnbook, per notebook (only shrinks)
 PENDING: dict[str, set[str]] = {
-    "03_ablations": {"band", "map_errors", "rmse_N", "reconverge"},
     "04_observers": {"make_observers", "twin_check", "design_check"},
     "05_neural_feedback": {"level_rates", "level_errors"},
     "07_quadrotor_learning": {"held_out"},
@@ -44,8 +43,6 @@ PENDING: dict[str, set[str]] = {
                       "spiral_predictions", "spiral_run"},
     "10_tuned_gains": {"o1_loss", "bottle_tuning_throws", "bottle_hand", "bottle_tune",
                        "o1_errors", "fnn_flight", "quad_hand", "quad_tune", "flight_summary"},
-    "12_why_sec3": {"profile_claim", "heat", "label_axes", "PointSpirals", "s5_at",
-                    "rmse9", "s10_at", "at_profile"},
     "14_why_feedback": {"ensemble", "levels_won", "counted", "d2_settled", "measured", "points_along", "axis_grid",
                         "authors_networks", "authors_checks", "window_grid", "release_curves", "curves_grid",
                         "d4_at_usage", "usage_grid", "curves_of", "why_figure"},

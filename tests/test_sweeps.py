@@ -13,11 +13,13 @@ from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
     colon_range,
     n_step_errors,
+    n_step_rmse,
     offset_spirals,
     outward_increase_fraction,
     paired_levels,
     residual_level_runs,
     simulate_levels,
+    sweep_errors,
     switched_spiral_run,
 )
 
@@ -182,6 +184,34 @@ def test_offset_spirals_add_the_offsets_to_the_base():
                                                           (2.0 + 0.2, 0.1 - 0.02, 3.0)]
     with pytest.raises(ValueError, match="offsets of shape"):
         offset_spirals([2.0, 0.1, 0.0], torch.zeros(3, 2))
+
+
+def test_n_step_rmse_is_the_root_mean_square_over_the_pooled_axes():
+    truth = torch.zeros(10, 2, dtype=F64)
+    pred = torch.zeros(3, 10, 2, dtype=F64)
+    pred[0, :, 0], pred[1, :, 1], pred[2, :5, 0] = 3.0, 4.0, 2.0  # errors 3, 4, and 2 at 5 of the 8 starts
+    torch.testing.assert_close(n_step_rmse(pred, truth, 2), torch.tensor([3.0, 4.0, (5 * 4 / 8) ** 0.5], dtype=F64))
+    torch.testing.assert_close(n_step_rmse(pred, truth, 2, dim=(0, 1)), torch.tensor((8 * 9 + 8 * 16 + 5 * 4) / 24,
+                                                                                    dtype=F64).sqrt())
+
+
+def test_sweep_errors_are_each_members_mean_error_at_each_gain():
+    """Cell (e, g): member e's cascade at gain L_g (decay beta), its mean N-step error; the gain 0 cell is the
+    member's open-loop Euler rollout."""
+    from fnnlib import NeuralODEEnsemble, rollout_predict, stack_members
+
+    ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0], dtype=F64), torch.arange(60, dtype=F64) * 0.01).float()
+    gains = torch.tensor([0.0, 5.0, 20.0], dtype=F64)
+    got = sweep_errors(ens, stack_members(x, 2), x, 0.01, 5, gains, 0.02)
+    assert got.shape == (2, 3)
+    for e in range(2):
+        m = ens.member(e)
+        for g, L in enumerate(gains.tolist()):
+            want = n_step_errors(cascade_predict(m, x, 0.01, 5, L, 0.02), x, 5).mean()
+            torch.testing.assert_close(got[e, g], want, rtol=1e-4, atol=1e-5)
+        open_loop = n_step_errors(rollout_predict(m, x, 0.01, 5, method="euler"), x, 5).mean()
+        torch.testing.assert_close(got[e, 0], open_loop, rtol=1e-4, atol=1e-5)
 
 
 def test_residual_level_runs_pair_each_levels_run_with_its_own_rate():
