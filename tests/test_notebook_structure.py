@@ -49,8 +49,6 @@ PENDING: dict[str, set[str]] = {
     "15_why_bottle": {"o1_errors", "judged"},
     "16_why_beyond": {"tuned_on", "test_errors", "b2_at", "readings_of"},
     "17_why_quadrotor_point": {"fly_adapfnn", "fly_set", "authors_networks"},
-    "18_why_quadrotor": {"setting", "at_profile", "gain_axis", "joined", "grid_panel", "grid_figure", "mean_of",
-                         "compare"},
     "19_cascaded_tanks": {"mean_err"},
     "20_why_tanks": {"b4_at", "b6_at", "holds"},
 }
