@@ -232,6 +232,17 @@ class WhyGrid:
         """``holds at 5 of 8 points`` or, with excluded points, ``holds at 1 of 2 feasible points``."""
         return f"holds at {self.held} of {self.counted} {'feasible ' if self.excluded else ''}points"
 
+    def holds_at_profile(self) -> bool | None:
+        """Whether the rule holds at the paper profile's point (each axis at its ``ours``; every value of an axis
+        without one): the grid must give there what the profile's counted reading gave. ``None`` where an axis's
+        ``ours`` is not among its values (the profile's point is off the grid)."""
+        at = []
+        for a in self.axes:
+            if a.ours is not None and a.ours not in a.values:
+                return None
+            at.append(slice(None) if a.ours is None else a.values.index(a.ours))
+        return bool(np.all(self.holds[tuple(at)]))
+
     @property
     def mixed(self) -> bool:
         """The rule holds at some feasible point and fails at another."""

@@ -67,6 +67,7 @@ from fnnlib.stability import (
     iss_bound,
     observe_continuous,
     reconvergence,
+    reconvergence_rows,
     scaled_error_norm,
     settling_time,
     theorem1_balls,
@@ -75,11 +76,15 @@ from fnnlib.sweeps import (
     colon_range,
     n_step_errors,
     offset_spirals,
+    residual_level_runs,
+    n_step_rmse,
+    sweep_errors,
+    switched_spiral_run,
     outward_increase_fraction,
     paired_levels,
     simulate_levels,
 )
-from fnnlib.systems import DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
+from fnnlib.systems import BatchedSpirals, DynamicalSystem, LinearSystem, StackedSystem, Pendulum, Spiral, SwitchedSystem, add_measurement_noise, add_member_noise
 from fnnlib.systems.projectile import fit_drag
 from fnnlib.training import (
     PAPER_BOTTLE_RECIPE,
@@ -92,6 +97,7 @@ from fnnlib.training import (
     TrainHistory,
     load_checkpoint,
     load_seed_checkpoints,
+    load_seed_ensemble,
     randomized_cases,
     register_model,
     save_checkpoint,
@@ -123,7 +129,7 @@ __all__ = [
     "tune_gains", "GainSweep", "sweep_gains", "GainChoice", "choose_gain",
     "ExtendedKalmanObserver", "KalmanObserver", "LuenbergerObserver", "Observer", "evaluate_observer",
     "linear_feedback_gain", "place_observer_gain", "steady_state_gain",
-    "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence",
+    "discrete_residual", "gain_eigen_bounds", "growth_factor", "iss_bound", "observe_continuous", "reconvergence", "reconvergence_rows",
     "settling_time", "theorem1_balls", "divergence_transition", "scaled_error_norm", "cascade_sweep", "colon_range", "n_step_errors", "observe_gains",
     "outward_increase_fraction", "paired_levels", "simulate_levels", "SwitchedSystem",
     "NeuralFeedback", "NeuralFeedbackObserver", "train_neural_feedback", "FeedbackRecipe", "ODERecipe",
@@ -131,11 +137,11 @@ __all__ = [
     "fit_drag", "bottle_throws", "load_bottle", "synthetic_throws",
     "CheckpointError", "DynamicalSystem", "Estimate", "GainError", "LinearFeedback", "MODELS", "NeuralODE",
     "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members",
-    "Spiral", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
+    "Spiral", "BatchedSpirals", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
     "cascade_predict_loop",
-    "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "seed_checkpoint_name",
+    "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "load_seed_ensemble", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
-    "rollout_depths", "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_depths", "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "residual_level_runs", "n_step_rmse", "sweep_errors", "switched_spiral_run", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
     "OutputFit", "OutputRecipe", "free_run", "train_from_outputs", "init_parameters",
 ]

@@ -230,3 +230,10 @@ def reconvergence(t: Tensor, err: Tensor, t_switch: float, *, window: float,
     return {"steady_pre": steady_pre, "steady_post": steady_post, "band": band,
             "time": settling_time(t, err, t_switch, band),
             "time_pre_band": settling_time(t, err, t_switch, band_factor * steady_pre)}
+
+
+def reconvergence_rows(t: Tensor, err: Tensor, t_switch: float, *, window: float,
+                       band_factor: float) -> dict[str, list[float]]:
+    """:func:`reconvergence` of each row of ``err`` (rows, T) (one seed a row), as one list per key."""
+    rows = [reconvergence(t, e, t_switch, window=window, band_factor=band_factor) for e in err]
+    return {k: [r[k] for r in rows] for k in rows[0]}

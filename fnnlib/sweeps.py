@@ -14,8 +14,10 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
+from fnnlib.models.ensemble import NeuralODEEnsemble
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
+from fnnlib.systems.switched import SwitchedSystem
 
 
 def colon_range(start: float, step: float, stop: float) -> Tensor:
@@ -80,6 +82,31 @@ def offset_spirals(base: Sequence[float], offsets: Tensor) -> list[Spiral]:
     return [Spiral(*(torch.tensor(base, dtype=torch.float64) + d).tolist()) for d in offsets]
 
 
+def residual_level_runs(base: Sequence[float], offsets: Tensor, x0: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """The runs of the learning-residual levels (App. A.7.1; S8, Fig. S9): each spiral ``base + offsets[j]``
+    (:func:`offset_spirals`) simulated from ``x0`` on ``t``, and its true change rate along that run.
+
+    Returns ``(x, f)``, both float32 of shape (levels, T, 2): the states as the networks read them, and Eq. (26)'s
+    rate evaluated at those float32 states (the reference the feedback's estimate and the network are scored on).
+    """
+    systems = offset_spirals(base, offsets)
+    x = simulate_levels(systems, x0, t).float()
+    return x, torch.stack([s.rate(xj) for s, xj in zip(systems, x)])
+
+
+def switched_spiral_run(before: Sequence[float], after: Sequence[float], t_switch: float, x0: Tensor,
+                        t: Tensor) -> tuple[Tensor, Tensor]:
+    """The run of S10 (App. A.7.2): the spiral Eq. (26) with parameters ``before`` (omega, eta, eps) until
+    ``t_switch`` and ``after`` from then on, simulated from ``x0`` on ``t`` (dopri5 restarted at the switch).
+
+    Returns ``(x, f)``, both float32 of shape (T, 2): the states, and the true rate of the system in force at each
+    time (computed on the float64 run, then rounded).
+    """
+    sw = SwitchedSystem([Spiral(*before), Spiral(*after)], [t_switch])
+    x = sw.simulate(x0, t)
+    return x.float(), sw.rate(t, x).float()
+
+
 def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
     """2-norm errors of N-step predictions from every start that has a truth sample N steps later.
 
@@ -98,6 +125,23 @@ def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
             raise ValueError(f"{name} holds a NaN or infinite value among the scored samples (first at index {idx} "
                              "of the scored part); score only samples that were measured")
     return torch.linalg.vector_norm(pred[..., : T - N, :] - truth[..., N:, :], dim=-1)
+
+
+def n_step_rmse(pred: Tensor, truth: Tensor, N: int, dim: int | tuple[int, ...] = -1) -> Tensor:
+    """The root mean square of the :func:`n_step_errors` of ``pred``, over the axes ``dim`` (the starts, and
+    any noise draws or levels pooled with them): the N-step RMSE of Fig. S11 (S9)."""
+    return n_step_errors(pred, truth, N).pow(2).mean(dim).sqrt()
+
+
+def sweep_errors(ensemble: NeuralODEEnsemble, z: Tensor, truth: Tensor, Ts: float, N: int, L: float | Tensor,
+                 beta: float | Tensor = 0.0) -> Tensor:
+    """The mean N-step error of every member of ``ensemble`` at every (gain, decay rate) pair of
+    :func:`fnnlib.feedback.cascade_sweep` (Eq. (11)), from the stacked measurements ``z`` (T, E n) of the
+    trajectory ``truth`` (T, n): shape (E, G), one cell per member and gain of the maps of Fig. 3 (S7)."""
+    from fnnlib.feedback.cascade import cascade_sweep  # noqa: PLC0415 (the sweeps need no cascade to import)
+    from fnnlib.feedback.options import Gains  # noqa: PLC0415
+
+    return n_step_errors(ensemble.split(cascade_sweep(ensemble, z, Ts, N, Gains.sweep(L, beta))), truth, N).mean(-1)
 
 
 def outward_increase_fraction(err: Tensor, center: int) -> Tensor:

@@ -59,3 +59,21 @@ def test_a_member_of_another_recipe_is_refused(tmp_path: Path) -> None:
 def test_the_run_must_name_distinct_seeds(tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match="trained the seeds"):
         _load(_members(tmp_path), {"seeds": [0, 0, 1]})
+
+
+def test_the_seed_ensemble_holds_each_seeds_network_in_the_checkpoints_order(tmp_path: Path) -> None:
+    """``load_seed_ensemble``: member e of the ensemble is seed ``seeds[e]``'s network, in the dtype asked for."""
+    for seed in (3, 1):
+        F.seed_everything(seed)
+        F.save_checkpoint(tmp_path / F.seed_checkpoint_name(seed), F.NeuralODE(2, [8], "tanh"), {"seed": seed})
+    ens = F.load_seed_ensemble(tmp_path, dtype=torch.float64)
+    loaded = F.load_seed_checkpoints(tmp_path)
+    assert list(ens.seeds) == [s for s, _, _ in loaded] == [1, 3]
+    x = torch.randn(5, 2, dtype=torch.float64)
+    out = ens.split(ens(0.0, F.stack_members(x, 2)))
+    assert out.dtype == torch.float64
+    for e, (_, net, _) in enumerate(loaded):
+        torch.testing.assert_close(out[e], net.double()(0.0, x))
+    (tmp_path / "res").mkdir()
+    with pytest.raises(CheckpointError, match="NeuralODE"):  # the members must be neural ODEs
+        F.load_seed_ensemble(_members(tmp_path / "res"), "residual")

@@ -17,6 +17,7 @@ from fnnlib.stability import (
     iss_bound,
     observe_continuous,
     reconvergence,
+    reconvergence_rows,
     scaled_error_norm,
     settling_time,
     theorem1_balls,
@@ -146,6 +147,10 @@ def test_reconvergence_after_a_step():
     assert r["time"] == r["time_pre_band"]
     with pytest.raises(ValueError, match="need a 4 s window"):
         reconvergence(t, err, 7.0, window=4.0, band_factor=2.0)
+    slow = torch.where(t < 7.0, err, 0.3 + 8.0 * torch.exp(-2 * (t - 7.0)))  # ten times slower: 1.09 s
+    rows = reconvergence_rows(t, torch.stack([err, slow]), 7.0, window=1.0, band_factor=2.0)
+    assert rows["time"] == [r["time"], pytest.approx(1.1, abs=1e-9)] and rows["band"][0] == r["band"]
+    assert set(rows) == set(r)
 
 
 def test_scaled_error_norm_survives_huge_errors():

@@ -13,10 +13,14 @@ from fnnlib.feedback import cascade_sweep, observe_gains
 from fnnlib.sweeps import (
     colon_range,
     n_step_errors,
+    n_step_rmse,
     offset_spirals,
     outward_increase_fraction,
     paired_levels,
+    residual_level_runs,
     simulate_levels,
+    sweep_errors,
+    switched_spiral_run,
 )
 
 F64 = torch.float64
@@ -180,6 +184,63 @@ def test_offset_spirals_add_the_offsets_to_the_base():
                                                           (2.0 + 0.2, 0.1 - 0.02, 3.0)]
     with pytest.raises(ValueError, match="offsets of shape"):
         offset_spirals([2.0, 0.1, 0.0], torch.zeros(3, 2))
+
+
+def test_n_step_rmse_is_the_root_mean_square_over_the_pooled_axes():
+    truth = torch.zeros(10, 2, dtype=F64)
+    pred = torch.zeros(3, 10, 2, dtype=F64)
+    pred[0, :, 0], pred[1, :, 1], pred[2, :5, 0] = 3.0, 4.0, 2.0  # errors 3, 4, and 2 at 5 of the 8 starts
+    torch.testing.assert_close(n_step_rmse(pred, truth, 2), torch.tensor([3.0, 4.0, (5 * 4 / 8) ** 0.5], dtype=F64))
+    torch.testing.assert_close(n_step_rmse(pred, truth, 2, dim=(0, 1)), torch.tensor((8 * 9 + 8 * 16 + 5 * 4) / 24,
+                                                                                    dtype=F64).sqrt())
+
+
+def test_sweep_errors_are_each_members_mean_error_at_each_gain():
+    """Cell (e, g): member e's cascade at gain L_g (decay beta), its mean N-step error; the gain 0 cell is the
+    member's open-loop Euler rollout."""
+    from fnnlib import NeuralODEEnsemble, rollout_predict, stack_members
+
+    ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0], dtype=F64), torch.arange(60, dtype=F64) * 0.01).float()
+    gains = torch.tensor([0.0, 5.0, 20.0], dtype=F64)
+    got = sweep_errors(ens, stack_members(x, 2), x, 0.01, 5, gains, 0.02)
+    assert got.shape == (2, 3)
+    for e in range(2):
+        m = ens.member(e)
+        for g, L in enumerate(gains.tolist()):
+            want = n_step_errors(cascade_predict(m, x, 0.01, 5, Gains(L, 0.02)), x, 5).mean()
+            torch.testing.assert_close(got[e, g], want, rtol=1e-4, atol=1e-5)
+        open_loop = n_step_errors(rollout_predict(m, x, 0.01, 5), x, 5).mean()
+        torch.testing.assert_close(got[e, 0], open_loop, rtol=1e-4, atol=1e-5)
+
+
+def test_residual_level_runs_pair_each_levels_run_with_its_own_rate():
+    """Level j: the run of spiral base + offsets[j], and Eq. (26)'s rate of that spiral along it (the zero
+    offset is the base spiral; a rate from another level would not match its run's finite differences)."""
+    offsets = paired_levels([-0.5, 0.0, 0.5], [0.0, 0.0, 0.05], [0.0, 0.0, 2.0])
+    Ts = 0.01
+    t = torch.arange(200, dtype=F64) * Ts
+    x, f = residual_level_runs([2.0, 0.1, 0.0], offsets, torch.tensor([9.0, 0.0], dtype=F64), t)
+    assert x.shape == f.shape == (3, 200, 2) and x.dtype == f.dtype == torch.float32
+    torch.testing.assert_close(x[1], Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0], dtype=F64), t).float())
+    rate_fd = (x[:, 2:] - x[:, :-2]) / (2 * Ts)  # central differences: the rate of each level's own run
+    for j in range(3):
+        torch.testing.assert_close(f[j, 1:-1], rate_fd[j], rtol=0.01, atol=0.01)
+    assert (f[0] - f[2]).abs().max() > 1.0
+
+
+def test_the_switched_run_follows_each_spiral_on_its_side_of_the_switch():
+    """Before the switch the run is the first spiral's, after it the second's (restarted from the state at the
+    switch), and the rate is the one of the spiral in force."""
+    before, after, x0 = (3.0, 0.05, 10.0), (1.0, 0.12, 5.0), torch.tensor([9.0, 0.0], dtype=F64)
+    t = torch.arange(301, dtype=F64) * 0.01  # switch at t = 1.5 s, sample 150
+    x, f = switched_spiral_run(before, after, 1.5, x0, t)
+    assert x.shape == f.shape == (301, 2) and x.dtype == f.dtype == torch.float32
+    torch.testing.assert_close(x[:151], Spiral(*before).simulate(x0, t[:151]).float(), rtol=1e-5, atol=1e-5)
+    x_sw = Spiral(*before).simulate(x0, t[:151])[-1]
+    torch.testing.assert_close(x[150:], Spiral(*after).simulate(x_sw, t[150:] - 1.5).float(), rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(f[200:], Spiral(*after).rate(x[200:].double()).float(), rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(f[:150], Spiral(*before).rate(x[:150].double()).float(), rtol=1e-5, atol=1e-5)
 
 
 def test_simulate_levels_exact_uses_the_closed_form():

@@ -116,6 +116,11 @@ class NeuralODEEnsemble(nn.Module):
             out.append(h)
         return torch.cat(out, dim=-1)
 
+    def split(self, z: Tensor) -> Tensor:
+        """This ensemble's stacked states or rates (..., E n) -> (E, ..., n), member (seed) first: each member's
+        own trajectory of Eq. (2), as :func:`split_members` with E = :attr:`size`."""
+        return split_members(z, self.size)
+
     def member(self, e: int) -> NeuralODE:
         """Member ``e`` as a stand-alone :class:`NeuralODE` (weights copied)."""
         model = NeuralODE(self.n_state, self.hidden, self.activation).to(self.weights[0].dtype)

@@ -4,8 +4,8 @@ from fnnlib.systems.base import DynamicalSystem, StackedSystem
 from fnnlib.systems.controlled import LinearSystem, Pendulum
 from fnnlib.systems.noise import add_measurement_noise, add_member_noise
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor, QuadrotorParams
-from fnnlib.systems.spiral import Spiral
+from fnnlib.systems.spiral import BatchedSpirals, Spiral
 from fnnlib.systems.switched import SwitchedSystem
 
-__all__ = ["NOMINAL", "TEST_TRUTH", "TRAINING_TRUTH", "DynamicalSystem", "StackedSystem", "LinearSystem", "Pendulum", "Quadrotor", "QuadrotorParams", "Spiral",
+__all__ = ["NOMINAL", "TEST_TRUTH", "TRAINING_TRUTH", "DynamicalSystem", "StackedSystem", "LinearSystem", "Pendulum", "Quadrotor", "QuadrotorParams", "Spiral", "BatchedSpirals",
            "SwitchedSystem", "add_measurement_noise", "add_member_noise"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -71,3 +72,24 @@ class Spiral(DynamicalSystem):
             raise TypeError(f"unknown spiral parameter(s) {sorted(unknown)}; known: omega, eta, eps")
         params.update(changes)
         return Spiral(**params)
+
+
+class BatchedSpirals(DynamicalSystem):
+    """Several spirals of Eq. (26) in one integration: batch row ``p`` of the state runs ``systems[p]``, on the
+    stacked state (P, E 2) of ``E`` copies (the layout of :class:`fnnlib.NeuralODEEnsemble`), so one dopri5 run
+    of Theorem 1's continuous observer (:func:`fnnlib.observe_continuous`) covers every spiral and every member.
+    """
+
+    def __init__(self, systems: Sequence[Spiral], E: int) -> None:
+        if not systems or int(E) != E or int(E) < 1:
+            raise ValueError(f"need at least one spiral and a number of copies E >= 1, got {len(systems)}, {E!r}")
+        self.A = torch.stack([s.A for s in systems])  # (P, 2, 2)
+        self.b = torch.stack([s.b for s in systems])  # (P, 2)
+        self.E, self.n = int(E), 2 * int(E)
+
+    def __call__(self, t: Tensor | float, x: Tensor) -> Tensor:
+        """dx/dt of row p under spiral p: ``x`` (P, E 2) -> (P, E 2)."""
+        if x.shape[0] != self.A.shape[0]:
+            raise ValueError(f"need one batch row per spiral ({self.A.shape[0]}), got x of shape {tuple(x.shape)}")
+        z = x.reshape(x.shape[0], self.E, 2)
+        return (torch.einsum("pij,psj->psi", self.A, z) + self.b[:, None]).reshape(x.shape)

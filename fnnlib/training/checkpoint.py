@@ -12,7 +12,7 @@ import torch
 from torch import nn
 
 from fnnlib.io import atomic_write
-from fnnlib.models import MODELS
+from fnnlib.models import MODELS, NeuralODEEnsemble
 
 FORMAT = "fnnlib.checkpoint"
 VERSION = 1
@@ -187,3 +187,16 @@ def _as_run(loaded: list[tuple[int, nn.Module, dict[str, Any]]], run: Mapping[st
                 raise CheckpointError(f"checkpoint {found[seed]} was trained with {key} = {value!r}, "
                                       f"the run record says {run[key]!r}: it comes from another run")
     return loaded
+
+
+def load_seed_ensemble(directory: str | os.PathLike[str], stem: str = "neural_ode", *,
+                       run: Mapping[str, Any] | None = None, dtype: torch.dtype | None = None) -> NeuralODEEnsemble:
+    """Every seed's neural ODE of Eq. (2) in ``directory`` side by side: one :class:`NeuralODEEnsemble` whose
+    member e is the network of seed ``ensemble.seeds[e]``.
+
+    The members are read by :func:`load_seed_checkpoints` (same checks, same seed order, ``run`` as there) and
+    converted to ``dtype`` where given (float64 for runs that must not overflow; the weights are the same numbers).
+    """
+    loaded = load_seed_checkpoints(directory, stem, "NeuralODE", run=run)
+    members = [m if dtype is None else m.to(dtype) for _, m, _ in loaded]
+    return NeuralODEEnsemble.from_members(members, [s for s, _, _ in loaded])

@@ -104,15 +104,10 @@ model = ens.member(0)  # the first seed's network, also saved alone for the task
 F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)
 
 
-def per_seed(z):
-    """Stacked ensemble states (..., E*2) -> (E, ..., 2), seed first."""
-    return F.split_members(z, E)
-
-
 # %%
 xs_nom, xs_test = F.stack_members(x_nom, E), F.stack_members(x_test, E)
 with torch.no_grad():
-    f_nn_nom, f_nn_test = per_seed(F.eval_field(ens, xs_nom)), per_seed(F.eval_field(ens, xs_test))
+    f_nn_nom, f_nn_test = ens.split(F.eval_field(ens, xs_nom)), ens.split(F.eval_field(ens, xs_test))
 s1_rel = [F.relative_rmse(f_nn_nom[e], f_nom) for e in range(E)]
 print(f"{E} networks trained in {history.seconds:.1f} s ({history.ms_per_iteration:.0f} ms/iteration); "
       f"final loss {history.loss[-1]:.4f}; nominal change-rate relative RMSE per seed "
@@ -137,14 +132,14 @@ fig_c = F.save_figure(fig, out, "fig4c_nominal_rate")
 
 # %%
 est = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs_test)
-f_hat = per_seed(est.f_hat)
+f_hat = ens.split(est.f_hat)
 rate_nn = [F.rmse(f_nn_test[e], f_test) for e in range(E)]
 rate_fb = [F.rmse(f_hat[e], f_test) for e in range(E)]
 t0 = time.perf_counter()
-z_fb = per_seed(F.cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
+z_fb = ens.split(F.cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
 cascade_s = time.perf_counter() - t0
-z_nn = per_seed(F.rollout_depths(ens, xs_test, Ts, N_max))
-z_nn_dp = per_seed(F.rollout_predict(ens, xs_test, Ts, N, solver=F.Solver("dopri5", rtol=rtol, atol=atol)))
+z_nn = ens.split(F.rollout_depths(ens, xs_test, Ts, N_max))
+z_nn_dp = ens.split(F.rollout_predict(ens, xs_test, Ts, N, solver=F.Solver("dopri5", rtol=rtol, atol=atol)))
 e_nn, e_fb = F.n_step_errors(z_nn[:, N], x_test, N), F.n_step_errors(z_fb[:, N], x_test, N)  # (E, T - N)
 e_dp = F.n_step_errors(z_nn_dp, x_test, N)
 
@@ -190,9 +185,9 @@ sweep = {"noise_std": [], "neural_ode": [], "feedback_decay": [], "feedback_no_d
 for std in noise_sweep:
     xm = xs_test + std * noise
     sweep["noise_std"].append(std)
-    sweep["neural_ode"].append(F.n_step_errors(per_seed(F.rollout_predict(ens, xm, Ts, N)), x_test, N).mean(-1).tolist())
+    sweep["neural_ode"].append(F.n_step_errors(ens.split(F.rollout_predict(ens, xm, Ts, N)), x_test, N).mean(-1).tolist())
     for key, b in [("feedback_decay", beta), ("feedback_no_decay", 0.0)]:
-        z = per_seed(F.cascade_predict(ens, xm, Ts, N, F.Gains(L, b)))
+        z = ens.split(F.cascade_predict(ens, xm, Ts, N, F.Gains(L, b)))
         sweep[key].append(F.n_step_errors(z, x_test, N).mean(-1).tolist())
 state_rms = float(x_test.pow(2).sum(-1).mean().sqrt())
 judged = {"judged_std": noise_std, "state_rms": state_rms, "noise_to_state_rms": noise_std / state_rms,

@@ -38,7 +38,6 @@ from fnnbook.tasks.theory import TheorySettings
 settings = TheorySettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
-import copy
 from pathlib import Path
 
 import numpy as np
@@ -51,11 +50,10 @@ from fnnbook.rules import sec3
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
-seeds = [s for s, _, _ in nets]
-S = len(seeds)
-models64 = [copy.deepcopy(m).double() for _, m, _ in nets]  # float64 throughout: the diverging runs reach 1e100
-ens64 = F.NeuralODEEnsemble.from_members(models64, seeds)  # every seed's network side by side on the stacked state
+# every seed's network of the spiral task side by side on the stacked state, in float64 throughout (the
+# diverging runs reach 1e100)
+ens64 = F.load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
+seeds, S = ens64.seeds, ens64.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
 sys_test = F.Spiral(*test)

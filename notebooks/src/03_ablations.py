@@ -71,26 +71,19 @@ betas, betas_ext = F.colon_range(*beta_range), F.colon_range(*beta_extended)
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
-seeds = [s for s, _, _ in nets]
-S = len(seeds)
-ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in nets], seeds)  # every seed's network on the stacked state
+ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
 gens = [F.make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S7 and S9, drawn in that order
 
 
 # %%
-def split(z):
-    """Stacked states (..., S*2) -> (S, ..., 2), seed first."""
-    return F.split_members(z, S)
-
-
-def band(ax, xs, v, color, label, style="o-", axis=0):
+def plot_band(ax, xs, v, color, label, style="o-", axis=0):
     """The mean over seeds (axis ``axis`` of ``v``) as a line, the min-max over seeds as a band."""
-    v = torch.as_tensor(v)
+    v = np.asarray(v)
     ax.plot(xs, v.mean(axis), style, ms=3, color=color, label=label)
-    ax.fill_between(xs, v.amin(axis), v.amax(axis), color=color, alpha=0.25, lw=0)
+    ax.fill_between(xs, v.min(axis), v.max(axis), color=color, alpha=0.25, lw=0)
 
 
 print(f"{S} networks (seeds {seeds}) from the spiral task")
@@ -128,17 +121,12 @@ x_lv_noisy = F.add_member_noise(x_lv, noise_std, gens, draws=noise_draws)  # (dr
 
 
 # %%
-def map_errors(z_in, u):
-    """Mean N-step error (S, G) at level ``u`` from measurements ``z_in`` (T, 2S): every seed and gain in one cascade.
-
-    One level and noise draw at a time: a (gains, T, 2S) batch stays small enough for the cache; all levels
-    and draws at once run several times slower.
-    """
-    return F.n_step_errors(split(F.cascade_sweep(ens, z_in, Ts, N, F.Gains.sweep(gains, beta))), x_lv[u], N).mean(-1)
-
-
-err_clean = torch.stack([map_errors(xs_lv[u], u) for u in range(len(levels))], dim=-1)  # (S, G, U)
-err_noisy = torch.stack([torch.stack([map_errors(x_lv_noisy[d, u], u) for d in range(noise_draws)]).mean(0)
+# every seed and gain in one cascade, one level and noise draw at a time: a (gains, T, 2S) batch stays small
+# enough for the cache (all levels and draws at once run several times slower)
+err_clean = torch.stack([F.sweep_errors(ens, xs_lv[u], x_lv[u], Ts, N, gains, beta) for u in range(len(levels))],
+                        dim=-1)  # (S, G, U)
+err_noisy = torch.stack([torch.stack([F.sweep_errors(ens, x_lv_noisy[d, u], x_lv[u], Ts, N, gains, beta)
+                                      for d in range(noise_draws)]).mean(0)
                          for u in range(len(levels))], dim=-1)  # (S, G, U): the mean over the draws
 
 # %%
@@ -176,7 +164,7 @@ for ax, err, name in [(axes[0, 0], err_noisy, f"(a) noise std {noise_std}"), (ax
 # %%
 ax = axes[0, 2]
 for i in range(len(levels)):
-    band(ax, gains, err_noisy[:, :, i], plt.cm.viridis(i / max(1, len(levels) - 1)), None)
+    plot_band(ax, gains, err_noisy[:, :, i], plt.cm.viridis(i / max(1, len(levels) - 1)), None)
 ax.set(xlabel="gain L", ylabel=f"mean {N}-step error", yscale="log",
        title=f"(c) noisy error vs gain per level (min-max of {S} seeds)")
 fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
@@ -197,17 +185,15 @@ fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
 # the claim holds for a metric when that happens at all 12 levels.
 
 # %%
-systems8 = F.offset_spirals(residual_base, res_levels)
-x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
+x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
 xs8 = F.stack_members(x8, S)
-f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
-    f8_nn = split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
-f8_fb = split(F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs8).f_hat)
+    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+f8_fb = ens.split(F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs8).f_hat)
 f8s = f8.expand_as(f8_nn)  # the true rates, the same for every seed
 rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8s).T, F.rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
-ms_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T
-ms_fb = F.n_step_errors(split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
+ms_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T
+ms_fb = F.n_step_errors(ens.split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
 
 # %%
 s8 = {"seeds": seeds, "offsets": res_levels.tolist(), "rate_rmse_neural_ode": rate_nn.tolist(),
@@ -248,16 +234,11 @@ fig_s8 = F.save_figure(fig, out, "figS9_residual_levels")
 x9 = F.Spiral(*test).simulate(torch.tensor(x0), t).float()
 x9n = F.add_member_noise(x9, noise_std, gens, draws=noise_draws)  # (draws, T, 2S): each seed its own noise
 
-
-def rmse_N(z, pool):
-    """The N-step RMSE per seed and beta from stacked cascade predictions, pooled over the axes ``pool``."""
-    return F.n_step_errors(split(z), x9, N).pow(2).mean(pool).sqrt()
-
-
 # %%
-rmse9 = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas)), (2, 3))  # (S, B)
-rmse9_ext = rmse_N(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas_ext)), (2, 3))
-rmse9_clean = rmse_N(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, F.Gains.sweep(L, betas)), -1)
+# the N-step RMSE per seed and beta, (S, B): the noise draws pooled with the starts
+rmse9 = F.n_step_rmse(ens.split(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas))), x9, N, dim=(2, 3))
+rmse9_ext = F.n_step_rmse(ens.split(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas_ext))), x9, N, dim=(2, 3))
+rmse9_clean = F.n_step_rmse(ens.split(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, F.Gains.sweep(L, betas))), x9, N)
 s9 = {"seeds": seeds, "beta": betas.tolist(), "rmse_noisy": rmse9.T.tolist(), "rmse_noise_free": rmse9_clean.T.tolist(),
       "beta_extended": betas_ext.tolist(), "rmse_noisy_extended": rmse9_ext.T.tolist(),
       "best_beta": betas[rmse9.argmin(1)].tolist(), "best_beta_noise_free": betas[rmse9_clean.argmin(1)].tolist(),
@@ -267,13 +248,13 @@ s9
 # %%
 fig, axes = F.new_figure(1, 2)
 ax = axes[0, 0]
-band(ax, betas, rmse9, F.plotting.COLORS["feedback"], f"noise std {noise_std}")
-band(ax, betas, rmse9_clean, "0.4", "noise-free", style="s--")
+plot_band(ax, betas, rmse9, F.plotting.COLORS["feedback"], f"noise std {noise_std}")
+plot_band(ax, betas, rmse9_clean, "0.4", "noise-free", style="s--")
 ax.set(xlabel=r"decay rate $\beta$", ylabel=f"{N}-step RMSE", yscale="log",
        title=f"(S11) the paper's grid (min-max of {S} seeds)")
 ax.legend(fontsize=8)
 ax = axes[0, 1]
-band(ax, betas_ext, rmse9_ext, F.plotting.COLORS["feedback"], None)
+plot_band(ax, betas_ext, rmse9_ext, F.plotting.COLORS["feedback"], None)
 ax.set(xlabel=r"decay rate $\beta$", ylabel=f"{N}-step RMSE (noisy)", yscale="log", title="extended grid")
 fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 
@@ -298,32 +279,25 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # after it (the same error indexed by the predicted time is reported as well).
 
 # %%
-sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
-x10 = sw.simulate(torch.tensor(x0), t)
-f10 = sw.rate(t, x10).float()
-x10 = x10.float()
+x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
 xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same for every seed
 with torch.no_grad():
-    e_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
-e_x, e_f = F.error_norm(split(est10.x_hat), x10s), F.error_norm(split(est10.f_hat), f10s)
-z_fb10 = split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta)))
-z_nn10 = split(F.rollout_predict(ens, xs10, Ts, N))
+    e_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
+e_x, e_f = F.error_norm(ens.split(est10.x_hat), x10s), F.error_norm(ens.split(est10.f_hat), f10s)
+z_fb10 = ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta)))
+z_nn10 = ens.split(F.rollout_predict(ens, xs10, Ts, N))
 e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 
 # %%
-def reconverge(tt, err):
-    """``F.reconvergence`` per seed (rows of ``err``), as one list per key."""
-    rows = [F.reconvergence(tt, e, t_switch, window=steady_window, band_factor=band_factor) for e in err]
-    return {k: [r[k] for r in rows] for k in rows[0]}
-
-
 s10 = {"seeds": seeds}
 for name, (tt, err) in {"x": (t, e_x), "f": (t, e_f), "multistep": (t[:-N], e_ms)}.items():
-    s10 |= {f"{k}_{name}": v for k, v in reconverge(tt, err).items()}
-s10["time_multistep_predicted_time"] = reconverge(t[N:], e_ms)["time"]
+    s10 |= {f"{k}_{name}": v for k, v in F.reconvergence_rows(tt, err, t_switch, window=steady_window,
+                                                               band_factor=band_factor).items()}
+s10["time_multistep_predicted_time"] = F.reconvergence_rows(t[N:], e_ms, t_switch, window=steady_window,
+                                                            band_factor=band_factor)["time"]
 
 # %%
 peaks = {"x": e_x[:, t >= t_switch].amax(-1), "f": e_f[:, t >= t_switch].amax(-1),

@@ -92,11 +92,6 @@ fb_recipe = F.FeedbackRecipe(iterations=fb_iterations, batch_size=fb_batch_size,
                              refresh_every=refresh_every)
 
 
-def per_seed(z):
-    """Stacked ensemble states (..., E*2) -> (E, ..., 2), seed first."""
-    return F.split_members(z, E)
-
-
 # %%
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
@@ -173,8 +168,8 @@ print(f"one refresh of the rollout ({E} seeds, all cases) costs {1000 * refresh_
 nf = F.NeuralFeedbackObserver(f_ens, Ts, h=h_ens, n=2 * E)
 xs_nom = F.stack_members(x_nom, E)
 with torch.no_grad():
-    f_nn_nom, f_dr_nom = per_seed(F.eval_field(f_ens, xs_nom)), per_seed(F.eval_field(dr_ens, xs_nom))
-f_fb_nom = per_seed(nf.observe(xs_nom).f_hat)
+    f_nn_nom, f_dr_nom = f_ens.split(F.eval_field(f_ens, xs_nom)), f_ens.split(F.eval_field(dr_ens, xs_nom))
+f_fb_nom = f_ens.split(nf.observe(xs_nom).f_hat)
 d12 = {"seeds": seeds, **{f"rel_rmse_{k}": [F.relative_rmse(v[e], f_nom) for e in range(E)]
                           for k, v in [("nominal_neural_ode", f_nn_nom), ("dr_neural_ode", f_dr_nom),
                                        ("neural_feedback", f_fb_nom)]},
@@ -254,9 +249,9 @@ def level_rates(xs, f_levels):
     """Per seed and level (E, levels): change-rate RMSE of the neural ODE, the neural feedback and the linear
     feedback on the members' stacked measurements ``xs``."""
     with torch.no_grad():
-        f_nn = per_seed(F.eval_field(f_ens, xs))
-    fhat = {"neural_ode": f_nn, "neural_feedback": per_seed(nf.observe(xs).f_hat),
-            "linear_feedback": per_seed(F.LinearFeedback(f_ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs).f_hat)}
+        f_nn = f_ens.split(F.eval_field(f_ens, xs))
+    fhat = {"neural_ode": f_nn, "neural_feedback": f_ens.split(nf.observe(xs).f_hat),
+            "linear_feedback": f_ens.split(F.LinearFeedback(f_ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs).f_hat)}
     return {k: F.rmse_over_time(v, f_levels.expand_as(v)) for k, v in fhat.items()}
 
 
@@ -268,10 +263,10 @@ def level_errors(x_levels, f_levels):
     xs = F.stack_members(x_levels, E)
     rate = level_rates(xs, f_levels)
     t0 = time.perf_counter()
-    z_nf = per_seed(nf.predict(xs, N))
+    z_nf = f_ens.split(nf.predict(xs, N))
     seconds = time.perf_counter() - t0
-    z = {"neural_ode": per_seed(F.rollout_predict(f_ens, xs, Ts, N)), "neural_feedback": z_nf,
-         "linear_feedback": per_seed(F.cascade_predict(f_ens, xs, Ts, N, F.Gains(L, beta)))}
+    z = {"neural_ode": f_ens.split(F.rollout_predict(f_ens, xs, Ts, N)), "neural_feedback": z_nf,
+         "linear_feedback": f_ens.split(F.cascade_predict(f_ens, xs, Ts, N, F.Gains(L, beta)))}
     multistep = {k: F.n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}
     return rate, multistep, seconds
 

@@ -52,7 +52,6 @@ from fnnbook.tasks.why_sec3 import WhySec3Settings
 settings = WhySec3Settings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
-import copy
 import time
 from pathlib import Path
 
@@ -68,10 +67,8 @@ out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 F.seed_everything(seed)
 started, started_cpu = time.perf_counter(), time.process_time()
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
-seeds = [s for s, _, _ in nets]
-S = len(seeds)
-ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in nets], seeds)  # every seed's network on the stacked state
+ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 x_test = F.Spiral(*test).simulate(torch.tensor(x0), t).float()  # (T, 2): the test spiral of Fig. 4
 xs_test = F.stack_members(x_test, S)
@@ -79,22 +76,14 @@ print(f"{S} networks (seeds {seeds}) from the spiral task")
 UNIT = "seed (one ensemble)"  # the spiral task's seeds train side by side on shared mini-batches: not independent
 
 
-# %%
-def split(z):
-    """Stacked states (..., S*2) -> (S, ..., 2), seed first."""
-    return F.split_members(z, S)
-
-
-def profile_claim(task, claim_id):
-    """The claim's paper-profile result: its verdict and its readings' verdicts."""
-    c = F.read_results(Path(upstream_dirs[task]) / "results.json").claim(claim_id)
-    return c.verdict, c.reading_verdicts()
-
+# %% [markdown]
+# Each grid is drawn as a map: where the rule holds (green) or fails (orange), a number per point, and dotted
+# lines through the paper profile's value of each axis.
 
 # %%
-def heat(ax, grid, title, value=None):
+def plot_heat(ax, grid, title, value=None):
     """A 2-D why grid as a map (rows: its first axis, columns: its second): holds (green) or fails (orange) at each
-    point, ``value`` (same shape as ``grid.holds``) written in each cell."""
+    point, ``value`` (same shape as ``grid.holds``) written in each cell, the profile's values dotted."""
     h = np.asarray(grid.holds)
     ax.imshow(h, cmap="RdYlGn", vmin=-0.5, vmax=1.5, origin="lower", aspect="auto")
     ya, xa = grid.axes
@@ -104,17 +93,12 @@ def heat(ax, grid, title, value=None):
     for (i, j), ok in np.ndenumerate(h):  # the value where given, "x" marking a failing point
         txt = ("holds" if ok else "fails") if v is None else f"{v[i, j]:.3g}"
         ax.text(j, i, txt + ("" if ok or v is None else " x"), ha="center", va="center", fontsize=7)
-    label_axes(ax, xa, ya, title)
-
-
-# %%
-def label_axes(ax, xa, ya, title):
-    """Axis names, the title, and dotted lines through the paper profile's value of each axis (where it is one)."""
     ax.set(xlabel=xa.name, ylabel=ya.name)
     ax.set_title(title, fontsize=8)
     for line, a in ((ax.axvline, xa), (ax.axhline, ya)):
         if a.ours in a.values:
             line(a.values.index(a.ours), color="k", ls=":", lw=1)
+
 
 # %% [markdown]
 # ## S3: gain decay under noise (Fig. 4g) over the noise level and the decay rate
@@ -129,9 +113,9 @@ unit = torch.cat([torch.randn(x_test.shape, generator=F.make_generator(s + 1), d
                  dim=-1)  # the spiral task's draw, one per seed
 stds3 = [0.0, *s3_noise]
 xm3 = torch.stack([xs_test + std * unit for std in stds3])  # (levels, T, 2S)
-err3_nn = F.n_step_errors(split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
+err3_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
 betas3 = torch.tensor([0.0, *s3_beta], dtype=torch.float64)
-err3_fb = F.n_step_errors(split(F.cascade_sweep(ens, xm3, Ts, N, F.Gains.sweep(L, betas3))), x_test, N).mean(-1)  # (S, B, levels)
+err3_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xm3, Ts, N, F.Gains.sweep(L, betas3))), x_test, N).mean(-1)  # (S, B, levels)
 
 # %%
 holds3 = np.zeros((len(s3_noise), len(s3_beta)), bool)
@@ -158,7 +142,7 @@ grid3 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid3, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
+plot_heat(ax, grid3, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
 fig_s3 = F.save_figure(fig, out, "why_s3")
 
 # %% [markdown]
@@ -172,58 +156,39 @@ fig_s3 = F.save_figure(fig, out, "why_s3")
 # continuous observer, the feedback network and the L sweep, float64).
 
 # %%
-ens64 = F.NeuralODEEnsemble.from_members([copy.deepcopy(m).double() for _, m, _ in nets], seeds)
+ens64 = F.load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
 lam_m, lam_M = F.gain_eigen_bounds(L, 2)
 t_tr = transient_time_constants / lam_m
 after_tr, last_half = t >= t_tr, t >= t[-1] / 2
 points5 = [F.Spiral(test[0], eta, eps) for eps in s5_eps for eta in s5_eta]  # the grid's spirals, row-major
 
 
-# %%
-class PointSpirals:
-    """The grid's spirals side by side: row ``p`` of the state (P, S n) is spiral ``p`` for every seed, so one
-    dopri5 integration runs Theorem 1's continuous observer at every point and seed (Eq. (26) per block)."""
-
-    def __init__(self, systems, copies):
-        self.A = torch.stack([s.A for s in systems])  # (P, 2, 2)
-        self.b = torch.stack([s.b for s in systems])  # (P, 2)
-        self.copies, self.n = copies, 2 * copies
-
-    def __call__(self, t, x):
-        z = x.reshape(x.shape[0], self.copies, 2)
-        return (torch.einsum("pij,psj->psi", self.A, z) + self.b[:, None]).reshape(x.shape)
-
+# %% [markdown]
+# One dopri5 integration runs Theorem 1's continuous observer at every grid point and seed (`BatchedSpirals`:
+# row $p$ of the state is spiral $p$); the feedback network runs on the same states.
 
 # %%
 x0s = F.stack_members(torch.tensor(x0), S).expand(len(points5), -1)
-x5, ct5 = F.observe_continuous(PointSpirals(points5, S), ens64, L, x0s, t)  # (P, T, 2S) each
-xs5 = split(x5)  # (S, P, T, 2): the true states (the same for every seed)
+x5, ct5 = F.observe_continuous(F.BatchedSpirals(points5, S), ens64, L, x0s, t)  # (P, T, 2S) each
+xs5 = ens.split(x5)  # (S, P, T, 2): the true states (the same for every seed)
 with torch.no_grad():
-    f5 = split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
-    gamma5 = (f5 - split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
+    f5 = ens.split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
+    gamma5 = (f5 - ens.split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
 fb5 = F.LinearFeedback(ens64, Ts, gains=F.Gains(L), n=2 * S).observe(x5)
-lim5 = (xs5[:, None] - split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
+lim5 = (xs5[:, None] - ens.split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
 lim5 = lim5[..., last_half].amax(-1)  # (S, G, P)
-err5 = {k: ((xs5 - split(e.x_hat)).norm(dim=-1), (f5 - split(e.f_hat)).norm(dim=-1))
+err5 = {k: ((xs5 - ens.split(e.x_hat)).norm(dim=-1), (f5 - ens.split(e.f_hat)).norm(dim=-1))
         for k, e in (("fb", fb5), ("ct", ct5))}  # (S, P, T) each
 
 
-# %%
-def s5_at(p):
-    """``sec3.s5`` at grid point ``p`` and its ratio ball / limit of |x~| per seed."""
-    bx, bf = (np.array(v) for v in zip(*(F.theorem1_balls(L, float(g), 2) for g in gamma5[:, p])))
-    (fx, ff), (cx, cf) = ([e[:, p] for e in err5[k]] for k in ("fb", "ct"))
-    rx, rf = bx / fx[:, last_half].amax(-1).numpy(), bf / ff[:, last_half].amax(-1).numpy()
-    r = sec3.s5(ball_x=bx, ball_f=bf, feedback_x=fx[:, after_tr].amax(-1), feedback_f=ff[:, after_tr].amax(-1),
-                continuous_x=cx[:, after_tr].amax(-1), continuous_f=cf[:, after_tr].amax(-1), ratio_x=rx,
-                ratio_f=rf, L_sweep=L_sweep, limit_x=lim5[:, :, p].T,
-                ball_x_sweep=gamma5[None, :, p] / torch.tensor(L_sweep, dtype=torch.float64)[:, None],
-                conservative_ratio=conservative_ratio)
-    return r, rx
-
+# %% [markdown]
+# `sec3.s5` at each point (`why_sec3.s5_point`), and its ratio ball / limit of $\|\tilde x\|$ per seed.
 
 # %%
-results5 = [s5_at(p) for p in range(len(points5))]
+results5 = [why_sec3.s5_point(L=L, gamma=gamma5[:, p], x_feedback=err5["fb"][0][:, p], f_feedback=err5["fb"][1][:, p],
+                              x_continuous=err5["ct"][0][:, p], f_continuous=err5["ct"][1][:, p], limit_x=lim5[:, :, p],
+                              L_sweep=L_sweep, after_transient=after_tr, last_half=last_half,
+                              conservative_ratio=conservative_ratio) for p in range(len(points5))]
 holds5 = np.array([why_sec3.holds(r) for r, _ in results5]).reshape(len(s5_eps), len(s5_eta))
 ratio5 = np.array([float(np.min(rx)) for _, rx in results5]).reshape(holds5.shape)  # the smallest over seeds
 holds5
@@ -237,7 +202,7 @@ grid5 = W.WhyGrid(
          f"{conservative_ratio:g}x the measured limit, and the limit falling as L grows, in >= S-1 seeds)",
     numbers={"ratio_x_min_over_seeds": ratio5})
 fig, ax = F.new_figure()
-heat(ax, grid5, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
+plot_heat(ax, grid5, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
 fig_s5 = F.save_figure(fig, out, "why_s5")
 
 # %% [markdown]
@@ -249,20 +214,18 @@ fig_s5 = F.save_figure(fig, out, "why_s5")
 
 # %%
 res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
-systems8 = F.offset_spirals(residual_base, res_levels)
-x8 = F.simulate_levels(systems8, torch.tensor(x0), t).float()  # (12, T, 2)
+x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
 xs8 = F.stack_members(x8, S)
-f8 = torch.stack([s.rate(x) for s, x in zip(systems8, x8)])
 with torch.no_grad():
-    f8_nn = split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
 gains8 = torch.tensor(s8_L, dtype=torch.float64)
-f8_fb = split(F.observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
+f8_fb = ens.split(F.observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
 rate8_nn = F.rmse_over_time(f8_nn, f8.expand_as(f8_nn)).T  # (12, S)
 rate8_fb = F.rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
 
 # %%
-ms8_nn = F.n_step_errors(split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T  # (12, S)
-ms8_fb = F.n_step_errors(split(F.cascade_sweep(ens, xs8, Ts, N, F.Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
+ms8_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T  # (12, S)
+ms8_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xs8, Ts, N, F.Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
 holds8 = np.stack([why_sec3.s8_levels(rate_neural_ode=rate8_nn, rate_feedback=rate8_fb[:, g].T,
                                       err_N_neural_ode=ms8_nn, err_N_feedback=ms8_fb[:, g].T,
                                       offsets=res_levels) for g in range(len(s8_L))], axis=1)  # (12, G)
@@ -282,7 +245,7 @@ grid8 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid8, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
+plot_heat(ax, grid8, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
 zero = set(range(len(domega))) - set(sec3.residual_levels(res_levels, len(domega), "S8").tolist())
 ax.set_yticks(range(len(domega)), [f"{v:g}" + (" (zero residual)" if j in zero else "") for j, v in enumerate(domega)])
 for j in zero:
@@ -301,16 +264,10 @@ n_fine = round(s9_beta_max / min(s9_beta_steps))
 betas9 = torch.arange(n_fine + 1, dtype=torch.float64) * (s9_beta_max / n_fine)  # the finest grid; the others: every k-th
 gens = [F.make_generator(seed + s + 1) for s in seeds]
 unit9 = F.add_member_noise(x_test, 1.0, gens, draws=noise_draws) - xs_test  # (draws, T, 2S): unit noise per seed
-
-
-def rmse9(z, pool):
-    """The N-step RMSE per seed and beta, pooled over the axes ``pool``."""
-    return F.n_step_errors(split(z), x_test, N).pow(2).mean(pool).sqrt()
-
-
-clean9 = rmse9(F.cascade_sweep(ens, xs_test, Ts, N, F.Gains.sweep(L, betas9)), -1)  # (S, B)
-noisy9 = torch.stack([rmse9(F.cascade_sweep(ens, xs_test + std * unit9, Ts, N, F.Gains.sweep(L, betas9)), (2, 3))
-                      for std in s9_noise])  # (noise, S, B)
+clean9 = F.n_step_rmse(ens.split(F.cascade_sweep(ens, xs_test, Ts, N, F.Gains.sweep(L, betas9))), x_test, N)  # (S, B)
+noisy9 = torch.stack([F.n_step_rmse(ens.split(F.cascade_sweep(ens, xs_test + std * unit9, Ts, N,
+                                                              F.Gains.sweep(L, betas9))), x_test,
+                                    N, dim=(2, 3)) for std in s9_noise])  # (noise, S, B): the draws pooled
 
 # %%
 holds9 = np.zeros((len(s9_beta_steps), len(s9_noise)), bool)
@@ -334,7 +291,7 @@ grid9 = W.WhyGrid(
 
 # %%
 fig, ax = F.new_figure()
-heat(ax, grid9, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
+plot_heat(ax, grid9, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
 fig_s9 = F.save_figure(fig, out, "why_s9")
 holds9
 
@@ -347,35 +304,24 @@ holds9
 # unchanged (strict reading) at each point; the errors are computed once.
 
 # %%
-sw = F.SwitchedSystem([F.Spiral(*before), F.Spiral(*after)], [t_switch])
-x10 = sw.simulate(torch.tensor(x0), t)
-f10 = sw.rate(t, x10).float()
-x10 = x10.float()
+x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
 xs10 = F.stack_members(x10, S)
 est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 with torch.no_grad():
-    e10_nn = F.error_norm(split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
-e10 = {"x": (t, F.error_norm(split(est10.x_hat), x10.expand(S, -1, -1))),
-       "f": (t, F.error_norm(split(est10.f_hat), f10.expand(S, -1, -1))),
-       "multistep": (t[:-N], F.n_step_errors(split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), x10, N))}
+    e10_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
+e10 = {"x": (t, F.error_norm(ens.split(est10.x_hat), x10.expand(S, -1, -1))),
+       "f": (t, F.error_norm(ens.split(est10.f_hat), f10.expand(S, -1, -1))),
+       "multistep": (t[:-N], F.n_step_errors(ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), x10, N))}
 peak10 = {k: err[:, tt >= t_switch].amax(-1).tolist() for k, (tt, err) in e10.items()}
 
 
-# %%
-def s10_at(band_factor, settle):
-    """``sec3.s10`` (strict) with the band ``band_factor`` x the steady level and the window ``settle`` s."""
-    parts = {}
-    for k, (tt, err) in e10.items():
-        rows = [F.reconvergence(tt, e, t_switch, window=steady_window, band_factor=band_factor) for e in err]
-        parts[k] = {"band": [r["band"] for r in rows], "peak": peak10[k], "time": [r["time"] for r in rows]}
-    late = t >= t_switch + settle
-    return sec3.s10(state=parts["x"], rate=parts["f"], multistep=parts["multistep"],
-                    rate_err_after_feedback=e10["f"][1][:, late].mean(-1).tolist(),
-                    rate_err_after_neural_ode=e10_nn[:, late].mean(-1).tolist(), settle_threshold=settle)
-
+# %% [markdown]
+# `sec3.s10` (strict) at each band factor and settling window (`why_sec3.s10_point`).
 
 # %%
-holds10 = np.array([[why_sec3.holds(s10_at(b, s)) for s in s10_settle] for b in s10_band])
+holds10 = np.array([[why_sec3.holds(why_sec3.s10_point(errors=e10, rate_err_neural_ode=e10_nn, t=t, t_switch=t_switch,
+                                                       steady_window=steady_window, band_factor=b, settle=s))
+                     for s in s10_settle] for b in s10_band])
 grid10 = W.WhyGrid(
     axes=(W.Axis("band_factor", s10_band, "the band an error returns to is not given", ours=2.0),
           W.Axis("settle_threshold", s10_settle, "how quick 'quickly' is is not given", ours=0.5)),
@@ -385,8 +331,10 @@ grid10 = W.WhyGrid(
          "error then below the neural ODE's)",
     numbers={"peak_over_steady_x": (np.array(peak10["x"]) / np.array(
         [F.reconvergence(t, e, t_switch, window=steady_window, band_factor=1.0)["band"] for e in e10["x"][1]])).tolist()})
+
+# %%
 fig, ax = F.new_figure()
-heat(ax, grid10, f"S10 ({S} seeds): the strict reading per point")
+plot_heat(ax, grid10, f"S10 ({S} seeds): the strict reading per point")
 fig_s10 = F.save_figure(fig, out, "why_s10")
 holds10
 
@@ -414,8 +362,8 @@ sources = {"S3": ("spiral", grid3, fig_s3), "S5": ("theory", grid5, fig_s5), "S8
            "S9": ("ablations", grid9, fig_s9), "S10": ("ablations", grid10, fig_s10)}
 whys = []
 for cid, (task, grid, fig_path) in sources.items():
-    verdict, readings = profile_claim(task, cid)
-    whys.append(W.Why(cid, verdict, grids=(grid,), readings=readings, figure=fig_path, note=notes[cid]))
+    c = F.read_results(Path(upstream_dirs[task]) / "results.json").claim(cid)  # the claim's paper-profile result
+    whys.append(W.Why(cid, c.verdict, grids=(grid,), readings=c.reading_verdicts(), figure=fig_path, note=notes[cid]))
 W.write_whys(out, whys)
 
 # %% [markdown]
@@ -423,19 +371,8 @@ W.write_whys(out, whys)
 # give what the profile's counted reading gave.
 
 # %%
-def at_profile(grid):
-    """Whether the rule holds at the profile's point (every value of an axis without one); None if not on the grid."""
-    at = []
-    for a in grid.axes:
-        if a.ours is not None and a.ours not in a.values:
-            return None
-        at.append(slice(None) if a.ours is None else a.values.index(a.ours))
-    return bool(np.all(grid.holds[tuple(at)]))
-
-
-# %%
 for w in whys:  # the verdict is the counted reading's
-    on_grid = at_profile(w.grids[0])
+    on_grid = w.grids[0].holds_at_profile()
     where = "is off the grid" if on_grid is None else ("holds" if on_grid else "fails")
     same = "" if on_grid is None else (" (agrees)" if on_grid == (w.verdict == "reproduced") else " (DIFFERS)")
     print(f"{w.claim}: at the profile's point the rule {where}; the profile's verdict: {w.verdict}{same}")

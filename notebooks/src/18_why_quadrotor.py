@@ -34,8 +34,7 @@ from pathlib import Path
 import numpy as np
 
 import fnnlib as F
-from fnnbook.quadrotor_eval import at_gains
-from fnnbook.rules import quadrotor as rules
+from fnnbook.rules import why_quadrotor as WQ
 from fnnbook.why import Axis, AuthorsCheck, Why, WhyGrid, write_whys
 
 # %% [markdown]
@@ -64,29 +63,17 @@ print(f"{len(points)} thrust bounds {bounds} N x {len(costs)} costs; AdapNN gain
 # %% [markdown]
 # ## The rules at every point
 # At bound $u$, cost $c$, AdapNN gain $g$ and AdapFNN gain $\Gamma$, the seven models' RMSEs over the $S$ units go
-# into `rules_at_setting` (Q3 and Q4 see AdapNN at $g$, Q5 sees AdapFNN at $\Gamma$). A point **holds** when the
-# claim's rule reads *reproduced* there, per cost, as each cost is judged in the flight test.
+# into `rules_at_setting` (Q3 and Q4 see AdapNN at $g$, Q5 sees AdapFNN at $\Gamma$; `WQ.setting`). A point
+# **holds** when the claim's rule reads *reproduced* there, per cost, as each cost is judged in the flight test:
+# per claim and cost, the grid along AdapNN's gain (AdapFNN at the profile's $\Gamma$) for Q3 and Q4, along
+# $\Gamma$ (AdapNN at its chosen gain) for Q5 (`WQ.holds_along_gains`).
 
 # %% tags=["hide-input"]
-def setting(rec, c, g, G, units):
-    """The claims' results at one setting of one record (ours or the authors')."""
-    pick = lambda key: {n: at_gains(rec[c], n, g, G)[key] for n in (*rules.SIX, "AdapFNN")}  # noqa: E731
-    return rules.rules_at_setting(pick("rmse"), pick("acc"), at_gains(rec[c], "AdapFNN", g, G)["theorem2_inside"],
-                                  units=units, label=c)
-
-
-# %% [markdown]
-# Every point's results, then per claim and cost the grid of where they read *reproduced*: along AdapNN's gain
-# (AdapFNN at the profile's $\Gamma$) for Q3 and Q4, along $\Gamma$ (AdapNN at its chosen gain) for Q5.
-
-# %% tags=["hide-input"]
-profile_G = first["profile_Gamma"]
-res = {(p["u_max"], c, g, G): setting(p["ours"], c, g, G, p["units"])
+profile_G, profile_Ga = first["profile_Gamma"], first["profile_Gamma_adapnn"]  # the profile's gains (Ga: per cost)
+res = {(p["u_max"], c, g, G): WQ.setting(p["ours"], c, g, G, units=p["units"])
        for p in points for c in costs for g in Ga_grid for G in G_grid}
-holds = {q: {c: np.array([[(r := res[(u, c, g, G)][q]) is not None and r.verdict == "reproduced"
-                           for g, G in ([(g, profile_G) for g in Ga_grid] if q != "Q5" else
-                                        [(first["profile_Gamma_adapnn"][c], G) for G in G_grid])]
-                          for u in bounds]) for c in costs} for q in ("Q3", "Q4", "Q5")}
+holds = {q: {c: WQ.holds_along_gains(res, q, c, bounds=bounds, adapnn_grid=Ga_grid, Gamma_grid=G_grid,
+                                     adapnn_gamma=profile_Ga[c], Gamma=profile_G) for c in costs} for q in WQ.CLAIMS}
 for q, by_cost in holds.items():
     for c, h in by_cost.items():
         print(f"{q} {c}: holds at {int(h.sum())} of {h.size} points, feasible or not")
@@ -97,17 +84,12 @@ for q, by_cost in holds.items():
 # grids, and the share of the units each failing comparison wins.
 
 # %% tags=["hide-input"]
-def at_profile(u, c):
-    return res[(u, c, first["profile_Gamma_adapnn"][c], profile_G)]
-
-
-failing = {q: {c: {str(u): [k.split(": ", 1)[1] for k, v in (at_profile(u, c)[q].checks.items()
-                                                           if at_profile(u, c)[q] is not None else [("x: Theorem 2", False)])
-                            if not v] for u in bounds} for c in costs} for q in ("Q3", "Q4", "Q5")}
+at_profile = {(u, c): res[(u, c, profile_Ga[c], profile_G)] for u in bounds for c in costs}
+failing = {q: {c: {str(u): WQ.failing_checks(at_profile[(u, c)][q]) for u in bounds} for c in costs} for q in WQ.CLAIMS}
 for q in failing:
     for c in costs:
         print(f"{q} {c}: " + "; ".join(f"{u} N: {', '.join(f) or 'none'}" for u, f in failing[q][c].items()))
-means = {c: {str(u): {n: float(np.mean(v)) for n, v in at_profile(u, c)["Q3"].numbers["mean"].items()}
+means = {c: {str(u): {n: float(np.mean(v)) for n, v in at_profile[(u, c)]["Q3"].numbers["mean"].items()}
              for u in bounds} for c in costs}
 ratio = {c: {str(p["u_max"]): {str(G): float(np.mean(np.divide(p["ours"][c]["AdapFNN"][str(G)]["rmse"],
                                                               p["ours"][c]["FNN"]["rmse"]))) for G in G_grid}
@@ -124,13 +106,6 @@ print("mean AdapFNN / FNN RMSE by bound and Gamma: " + json.dumps(ratio))
 COST_TEXT = {"as_written": "Eq. (28) as written (R = I)", "as_flown": "Eq. (28) as the release flies it"}
 U = Axis("u_max", tuple(bounds), "the thrust bound: the paper states 4 N, its release flies 6 N",
          paper=first["paper_u_max"], ours=first["u_max_judged"])
-
-
-def gain_axis(q, c):
-    if q == "Q5":
-        return Axis("Gamma", tuple(G_grid), "AdapFNN's adaptation gain of Eq. (30) is not stated", ours=profile_G)
-    return Axis("Gamma_adapnn", tuple(Ga_grid), "AdapNN's gain: 'adjusted for optimal performance', no value",
-                ours=first["profile_Gamma_adapnn"][c])
 
 
 # %% [markdown]
@@ -157,14 +132,16 @@ RULE = {"Q3": "FNN paired-beats each of the other five and Neural beats Nomi and
         "Q4": "FNN's first-step acceleration error paired-beats each of the other five (q4_prediction reads reproduced)",
         "Q5": "AdapFNN within 25 % of FNN in >= S - 1 of S units and its mean RMSE >= FNN's (q5_adaptive, strict "
               "reading, reads reproduced)"}
-grids = {q: tuple(WhyGrid(axes=(U, gain_axis(q, c)), holds=holds[q][c], n=S, rule=f"{COST_TEXT[c]}: {RULE[q]}",
+gain_axes = {(q, c): WQ.gain_axis(q, adapnn_grid=Ga_grid, Gamma_grid=G_grid, adapnn_gamma=profile_Ga[c], Gamma=profile_G)
+             for q in WQ.CLAIMS for c in costs}
+grids = {q: tuple(WhyGrid(axes=(U, gain_axes[(q, c)]), holds=holds[q][c], n=S, rule=f"{COST_TEXT[c]}: {RULE[q]}",
                           title=c.replace("_", " "), unit="unit (networks of one ensemble)",
                           feasible=np.broadcast_to(feasible_bound[:, None], holds[q][c].shape).copy(),
                           infeasible=INFEASIBLE,
                           numbers={"failing_checks_at_profile_gains": failing[q][c],
                                    "mean_rmse_at_profile_gains": means[c], "adapfnn_over_fnn": ratio[c],
                                    "thrust_needed_peak_N": need, "bound_too_small": [u < need for u in bounds]})
-                  for c in costs) for q in ("Q3", "Q4", "Q5")}
+                  for c in costs) for q in WQ.CLAIMS}
 
 # %% [markdown]
 # ## The authors' networks
@@ -173,16 +150,8 @@ grids = {q: tuple(WhyGrid(axes=(U, gain_axis(q, c)), holds=holds[q][c], n=S, rul
 # same rule on our networks at the same setting (the profile's verdict).
 
 # %% tags=["hide-input"]
-def joined(rec, units, q):
-    """Claim ``q``'s verdict and checks over both costs at the profile's gains (`joined_verdict`)."""
-    return rules.joined_verdict([setting(rec, c, first["profile_Gamma_adapnn"][c], profile_G, units)[q]
-                                 for c in costs])
-
-
-judged = next((p for p in points if p["u_max"] == first["u_max_judged"]), None)
-
-# %% [markdown]
-# Their verdict beside ours, per claim, with the checks that fail with their networks.
+judged = next((p for p in points if p["u_max"] == first["u_max_judged"]), None)  # the profile's bound's record
+at = dict(costs=costs, adapnn_gamma=profile_Ga, Gamma=profile_G)  # the profile's gains
 
 # %% tags=["hide-input"]
 authors = {}
@@ -190,9 +159,9 @@ if judged is None or judged["authors"] is None:
     print("authors' networks: not evaluated (no release in data_dir, or the profile's bound not on the grid)")
 else:
     a = judged["authors"]
-    for q in ("Q3", "Q4", "Q5"):
-        verdict, checks = joined(a, a["units"], q)
-        ours_verdict, _ = joined(judged["ours"], judged["units"], q)
+    for q in WQ.CLAIMS:  # each claim over both costs at the profile's gains, as the flight test joins them
+        verdict, checks = WQ.joined_at(a, q, units=a["units"], **at)
+        ours_verdict, _ = WQ.joined_at(judged["ours"], q, units=judged["units"], **at)
         authors[q] = AuthorsCheck(verdict=verdict, ours=ours_verdict, checks=checks, n=S,
                                   shared=f"the {S} units share the release's 2 MLPs: 2 independent MLPs",
                                   networks=f"the {S} residual runs of learning_NODE (epoch 50) and the 2 MLPs of "
@@ -207,7 +176,7 @@ else:
 # the star is the paper profile's point.
 
 # %% tags=["hide-input"]
-def grid_panel(ax, q, g):
+def plot_grid_panel(ax, q, g):
     """One grid of claim ``q`` (thrust bound x gain) as cells that hold or fail, the bound needed, the profile."""
     u, gain = g.axes
     ax.imshow(g.holds.T.astype(float), origin="lower", cmap="Greens", vmin=0, vmax=1.5, aspect="auto")
@@ -224,58 +193,50 @@ def grid_panel(ax, q, g):
     ax.legend(fontsize=6, loc="upper left")
 
 
-# %% [markdown]
-# A claim's figure: its grid under each cost side by side.
-
 # %% tags=["hide-input"]
-def grid_figure(q):
+def plot_claim(q):
+    """Claim ``q``'s figure: its grid under each cost side by side."""
     fig, axes = F.new_figure(1, len(costs))
     for ax, g in zip(np.ravel(axes), grids[q]):
-        grid_panel(ax, q, g)
+        plot_grid_panel(ax, q, g)
     return F.save_figure(fig, out, f"why_{q.lower()}")
 
 
-figures = {q: grid_figure(q) for q in grids}
+# %% tags=["hide-input"]
+figures = {q: plot_claim(q) for q in grids}
 
 # %% [markdown]
 # ## The whys
 # The causes and the one-line summary are computed by `fnnbook.why` from the grids, the authors' check and the
 # profile's readings; nothing here names them by hand.
 
-# %% tags=["hide-input"]
-def mean_of(rec, c, n):
-    """The mean RMSE over the units at the profile's gains (AdapNN at its chosen gain, AdapFNN at Gamma)."""
-    return float(np.mean(at_gains(rec[c], n, first["profile_Gamma_adapnn"][c], profile_G)["rmse"]))
-
-
-def compare(names):
-    """Mean RMSE of ``names`` at the profile's point per cost, ours and (where flown) the authors'."""
-    recs = {"ours": judged["ours"]} | ({"the authors'": judged["authors"]} if authors else {})
-    return "; ".join(f"{who}, {c}: " + ", ".join(f"{n} {mean_of(rec, c, n):.3f} m" for n in names)
-                     for who, rec in recs.items() for c in costs)
-
-
 # %% [markdown]
-# Each why's note: the models the claim compares at the profile's point, what the thrust bound does and, where
-# the authors' networks flew, how they were paired with the units.
+# Each why's note: the models the claim compares at the profile's point (their mean RMSE over the units,
+# `WQ.mean_rmse`), what the thrust bound does and, where the authors' networks flew, how they were paired with
+# the units.
 
 # %% tags=["hide-input"]
+recs = {"ours": judged["ours"]} | ({"the authors'": judged["authors"]} if authors else {})
+compare = {names: "; ".join(f"{who}, {c}: " + ", ".join(
+    f"{n} {WQ.mean_rmse(rec, c, n, profile_Ga[c], profile_G):.3f} m" for n in names)
+    for who, rec in recs.items() for c in costs) for names in (("Neural", "MLP"), ("FNN", "AdapFNN"))}
 THRUST = (f"Bounds below the {need:.2f} N per motor the test vehicle needs at the reference's peak (the paper's "
           f"own {first['paper_u_max']:g} N among them) cannot follow the Lissajous curve: FNN's mean RMSE, "
-          + ", ".join(f"{c}: {mean_of(first['ours'], c, 'FNN'):.3f} m at {bounds[0]:g} N against "
-                      f"{mean_of(judged['ours'], c, 'FNN'):.3f} m at {judged['u_max']:g} N" for c in costs) + ".")
+          + ", ".join(f"{c}: {WQ.mean_rmse(first['ours'], c, 'FNN', profile_Ga[c], profile_G):.3f} m at {bounds[0]:g} N "
+                      f"against {WQ.mean_rmse(judged['ours'], c, 'FNN', profile_Ga[c], profile_G):.3f} m at "
+                      f"{judged['u_max']:g} N" for c in costs) + ".")
 AUTH = (" The authors' AdapNN adapts at the gain chosen on validation with our network, and unit k flies the "
         "release's MLP k mod 2 (it has two)." if authors else "")
-notes = {"Q3": f"Neural against MLP at the profile's point: {compare(['Neural', 'MLP'])}.",
+notes = {"Q3": f"Neural against MLP at the profile's point: {compare[('Neural', 'MLP')]}.",
          "Q4": f"AdapNN's gain chosen on validation flights: {first['profile_Gamma_adapnn']}.",
-         "Q5": f"FNN against AdapFNN at the profile's point: {compare(['FNN', 'AdapFNN'])}."}
+         "Q5": f"FNN against AdapFNN at the profile's point: {compare[('FNN', 'AdapFNN')]}."}
 
 # %% [markdown]
 # The whys, written to `whys.json`, with the causes `fnnbook.why` finds.
 
 # %% tags=["hide-input"]
 whys = []
-for q in ("Q3", "Q4", "Q5"):
+for q in WQ.CLAIMS:
     c = profile_result.claim(q)
     whys.append(Why(q, c.verdict, grids=grids[q], authors=authors.get(q), readings=c.reading_verdicts(),
                     figure=figures[q], note=f"{notes[q]} {THRUST}{AUTH}"))

@@ -81,3 +81,14 @@ def test_continuous_observer_of_every_member_in_one_integration() -> None:
         torch.testing.assert_close(F.split_members(est.f_hat, 2)[e], est_e.f_hat, rtol=1e-6, atol=1e-6)
     with pytest.raises(ValueError, match="E >= 1"):
         F.StackedSystem(spiral, 0)
+
+
+def test_split_puts_each_members_own_states_first() -> None:
+    """``ens.split`` undoes ``stack_members`` per member: member e's slice of a stacked (..., E n) tensor."""
+    ens = F.NeuralODEEnsemble(2, [4], "tanh", [0, 1, 2])
+    z = torch.arange(2 * 5 * 6, dtype=torch.float64).reshape(2, 5, 6)  # (..., E n), E = 3, n = 2
+    out = ens.split(z)
+    assert out.shape == (3, 2, 5, 2)
+    for e in range(3):
+        torch.testing.assert_close(out[e], z[..., 2 * e:2 * e + 2])
+    torch.testing.assert_close(ens.split(F.stack_members(z[..., :2], 3)), z[..., :2].expand(3, 2, 5, 2))

@@ -21,6 +21,16 @@ def letters(**kw) -> str:
     return "".join(c.letter for c in causes(**kw))
 
 
+def test_the_profile_point_is_read_at_each_axis_ours_and_across_an_axis_without_one() -> None:
+    assert grid([False, False, True, False]).holds_at_profile() is True  # noise 0.01: index 2
+    assert grid([True, True, False, True]).holds_at_profile() is False
+    levels = Axis("level", (-1, 0, 1), "the levels (stated)", paper=(-1, 0, 1))  # no ours: every level
+    two = grid(np.array([[True, True], [True, False], [True, True]]), axes=(levels, STATED))
+    assert two.holds_at_profile() is False  # at N = 20, level 0 fails
+    off = Axis("beta", (0.1, 0.2), "the decay is not given", ours=0.3)
+    assert grid([True, True], axes=(off,)).holds_at_profile() is None
+
+
 def test_a_threshold_along_an_open_axis_reads_as_a_range_and_cause_b() -> None:
     g = grid([True, True, False, False])
     assert summary([g]) == "holds for noise_std <= 0.003, fails at 0.01 and above (5 seeds per point)"

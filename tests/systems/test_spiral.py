@@ -123,3 +123,24 @@ def test_noise_has_the_requested_std():
 def test_parameters_are_required():
     with pytest.raises(TypeError):
         Spiral()  # no silent nominal spiral
+
+
+def test_batched_spirals_run_spiral_p_on_row_p_for_every_copy():
+    """Row p, copy e of the batched field is Eq. (26) of spiral p at that copy's state; a run of the batch is
+    each spiral's own run (its closed form)."""
+    from fnnlib import BatchedSpirals
+
+    spirals = [Spiral(**p) for p in PARAMS]
+    batch = BatchedSpirals(spirals, 2)
+    x = torch.randn(3, 4, dtype=torch.float64)
+    dx = batch(0.0, x)
+    for p, s in enumerate(spirals):
+        for e in range(2):
+            torch.testing.assert_close(dx[p, 2 * e:2 * e + 2], s(0.0, x[p:p + 1, 2 * e:2 * e + 2])[0])
+    t = torch.linspace(0.0, 2.0, 21, dtype=torch.float64)
+    x0 = torch.tensor([[9.0, 0.0, 1.0, -2.0]] * 3, dtype=torch.float64)
+    run = batch.simulate(x0, t)  # (P, T, 4)
+    for p, s in enumerate(spirals):
+        torch.testing.assert_close(run[p, :, 2:], s.exact_solution(x0[p, 2:], t), rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="one batch row per spiral"):
+        batch(0.0, x[:2])
