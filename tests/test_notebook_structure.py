@@ -43,12 +43,8 @@ PENDING: dict[str, set[str]] = {
                       "spiral_predictions", "spiral_run"},
     "10_tuned_gains": {"o1_loss", "bottle_tuning_throws", "bottle_hand", "bottle_tune",
                        "o1_errors", "fnn_flight", "quad_hand", "quad_tune", "flight_summary"},
-    "14_why_feedback": {"ensemble", "levels_won", "counted", "d2_settled", "measured", "points_along", "axis_grid",
-                        "authors_networks", "authors_checks", "window_grid", "release_curves", "curves_grid",
-                        "d4_at_usage", "usage_grid", "curves_of", "why_figure"},
     "15_why_bottle": {"o1_errors", "judged"},
     "16_why_beyond": {"tuned_on", "test_errors", "b2_at", "readings_of"},
-    "17_why_quadrotor_point": {"fly_adapfnn", "fly_set", "authors_networks"},
     "19_cascaded_tanks": {"mean_err"},
     "20_why_tanks": {"b4_at", "b6_at", "holds"},
 }
