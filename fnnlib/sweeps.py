@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import Tensor
 
-from fnnlib.models.ensemble import NeuralODEEnsemble
+from fnnlib.feedback.tuning import GainSweep, TunedGains
+from fnnlib.feedback.types import VectorField
+from fnnlib.metrics import ahead_position_errors, ahead_position_loss
+from fnnlib.models.ensemble import NeuralODEEnsemble, stack_members
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
 from fnnlib.systems.switched import SwitchedSystem
@@ -141,6 +145,45 @@ def sweep_errors(ensemble: NeuralODEEnsemble, z: Tensor, truth: Tensor, Ts: floa
     from fnnlib.feedback.cascade import cascade_sweep  # noqa: PLC0415 (the sweeps need no cascade to import)
 
     return n_step_errors(ensemble.split(cascade_sweep(ensemble, z, Ts, N, L, beta)), truth, N).mean(-1)
+
+
+def cascade_position_errors(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor,
+                            beta: float = 0.0) -> Tensor:
+    """O1's error (Sec. 5.1) of the N-step cascade (Eq. (11), gain ``L``, decay ``beta``; ``L = 0`` is the open-loop
+    Euler rollout) on the trajectories ``x`` (K, T, n): each one's mean position error N samples ahead over every
+    start (:func:`fnnlib.metrics.ahead_position_errors`), shape (K,); with a :class:`NeuralODEEnsemble` ``f``
+    every member's on the same measurements, (E, K). The cascade is causal: it runs on the first T - N rows."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415 (the sweeps need no cascade to import)
+
+    if isinstance(f, NeuralODEEnsemble):
+        return ahead_position_errors(f.split(cascade_predict(f, stack_members(x, f.size)[:, :-N], Ts, N, L, beta)),
+                                     x, N)
+    return ahead_position_errors(cascade_predict(f, x[:, :-N], Ts, N, L, beta), x, N)
+
+
+def position_gain_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L_grid: Sequence[float],
+                        beta_grid: Sequence[float]) -> GainSweep:
+    """Gains tuned by hand on O1's error (B1): the (L, beta) of the grid whose N-step cascade (Eq. (11)) has the
+    lowest mean position error N samples ahead (:func:`fnnlib.metrics.ahead_position_loss`) on the trajectories
+    ``x`` (K, T, n) (:func:`fnnlib.feedback.sweep_gains`)."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415
+    from fnnlib.feedback.tuning import sweep_gains  # noqa: PLC0415
+
+    def cost(L: float, beta: float) -> float:
+        with torch.no_grad():
+            return float(ahead_position_loss(x, cascade_predict(f, x[..., :-N, :], Ts, N, L, beta), N))
+    return sweep_gains(cost, L_grid, beta_grid)
+
+
+def position_gain_tuning(f: VectorField, x: Tensor, Ts: float, N: int, *, L0: Any, beta0: float, iterations: int,
+                         lr: float) -> TunedGains:
+    """Gains tuned by gradient on O1's error (B1): :func:`fnnlib.feedback.tune_gains` from ``(L0, beta0)`` with the
+    mean position error N samples ahead of the cascade on the trajectories ``x`` as its objective."""
+    from fnnlib.feedback.tuning import cascade_forward, tune_gains  # noqa: PLC0415
+
+    def objective(gains, x_, u, mask):  # the judged metric on the tuning trajectories, differentiable in the gains
+        return ahead_position_loss(x_, cascade_forward(f, x_, Ts, N, gains, rows=x_.shape[-2] - N), N)
+    return tune_gains(f, x, Ts, N, L0=L0, beta0=beta0, objective=objective, iterations=iterations, lr=lr)
 
 
 def outward_increase_fraction(err: Tensor, center: int) -> Tensor:

@@ -41,10 +41,6 @@ PENDING: dict[str, set[str]] = {
     "08_quadrotor_mpc": {"make_qp", "merged", "at_paper"},
     "09_own_system": {"hand_sweep", "pendulum_data", "pendulum_model", "pendulum_predictions", "pendulum_run",
                       "spiral_predictions", "spiral_run"},
-    "10_tuned_gains": {"o1_loss", "bottle_tuning_throws", "bottle_hand", "bottle_tune",
-                       "o1_errors", "fnn_flight", "quad_hand", "quad_tune", "flight_summary"},
-    "15_why_bottle": {"o1_errors", "judged"},
-    "16_why_beyond": {"tuned_on", "test_errors", "b2_at", "readings_of"},
     "19_cascaded_tanks": {"mean_err"},
     "20_why_tanks": {"b4_at", "b6_at", "holds"},
 }
