@@ -68,6 +68,7 @@ test: venv
 # Rebuild notebooks/NN_<name>.ipynb from its source notebooks/src/NN_<name>.py (jupytext's percent format),
 # keeping the cell ids; tests/test_notebook_sources.py checks that the committed notebooks match.
 notebooks: venv
+	$(VENV)/bin/python tools/write_parameters_cells.py   # each parameters cell from its settings in fnnbook/tasks
 	for f in notebooks/src/*.py; do $(VENV)/bin/jupytext --update --set-kernel python3 --to ipynb \
 		-o "notebooks/$$(basename "$${f%.py}").ipynb" "$$f" || exit 1; done
 

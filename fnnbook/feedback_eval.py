@@ -91,7 +91,7 @@ def _trajectories(make: Callable[..., Any], params: Tensor, x0: Tensor, t: Tenso
 
 
 def evaluation_setup(p: Mapping[str, Any], make: Callable[..., Any] = F.Spiral) -> EvaluationSetup:
-    """The evaluation of the neural_feedback notebook from its parameters ``p`` (its presets: ``x0``, ``nominal``,
+    """The evaluation of the neural_feedback notebook from its parameters ``p`` (its settings: ``x0``, ``nominal``,
     ``n_samples``, ``Ts``, ``N``, ``residual_base``, the residual and training ranges, ``heldout_flip``,
     ``heldout_min_distance``), with systems made by ``make``."""
     t = torch.arange(p["n_samples"], dtype=torch.float64) * p["Ts"]

@@ -2,12 +2,13 @@
 
 Each notebook has one code cell tagged ``parameters`` that holds plain
 literal assignments (``seed = 0``, ``hidden = [50, 50]``).  Those are the
-names a task may set, and their values fix the types it may pass.  A value
-the paper shares between notebooks is written once, in a preset: the cell
-says ``L = None`` and the runner fills in the preset
-(:data:`fnnbook.settings.NOTEBOOK_PRESETS`), whose type then applies.  The
-runner also injects ``profile`` and ``out_dir`` (always), ``data_dir`` and
-``upstream_dirs`` (where declared).
+names a task may set, and their values fix the types it may pass.  A
+notebook of the book has its settings in one home, the frozen dataclass of
+its module in :mod:`fnnbook.tasks`: the runner takes the names and paper
+values from there (:func:`task_defaults`), and its cell lists the same
+values, written from the dataclass by :func:`parameters_cell` (``make
+notebooks``).  The runner also injects ``profile`` and ``out_dir``
+(always), ``data_dir`` and ``upstream_dirs`` (where declared).
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from fnnbook.spec import PipelineError, PipelineSpec, Task
+from fnnbook.tasks import notebook_name, settings_class
 
-__all__ = ["FINGERPRINT_FILE", "INJECTED", "check_task_parameters", "read_parameters", "resolve_parameters",
-           "upstream_parameters"]
+__all__ = ["FINGERPRINT_FILE", "INJECTED", "SETTINGS_MARK", "check_task_parameters", "parameters_cell",
+           "read_parameters", "resolve_parameters", "task_defaults", "upstream_parameters"]
 
 INJECTED = ("profile", "out_dir", "data_dir", "upstream_dirs")
 #: the record the runner writes beside a task's products: its fingerprint and the parameters it ran with
@@ -94,15 +96,29 @@ def read_parameters(notebook: str | os.PathLike[str]) -> dict[str, Any]:
     return defaults
 
 
-def _presets(task: Task) -> dict[str, Any]:
-    """The paper presets of a task's notebook ({} for a notebook that is not one of the book's)."""
-    from fnnbook.settings import notebook_name, notebook_presets  # noqa: PLC0415 (loads torch: not in workers)
-
+def _book(task: Task) -> str | None:
+    """The name of the book's notebook a task runs (None for a notebook of your own)."""
     try:
-        name = notebook_name(task.notebook)
+        return notebook_name(task.notebook)
     except ValueError as exc:
         raise PipelineError(f"task {task.name!r}: {exc}") from exc
-    return {} if name is None else notebook_presets(name)
+
+
+def task_defaults(task: Task, declared: Mapping[str, Any]) -> dict[str, Any]:
+    """The names a task may set and their defaults: for a notebook of the book, the injected names its cell
+    declares and every setting of its dataclass with its paper value (:mod:`fnnbook.tasks`); for another
+    notebook, its ``parameters`` cell (``declared``, from :func:`read_parameters`).
+
+    Raises
+    ------
+    PipelineError
+        If the notebook imports a settings module that is not one of the book's.
+    """
+    name = _book(task)
+    if name is None:
+        return dict(declared)
+    injected = {k: v for k, v in declared.items() if k in INJECTED}
+    return {**injected, **settings_class(name).defaults()}  # loads the library (torch): not in the workers
 
 
 def _type_ok(default: Any, value: Any) -> bool:
@@ -133,8 +149,8 @@ def _type_name(value: Any) -> str:
 def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any]) -> None:
     """Check one task's parameters for one profile against its notebook's defaults.
 
-    Types: a ``None`` default of a preset parameter takes the preset's type, any other ``None`` default
-    accepts anything; a float default accepts int
+    Names and defaults: :func:`task_defaults` (a notebook of the book: its settings dataclass). Types: a
+    ``None`` default accepts anything; a float default accepts int
     or float; a bool is accepted only where the default is a bool; a list
     (or tuple) default accepts a list whose every element passes this rule
     against some element of the default (an empty default accepts any
@@ -166,22 +182,23 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
     if profile not in task.parameters:
         raise PipelineError(f"task {task.name!r} has no parameters for profile {profile!r} "
                             f"(it has: {', '.join(task.parameters)})")
-    choices = [n for n in declared if n not in INJECTED]
-    presets = _presets(task)
+    defaults = task_defaults(task, declared)
+    choices = [n for n in defaults if n not in INJECTED]
     for name, value in task.parameters[profile].items():
         where = f"task {task.name!r}, profile {profile!r}, parameter {name!r}"
         if name in INJECTED:
             raise PipelineError(f"{where}: {name!r} is injected by the runner; "
                                 "remove it from pipeline.yaml")
-        if name not in declared:
+        if name not in defaults:
             close = difflib.get_close_matches(name, choices, n=3)
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-            raise PipelineError(f"{where}: not declared in the parameters cell of {nb}{hint}")
-        default = presets.get(name) if declared[name] is None else declared[name]
+            book = _book(task)
+            home = "the parameters cell" if book is None else f"the settings of fnnbook.tasks.{book}"
+            raise PipelineError(f"{where}: not declared in {home} of {nb}{hint}")
+        default = defaults[name]
         if not _type_ok(default, value):
-            source = "paper preset" if declared[name] is None else "default"
             raise PipelineError(f"{where}: got {_type_name(value)} {value!r}, but the notebook's "
-                                f"{source} is {_type_name(default)} {default!r}")
+                                f"default is {_type_name(default)} {default!r}")
     for name in INJECTED:
         if name in declared and declared[name] is not None:
             expected: Any = {} if name == "upstream_dirs" else ""
@@ -201,9 +218,8 @@ def resolve_parameters(
 ) -> dict[str, Any]:
     """Return the parameters papermill injects into ``task``'s notebook.
 
-    Every default of the notebook's parameters cell (a ``None`` default of a
-    preset parameter filled with its paper value,
-    :data:`fnnbook.settings.NOTEBOOK_PRESETS`), updated by the task's
+    Every default of the notebook (:func:`task_defaults`: a notebook of the
+    book's every paper value, from its settings dataclass), updated by the task's
     profile overrides (so the executed notebook shows every value the run
     used), plus ``profile``, ``out_dir``, and where
     the notebook declares them ``data_dir`` (a string) and ``upstream_dirs``
@@ -216,8 +232,7 @@ def resolve_parameters(
         If the notebook declares ``data_dir`` and the pipeline has none, or
         it does not exist.
     """
-    params: dict[str, Any] = {k: v for k, v in declared.items() if k not in INJECTED}
-    params.update((k, v) for k, v in _presets(task).items() if params.get(k) is None)
+    params: dict[str, Any] = {k: v for k, v in task_defaults(task, declared).items() if k not in INJECTED}
     params.update(task.parameters[profile])
     params["profile"] = spec.home(profile, task.name)  # a task inherited from the paper profile runs as there
     params["out_dir"] = str(out_dir)
@@ -251,3 +266,55 @@ def upstream_parameters(upstream_dir: str | os.PathLike[str]) -> dict[str, Any]:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise PipelineError(f"{path}: no run record with the upstream task's parameters ({exc}); run the "
                             "upstream task with fnn-pipeline first") from exc
+
+
+# ---------------------------------------------------------------- the cell, written from the dataclass
+#: the comment line of a ``parameters`` cell below which the settings are written from the dataclass
+SETTINGS_MARK = "# the settings and their paper values, from fnnbook.tasks.{name} (written by `make notebooks`)"
+
+
+def _literal(value: Any) -> str:
+    """A plain value as Python source: strings in double quotes."""
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_literal(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_literal(k)}: {_literal(v)}" for k, v in value.items()) + "}"
+    return repr(value)
+
+
+def _assignment(name: str, value: Any, width: int = 115) -> list[str]:
+    """``name = value``, a long list wrapped after its commas, its later lines under its first element."""
+    line = f"{name} = {_literal(value)}"
+    if len(line) <= width or not isinstance(value, list):
+        return [line]
+    lines, indent = [f"{name} = ["], " " * (len(name) + 4)
+    for i, v in enumerate(value):
+        item = _literal(v) + ("]" if i == len(value) - 1 else ",")
+        if len(lines[-1]) + 1 + len(item) > width and not lines[-1].endswith("["):
+            lines.append(indent + item)
+        else:
+            lines[-1] += ("" if lines[-1].endswith("[") else " ") + item
+    return lines
+
+
+def parameters_cell(notebook: str, cell: str) -> str:
+    """A notebook's ``parameters`` cell with its settings written from its dataclass, one line a setting.
+
+    ``cell`` is the cell as it is: its lines above :data:`SETTINGS_MARK` (the names the runner injects:
+    ``profile``, ``out_dir``, ``data_dir``, ``upstream_dirs``) are kept; the mark and the paper values follow.
+    """
+    settings = settings_class(notebook)
+    mark = SETTINGS_MARK.format(name=settings.notebook)
+    kept = cell.split(mark)[0].rstrip("\n").splitlines()
+    if mark not in cell:  # a cell not yet written: keep its assignments of the injected names
+        kept = []
+        for stmt in ast.parse(cell).body:
+            target = stmt.targets[0] if isinstance(stmt, ast.Assign) else getattr(stmt, "target", None)
+            if isinstance(target, ast.Name) and target.id in INJECTED:
+                kept.append(ast.get_source_segment(cell, stmt) or "")
+    lines = [*kept, mark]
+    for setting, value in settings.defaults().items():
+        lines += _assignment(setting, value)
+    return "\n".join(lines) + "\n"

@@ -1,6 +1,6 @@
 """The checks ``fnn-pipeline check`` (and the start of ``run``) adds to the parameter types: before any work.
 
-Per task: its notebook's own value checks (:func:`fnnbook.settings.check_notebook_settings`, the data files'
+Per task: its notebook's own value checks (its settings dataclass in :mod:`fnnbook.tasks`, the data files'
 SHA-256 included), and the grid rule: a task that lists a grid task upstream gets every grid point's folder
 in ``upstream_dirs`` (keyed by point name), so only an aggregate step, one that reads them all, may; a
 notebook that reads the grid by its own name (``upstream_dirs["spiral"]``) is refused.
@@ -52,7 +52,8 @@ def check_grid_upstream(spec: PipelineSpec, task: Task, declared: Mapping[str, A
 
 
 def check_task_values(task: Task, profile: str, params: Mapping[str, Any]) -> str:
-    """Run the notebook's own value checks on the resolved parameters (none for a notebook not of the book).
+    """Make the notebook's settings dataclass from the resolved parameters, which checks them (none for a notebook
+    not of the book).
 
     Returns "" or, when only its data files are missing, why it cannot run.
 
@@ -61,7 +62,9 @@ def check_task_values(task: Task, profile: str, params: Mapping[str, Any]) -> st
     PipelineError
         Naming task, profile and the bad value (or the data file whose SHA-256 is not the pinned one).
     """
-    from fnnbook.settings import MissingDataError, check_notebook_settings, notebook_name  # noqa: PLC0415 (torch)
+    from fnnbook.params import INJECTED  # noqa: PLC0415
+    from fnnbook.tasks import notebook_name, settings_class  # noqa: PLC0415
+    from fnnlib.checks import MissingDataError  # noqa: PLC0415 (loads torch)
     from fnnlib.data.bottle import DataError  # noqa: PLC0415
 
     where = f"task {task.name!r}, profile {profile!r}"
@@ -69,7 +72,8 @@ def check_task_values(task: Task, profile: str, params: Mapping[str, Any]) -> st
         name = notebook_name(task.notebook)
         if name is None:
             return ""
-        check_notebook_settings(name, {k: v for k, v in params.items() if k not in ("out_dir", "upstream_dirs")})
+        settings_class(name).from_mapping({k: v for k, v in params.items() if k not in INJECTED},
+                                          data_dir=params.get("data_dir"))
     except MissingDataError as exc:
         return str(exc)
     except (ValueError, TypeError, DataError) as exc:

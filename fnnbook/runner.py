@@ -70,7 +70,7 @@ def check(
     ------
     PipelineError
         On the first invalid task, parameter (name, type, or a value the
-        notebook's checks in :func:`fnnbook.settings.check_notebook_settings` refuse, a grid upstream of a
+        notebook's settings dataclass in :mod:`fnnbook.tasks` refuses, a grid upstream of a
         task that is not an aggregate step, a data file that is not the published one),
         claim ID or data folder. Missing data files are not an error: the
         plan lists them in ``missing_data``.

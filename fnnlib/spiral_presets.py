@@ -1,9 +1,8 @@
 """The paper's Sec. 3-4 settings (the spiral of Eq. (26), App. A.3 and A.7, the authors' release), each written once.
 
 The Sec. 3 and Sec. 4 notebooks (spiral, theory, ablations, observers, neural feedback, and the spiral part of
-"Your own system") share these values. Their ``parameters`` cells leave a shared value at ``None``; the runner
-(and the notebook's settings check, for a notebook run by hand) fills it from here through the book's table of
-presets (``fnnbook.settings``), so a task's profile may still override it. The Sec. 5 values live in
+"Your own system") share these values: their settings dataclasses (``fnnbook.tasks``) take their paper values
+from here, and a task's profile may still override them. The Sec. 5 values live in
 :mod:`fnnlib.quadrotor_presets`; the training recipes in :mod:`fnnlib.training` (``PAPER_SPIRAL_RECIPE``,
 ``PAPER_BOTTLE_RECIPE``).
 

@@ -30,12 +30,15 @@ def test_source_notebook_has_no_outputs(src: Path) -> None:
 
 @pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
 def test_settings_are_checked_right_after_the_parameters_cell(src: Path) -> None:
-    """The notebook runs the same value checks as `fnn-pipeline check` (fnnbook.settings.check_notebook_settings)."""
+    """The notebook makes its settings dataclass (fnnbook.tasks), which runs the checks `fnn-pipeline check` runs."""
+    from fnnbook.tasks import settings_class
+
     nb_cells = read_source(src).cells
     first = next(i for i, c in enumerate(nb_cells) if "parameters" in c.metadata.get("tags", []))
     task = re.sub(r"^\d+_", "", src.stem)  # files are numbered in paper order: 01_spiral.py runs task spiral
-    assert f'\ncheck_notebook_settings("{task}", globals())' in nb_cells[first + 1].source
-    assert "from fnnbook.settings import check_notebook_settings" in nb_cells[first + 1].source
+    cls = settings_class(task).__name__
+    assert f"\nsettings = {cls}.from_namespace(globals())" in nb_cells[first + 1].source
+    assert f"from fnnbook.tasks.{task} import {cls}" in nb_cells[first + 1].source
 
 
 #: the most lines a code cell may have: its non-blank lines, comments included (what a reader sees)

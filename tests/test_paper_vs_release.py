@@ -16,8 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fnnbook.params import read_parameters
-from fnnbook.settings import NOTEBOOK_PRESETS
+from fnnbook.params import read_parameters, task_defaults
 from fnnbook.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,12 +63,11 @@ def spec():
 
 @pytest.fixture(scope="module")
 def defaults(spec) -> dict[str, dict[str, object]]:
-    """Task -> its notebook's parameters as the paper profile runs them (None: the preset's value)."""
+    """Task -> its notebook's parameters as the paper profile runs them (its settings' paper values)."""
     out = {}
     for name, task in spec.tasks.items():
-        values = read_parameters(task.notebook) | dict(task.parameters.get("paper", {}))
-        preset = NOTEBOOK_PRESETS.get(name, {})
-        out[name] = {k: _plain(preset.get(k) if v is None else v) for k, v in values.items()}
+        values = task_defaults(task, read_parameters(task.notebook)) | dict(task.parameters.get("paper", {}))
+        out[name] = {k: _plain(v) for k, v in values.items()}
     return out
 
 

@@ -1,80 +1,110 @@
-"""fnnbook.settings: every notebook's presets and value checks, run before any work; fnnlib.checks underneath."""
+"""fnnbook.tasks: every notebook's settings in one frozen dataclass, paper values and checks together, checked
+before any work; fnnlib.checks underneath."""
 
 from __future__ import annotations
 
-import copy
-import functools
+import dataclasses
 import re
+import subprocess
+import sys
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 import pytest
 
-import fnnbook.settings as S
 from fnnbook import read_parameters
-from fnnbook.params import INJECTED
-from fnnbook.settings import NOTEBOOK_PRESETS, VALUE_CHECKS, MissingDataError, check_notebook_settings, notebook_presets
+from fnnbook.params import INJECTED, SETTINGS_MARK, parameters_cell, resolve_parameters, task_defaults
+from fnnbook.spec import load_spec
+from fnnbook.tasks import NOTEBOOKS, notebook_name, settings_class
+from fnnbook.tasks import _checks as K
+from fnnbook.tasks._base import TaskSettings, setting
 from fnnlib import checks as C
+from fnnlib.checks import MissingDataError
 from fnnlib.data.bottle import BOTTLE_FILES, DataError
 
-NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOK_FILES = sorted((ROOT / "notebooks").glob("*.ipynb"))
+SYNTHETIC = {"bottle": {"data": "synthetic"}, "cascaded_tanks": {"data": "synthetic"}}  # CI has no real data
 
 
 def _name(notebook: Path) -> str:
     return re.sub(r"^\d+_", "", notebook.stem)  # 01_spiral -> spiral
 
 
-@functools.cache
-def _declared(name: str) -> MappingProxyType[str, Any]:
-    return MappingProxyType(read_parameters(next(p for p in NOTEBOOKS if _name(p) == name)))
+def make(notebook: str, **change: Any) -> TaskSettings:
+    """The notebook's settings with ``change`` (and synthetic data where it reads data files), checked."""
+    return settings_class(notebook).from_mapping({**SYNTHETIC.get(notebook, {}), **change})
 
 
-def _defaults(name: str) -> dict[str, Any]:
-    params = copy.deepcopy(dict(_declared(name)))
-    synthetic = {"bottle": {"data": "synthetic"}, "cascaded_tanks": {"data": "synthetic"}}  # CI has no real data
-    return {**params, **synthetic.get(name, {})}
+def test_every_notebook_has_its_settings() -> None:
+    assert sorted(_name(p) for p in NOTEBOOK_FILES) == list(NOTEBOOKS)
+    for path in NOTEBOOK_FILES:
+        assert notebook_name(path) == _name(path)
+        assert settings_class(path.name).notebook == _name(path)
 
 
-def _filled(name: str) -> dict[str, Any]:
-    """The defaults with the presets filled: every value a task of the book gets in the paper profile."""
-    settings = _defaults(name)
-    S.fill_presets(name, settings)
-    return settings
+@pytest.mark.parametrize("notebook", NOTEBOOKS)
+def test_the_paper_values_pass(notebook: str) -> None:
+    settings = make(notebook)
+    assert dataclasses.is_dataclass(settings)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        settings.anything = 1  # type: ignore[attr-defined]
 
 
-@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_the_paper_values_pass(notebook: Path) -> None:
-    check_notebook_settings(notebook.stem, _defaults(_name(notebook)))
+@pytest.mark.parametrize("notebook", NOTEBOOKS)
+def test_every_setting_has_a_check(notebook: str) -> None:
+    for f in dataclasses.fields(settings_class(notebook)):
+        assert callable(f.metadata.get("check")), f"{notebook}.{f.name} has no check"
 
 
-@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_every_parameter_has_a_check(notebook: Path) -> None:
-    """Each name of each parameters cell (but the injected ones) has a check, and no check names another."""
-    declared = {k for k in read_parameters(notebook) if k not in INJECTED}
-    checked = set(VALUE_CHECKS[_name(notebook)])
-    assert declared - checked == set(), f"{notebook.name}: parameters without a check"
-    assert checked - declared == set(), f"{notebook.name}: checks of parameters it does not declare"
+@pytest.mark.parametrize("path", NOTEBOOK_FILES, ids=[p.stem for p in NOTEBOOK_FILES])
+def test_the_parameters_cell_is_written_from_the_settings(path: Path) -> None:
+    """The cell lists the injected names and then every setting with its paper value, as the dataclass has them
+    (``make notebooks`` writes it): no value of the cell is written by hand, and no ``None`` placeholder."""
+    cls = settings_class(_name(path))
+    declared = read_parameters(path)
+    assert {k: v for k, v in declared.items() if k not in INJECTED} == cls.defaults()
+    assert None not in [v for k, v in declared.items() if k not in INJECTED]
+    source = next(c for c in __import__("nbformat").read(path, as_version=4).cells
+                  if "parameters" in c.metadata.get("tags", [])).source
+    assert SETTINGS_MARK.format(name=cls.notebook) in source
+    assert parameters_cell(cls.notebook, source) == source + "\n" * (not source.endswith("\n"))
+
+
+def test_the_cell_writer_follows_a_changed_default(monkeypatch: pytest.MonkeyPatch) -> None:
+    cls = settings_class("quick_start")
+    source = parameters_cell("quick_start", 'profile = "paper"\nout_dir = "x"\nT = None\n')
+    assert source.splitlines()[:3] == ['profile = "paper"', 'out_dir = "x"', SETTINGS_MARK.format(name="quick_start")]
+    assert "T = 300" in source and "None" not in source
+    monkeypatch.setattr(cls, "defaults", classmethod(lambda c: {"T": 400}))
+    assert parameters_cell("quick_start", source).endswith(SETTINGS_MARK.format(name="quick_start") + "\nT = 400\n")
+
+
+def test_the_sources_cells_are_current() -> None:
+    """``tools/write_parameters_cells.py --check``: every notebooks/src cell is its dataclass's."""
+    done = subprocess.run([sys.executable, str(ROOT / "tools" / "write_parameters_cells.py"), "--check"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
 
 
 def _kind_bad_values() -> dict[Any, Any]:
     """A value each shared check refuses: the bound it checks, just crossed."""
-    return {S._N1: 0, S._N0: -1, S._N2: 1, S._POS: 0.0, S._NONNEG: -0.5, S._SEED: -1, S._SEEDS2: [3],
-            S._SEEDS1: [], S._BOOL: "yes", S._WIDTHS: [16, 0], S._GRID: [1.0, -0.5, 2.0], S._SPIRAL3: [2.0, 0.1],
-            S._X0: [9.0], S._ACT: "sigmoid", S._METHOD: "rk45", S._OPTIMIZER: "sgd", S._SWEEP0: [],
-            S._GAINS: [], S._GAIN: float("nan"), S._synthetic_sizes: [21, 9, 0]}
+    return {K.N1: 0, K.N0: -1, K.N2: 1, K.POS: 0.0, K.NONNEG: -0.5, K.SEED: -1, K.SEEDS2: [3], K.SEEDS1: [],
+            K.BOOL: "yes", K.WIDTHS: [16, 0], K.GRID: [1.0, -0.5, 2.0], K.SPIRAL3: [2.0, 0.1], K.X0: [9.0],
+            K.ACT: "sigmoid", K.METHOD: "rk45", K.OPTIMIZER: "sgd", K.SWEEP0: [], K.GAINS: [],
+            K.GAIN: float("nan"), K.synthetic_sizes: [21, 9, 0], K.GRID0: [-1.0]}
 
 
-CASES = [(name, param) for name, checks in VALUE_CHECKS.items() for param in checks]
+CASES = [(name, f.name, f.metadata["check"]) for name in NOTEBOOKS
+         for f in dataclasses.fields(settings_class(name))]
 
 
-@pytest.mark.parametrize(("notebook", "param"), CASES, ids=[f"{n}.{p}" for n, p in CASES])
-def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: str) -> None:
-    check = VALUE_CHECKS[notebook][param]
-    default = _filled(notebook)[param]
+@pytest.mark.parametrize(("notebook", "param", "check"), CASES, ids=[f"{n}.{p}" for n, p, _ in CASES])
+def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: str, check: Any) -> None:
+    default = settings_class(notebook).defaults()[param]
     bad = _kind_bad_values().get(check, [] if isinstance(default, list) else "bogus")
     with pytest.raises(ValueError, match=rf"^{re.escape(param)}( \(.*\))?( must |: )"):  # its own check, first
-        check_notebook_settings(notebook, {**_defaults(notebook), param: bad})
+        make(notebook, **{param: bad})
 
 
 @pytest.mark.parametrize(("notebook", "change", "message"), [
@@ -152,20 +182,41 @@ def test_each_bad_value_is_refused_naming_its_parameter(notebook: str, param: st
 ])
 def test_bad_values_are_refused(notebook: str, change: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        check_notebook_settings(notebook, {**_defaults(notebook), **change})
+        make(notebook, **change)
+
+
+@pytest.mark.parametrize(("notebook", "change", "message"), [
+    ("ablations", {"gain_range": [0.0, 100.0, 300.0]}, "gain_range: .*unstable"),
+    ("ablations", {"gain_range": [0.0, 5.0, 45.0], "Ts": 0.05}, "gain_range: .*unstable"),
+    ("why_beyond", {"objectives": ["one_step", "multi_step"]}, "objectives must hold 'judged'"),
+])
+def test_checks_the_notebooks_made_themselves_are_the_settings_now(notebook: str, change: dict[str, Any],
+                                                                   message: str) -> None:
+    """Checks a notebook ran in its own cells, moved into its dataclass (each check written once)."""
+    with pytest.raises(ValueError, match=message):
+        make(notebook, **change)
+
+
+def test_no_notebook_repeats_a_check_of_its_settings() -> None:
+    """The gain, horizon and switch checks live in the dataclasses: no notebook source runs them again on its own
+    settings (``F.check_gain(L, 2, Ts)``, ``need 1 <= N``; a check against an upstream run's values stays)."""
+    for src in sorted((ROOT / "notebooks" / "src").glob("*.py")):
+        text = src.read_text(encoding="utf-8")
+        assert not re.search(r"check_gain\((L|g), \d, Ts\)", text), src.name
+        assert "need 1 <= N" not in text and "check_notebook_settings" not in text, src.name
 
 
 def test_missing_and_corrupt_data(tmp_path: Path) -> None:
-    real = {**_defaults("bottle"), "data": "real", "data_dir": str(tmp_path)}
     with pytest.raises(MissingDataError, match="data missing: Training_dataset.mat, Testing_dataset.mat"):
-        check_notebook_settings("06_bottle.ipynb", real)
+        settings_class("06_bottle.ipynb")(data="real", data_dir=str(tmp_path))
     (tmp_path / "bottle").mkdir()
     for name in BOTTLE_FILES:
         (tmp_path / "bottle" / name).write_bytes(b"not the published throws")
     with pytest.raises(DataError, match=r"Training_dataset.mat has SHA-256 [0-9a-f]{64}, not the pinned") as err:
-        check_notebook_settings("bottle", real)
+        settings_class("bottle").from_mapping({"data": "real"}, data_dir=str(tmp_path))
     assert not isinstance(err.value, MissingDataError)  # the runner tells the two apart by type
-    check_notebook_settings("bottle", {**real, "data": "synthetic"})  # synthetic throws read no file
+    settings_class("bottle")(data="synthetic", data_dir=str(tmp_path))  # synthetic throws read no file
+    settings_class("bottle")(data="real")  # no data directory given: the files are not looked for
 
 
 def test_pinned_files_pass(tmp_path: Path) -> None:
@@ -174,16 +225,17 @@ def test_pinned_files_pass(tmp_path: Path) -> None:
     assert C.data_files(tmp_path, {"a.bin": digest}) == [tmp_path / "a.bin"]
 
 
-def test_unknown_notebooks_and_missing_settings_are_errors() -> None:
-    with pytest.raises(ValueError, match="no notebook of the book is named 'my_own_notebook'; the notebooks are spiral"):
-        check_notebook_settings("my_own_notebook", {"L": -1.0})
+def test_unknown_notebooks_and_unknown_settings_are_errors() -> None:
+    with pytest.raises(ValueError, match="no notebook of the book is named 'my_own_notebook'; the notebooks are "
+                                         "ablations"):
+        settings_class("my_own_notebook")
     with pytest.raises(ValueError, match="no notebook of the book is named '01_spirals.ipynb'"):
-        notebook_presets("01_spirals.ipynb")
-    with pytest.raises(ValueError, match="setting.* missing: .*N_max"):  # Ts, N, ... come from the presets
-        check_notebook_settings("spiral", {"L": 20.0})
+        settings_class("01_spirals.ipynb")
+    with pytest.raises(ValueError, match="notebook 'spiral' has no setting 'N_mx'; did you mean 'N_max'"):
+        make("spiral", N_mx=20)
 
 
-def test_a_notebook_is_the_books_by_the_name_it_checks_with(tmp_path: Path) -> None:
+def test_a_notebook_is_the_books_by_the_settings_it_imports(tmp_path: Path) -> None:
     import nbformat
 
     def notebook(source: str) -> Path:
@@ -193,49 +245,78 @@ def test_a_notebook_is_the_books_by_the_name_it_checks_with(tmp_path: Path) -> N
         nbformat.write(nb, path)
         return path
 
-    assert S.notebook_name(notebook('check_notebook_settings("bottle", globals())')) == "bottle"
-    assert S.notebook_name(notebook("x = 1")) is None  # one of your own: no presets, no value checks
+    assert notebook_name(notebook("from fnnbook.tasks.bottle import BottleSettings")) == "bottle"
+    assert notebook_name(notebook("x = 1")) is None  # one of your own: no settings class, no value checks
     with pytest.raises(ValueError, match="no notebook of the book is named 'botle'"):
-        S.notebook_name(notebook('F.check_notebook_settings("botle", globals())'))
-    for path in NOTEBOOKS:
-        assert S.notebook_name(path) == _name(path)
+        notebook_name(notebook("from fnnbook.tasks.botle import BottleSettings"))
 
 
-@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_a_shared_paper_value_is_left_to_its_preset(notebook: Path) -> None:
-    """Every preset parameter is ``None`` in the cell (the value is written once, in the presets)."""
-    declared, presets = read_parameters(notebook), notebook_presets(notebook.stem)
-    assert set(presets) <= set(declared), f"presets for parameters {notebook.name} does not declare"
-    written = {k: declared[k] for k in presets if declared[k] is not None}
-    assert not written, f"{notebook.name} writes preset values again: {written}"
-
-
-def test_presets_fill_none_in_place_and_print(capsys: pytest.CaptureFixture[str]) -> None:
-    settings = {**_defaults("theory"), "L": 10.0}
-    check_notebook_settings("02_theory", settings)
-    assert settings["Ts"] == 0.01 and settings["n_samples"] == 1000 and settings["test"] == [3.0, 0.05, 10.0]
-    assert settings["L"] == 10.0  # an override is kept
-    out = capsys.readouterr().out
-    assert "Ts = 0.01" in out and "L =" not in out
-    check_notebook_settings("02_theory", settings)  # nothing left to fill: silent
-    assert capsys.readouterr().out == ""
-
-
-def test_a_read_only_mapping_is_checked_with_its_presets() -> None:
-    frozen = MappingProxyType(_defaults("observers"))
-    check_notebook_settings("observers", frozen)
+def test_a_notebook_builds_its_settings_from_its_variables(tmp_path: Path) -> None:
+    """What the kernel does after the parameters cell (and papermill's injected values): its variables, checked;
+    a setting it does not hold keeps its paper value; ``data_dir`` checks the data files."""
+    names = {"profile": "paper", "out_dir": "x", "L": 10.0, "Ts": 0.01, "unrelated": object()}
+    settings = settings_class("theory").from_namespace(names)
+    assert settings.L == 10.0 and settings.n_samples == 1000 and settings.test == [3.0, 0.05, 10.0]
     with pytest.raises(ValueError, match="not positive definite"):
-        check_notebook_settings("observers", MappingProxyType({**frozen, "L": -1.0}))
-    assert frozen["L"] is None  # untouched
+        settings_class("observers").from_namespace({"L": -1.0})
+    with pytest.raises(MissingDataError):
+        settings_class("cascaded_tanks").from_namespace({"data": "real", "data_dir": str(tmp_path)})
 
 
-def test_preset_values_are_plain_and_one_source() -> None:
+def test_a_settings_class_checks_itself_when_made() -> None:
+    """A subclass's defaults pass through the same checks: a bad paper value cannot be written."""
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Bad(TaskSettings):
+        rate: float = setting(-1.0, K.POS)
+
+    with pytest.raises(ValueError, match="rate must be a finite number > 0"):
+        Bad()
+
+
+def test_shared_values_are_plain_and_one_source() -> None:
     """Tuples become lists; the same paper value reaches every notebook that shares it."""
     from fnnlib import spiral_presets as SP
-    assert all(not isinstance(v, tuple) for name in NOTEBOOK_PRESETS for v in notebook_presets(name).values())
-    for name in ("spiral", "theory", "ablations", "observers", "neural_feedback"):
-        assert notebook_presets(name)["Ts"] == SP.SPIRAL_TS
-    assert notebook_presets("own_system")["spiral_L"] == notebook_presets("spiral")["L"] == SP.PAPER_SPIRAL_L
+    for name in NOTEBOOKS:
+        for value in settings_class(name).defaults().values():
+            assert not isinstance(value, tuple)
+    for name in ("spiral", "theory", "ablations", "observers", "neural_feedback", "why_sec3"):
+        assert settings_class(name).defaults()["Ts"] == SP.SPIRAL_TS
+    assert settings_class("own_system").defaults()["spiral_L"] == settings_class("spiral").defaults()["L"] \
+        == SP.PAPER_SPIRAL_L
+    assert settings_class("neural_feedback").defaults()["dr_omega_range"] == \
+        settings_class("why_feedback").defaults()["dr_omega_range"]
+
+
+def _paper_profile_cases() -> list[tuple[str, str]]:
+    spec = load_spec(ROOT / "pipeline.yaml")
+    return [(profile, name) for profile in ("paper", "why") for name in spec.declares(profile)
+            if spec.home(profile, name) == profile]
+
+
+@pytest.mark.parametrize(("profile", "task"), _paper_profile_cases(), ids="/".join)
+def test_the_paper_profile_runs_each_dataclass_defaults(profile: str, task: str, tmp_path: Path) -> None:
+    """Where pipeline.yaml gives the paper (or why) profile no values, the task runs with its dataclass's
+    defaults, each of them; a value the profile sets (a grid point's) is the only change."""
+    spec = load_spec(ROOT / "pipeline.yaml")
+    t = spec.tasks[task]
+    declared = {k: v for k, v in read_parameters(t.notebook).items() if k != "data_dir"}
+    params = resolve_parameters(spec, t, profile, declared, out_dir=tmp_path)
+    defaults = settings_class(notebook_name(t.notebook) or "").defaults()
+    overrides = dict(t.parameters[profile])
+    assert set(overrides) <= set(defaults)
+    assert {k: v for k, v in params.items() if k not in INJECTED} == {**defaults, **overrides}
+    assert task_defaults(t, declared).keys() - set(INJECTED) == defaults.keys()
+
+
+def test_a_changed_default_changes_what_the_paper_profile_runs(monkeypatch: pytest.MonkeyPatch,
+                                                               tmp_path: Path) -> None:
+    spec = load_spec(ROOT / "pipeline.yaml")
+    t = spec.tasks["quick_start"]
+    cls = settings_class("quick_start")
+    monkeypatch.setattr(cls, "defaults", classmethod(lambda c: {"T": 400}))
+    declared = read_parameters(t.notebook)
+    assert resolve_parameters(spec, t, "paper", declared, out_dir=tmp_path)["T"] == 400
 
 
 @pytest.mark.parametrize(("check", "args", "message"), [

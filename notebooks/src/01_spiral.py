@@ -12,37 +12,37 @@
 # one ensemble, and is judged per seed, paired (`fnnbook.rules.sec3`).
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/spiral"
+# the settings and their paper values, from fnnbook.tasks.spiral (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
+L = 20.0
+beta = 0.02
+N = 50
+noise_std = 0.01
 seeds = [0, 1, 2, 3, 4]
-n_samples = None
-Ts = None
-nominal = None
-test = None
-x0 = None
-hidden = None
-activation = None
-iterations = None
-batch_size = None
-batch_time = None
-lr = None
-method = None
-adjoint = None
-rtol = None
-atol = None
-L = None
-beta = None
-N = None
+nominal = [2.0, 0.1, 0.0]
+test = [3.0, 0.05, 10.0]
+hidden = [50, 50]
+activation = "relu"
+iterations = 400
+batch_size = 20
+batch_time = 10
+lr = 0.001
+method = "dopri5"
+adjoint = True
+rtol = 1e-05
+atol = 1e-06
 N_max = 100
-noise_std = None
 noise_sweep = [0.0, 0.003, 0.01, 0.03, 0.1]
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("spiral", globals())
+from fnnbook.tasks.spiral import SpiralSettings
+settings = SpiralSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
@@ -56,10 +56,6 @@ import fnnlib as F
 from fnnbook.rules import sec3
 
 # %% tags=["hide-input"]
-# refuse bad settings before any work: an unstable gain (Theorem 1, Eq. (25)), a bad decay or horizon
-F.decayed_gains(F.check_gain(L, 2, Ts), N_max, beta)
-if not 1 <= N <= N_max < n_samples:
-    raise ValueError(f"need 1 <= N <= N_max < n_samples, got N={N}, N_max={N_max}, n_samples={n_samples}")
 recipe = F.PAPER_SPIRAL_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
                                        method=method, adjoint=adjoint, rtol=rtol, atol=atol)
 

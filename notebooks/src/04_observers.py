@@ -11,33 +11,33 @@
 # decided over the seeds.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/observers"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
+# the settings and their paper values, from fnnbook.tasks.observers (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
+L = 20.0
+beta = 0.02
+N = 50
+noise_std = 0.01
 seed = 0
-n_samples = None
-Ts = None
-test = None
-x0 = None
-noise_std = None
-L = None
-beta = None
-N = None
+test = [3.0, 0.05, 10.0]
 settle = 50
 luenberger_poles = [0.5, 0.5, 0.8, 0.8]
-kf_q_x = None
-kf_tuning_low = [0.8, 0.04, -24.0]   # q_d comes from the Sec. 4 training cases (Alg. 1's 20 randomized spirals),
-kf_tuning_high = [3.08, 0.135, 21.6]  # never from the test spiral: omega, eta, eps from low to high
+kf_q_x = 1e-08
+kf_tuning_low = [0.8, 0.04, -24.0]
+kf_tuning_high = [3.08, 0.135, 21.6]
 kf_tuning_cases = 20
-kf_p0_d = None
+kf_p0_d = 100.0
 repeats = 3
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("observers", globals())
+from fnnbook.tasks.observers import ObserversSettings
+settings = ObserversSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import math

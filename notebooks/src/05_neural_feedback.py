@@ -16,46 +16,46 @@
 # (`fnnbook.rules.sec4`). The single-seed panels show seed `seed`.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/neural_feedback"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
-seed = 0
-x0 = None
-nominal = None
-n_samples = None
-Ts = None
+# the settings and their paper values, from fnnbook.tasks.neural_feedback (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
 dr_omega_range = [0.8, 0.12, 3.08]
 dr_eta_range = [0.04, 0.005, 0.135]
 dr_eps_range = [-24.0, 2.4, 21.6]
 dr_n_samples = 1000
 dr_Ts = 0.02
-fb_hidden = None
-fb_activation = None
-fb_iterations = 2000
+fb_hidden = [50, 50]
+fb_activation = "relu"
 fb_batch_size = 100
+fb_iterations = 2000
 fb_lr = 0.01
 fb_optimizer = "rmsprop"
 refresh_every = 10
-N = None
-L = None
-beta = None
-residual_base = None
-domega_range = None
-deta_range = None
-deps_range = None
-d1_factor = 1.5
+L = 20.0
+beta = 0.02
+N = 50
+residual_base = [2.0, 0.1, 0.0]
+domega_range = [-0.72, 0.12, 0.6]
+deta_range = [-0.03, 0.005, 0.025]
+deps_range = [-14.4, 2.4, 12.0]
 d2_factor = 1.5
 d3_ratio = 0.5
 d3_flat = 0.1
 heldout_flip = [1.0, -1.0, 1.0]
 heldout_min_distance = 3.0
+d1_factor = 1.5
+seed = 0
+nominal = [2.0, 0.1, 0.0]
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("neural_feedback", globals())
+from fnnbook.tasks.neural_feedback import NeuralFeedbackSettings
+settings = NeuralFeedbackSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
@@ -69,12 +69,8 @@ from fnnbook.rules import sec4
 
 # %% tags=["hide-input"]
 task_start = time.perf_counter()
-# refuse bad settings before any work
 cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
 res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
-F.decayed_gains(F.check_gain(L, 2, Ts), N, beta)
-if not 1 <= N < n_samples:
-    raise ValueError(f"need 1 <= N < n_samples, got N={N}, n_samples={n_samples}")
 
 # %%
 out = Path(out_dir)

@@ -11,20 +11,20 @@
 # and every comparison is judged per throw and per seed, paired (`fnnbook.rules.bottle`).
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/bottle"
 data_dir = "data"
+# the settings and their paper values, from fnnbook.tasks.bottle (written by `make notebooks`)
 data = "real"
 seeds = [0, 1, 2, 3, 4]
 hidden = [100, 100, 100]
 activation = "relu"
-iterations = None
-batch_size = None
-batch_time = None
-lr = None
-method = None
-adjoint = None
+iterations = 1000
+batch_size = 20
+batch_time = 10
+lr = 0.001
+method = "dopri5"
+adjoint = False
 L = 5.0
 beta = 0.02
 N = 500
@@ -33,8 +33,8 @@ synthetic_sizes = [21, 9, 1058]
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("bottle", globals())
+from fnnbook.tasks.bottle import BottleSettings
+settings = BottleSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
@@ -49,9 +49,6 @@ from fnnbook.rules import bottle as rules
 # the real throws (SHA-256 and shapes checked before any work) or synthetic ones drawn with the first seed
 train, test = F.bottle_throws(data, data_dir=data_dir, synthetic_sizes=synthetic_sizes, seed=seeds[0])
 Ts = train.Ts
-F.decayed_gains(F.check_gain(L, 6, Ts), N, beta)  # refuse an unstable gain or bad decay up front
-if not 1 <= N < test.data.shape[1]:
-    raise ValueError(f"need 1 <= N < {test.data.shape[1]} samples, got N={N}")
 
 # %%
 out = Path(out_dir)

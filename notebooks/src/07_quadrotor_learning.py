@@ -16,35 +16,35 @@
 # nothing and judge Q2, for every trained network.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_learning"
+# the settings and their paper values, from fnnbook.tasks.quadrotor_learning (written by `make notebooks`)
 seed = 0
 seeds = [0, 1, 2, 3, 4]
 n_flights = 40
 n_nodes = 200
-n_waypoints = None
+n_waypoints = 3
 val_flights = 3
 val_nodes = 500
 val_waypoints = 6
-Ts = None
-truth_drag = None
-truth_substeps = None
-hidden = None
-activation = None
-epochs = None
-segment_length = None
-batch_size = None
-lr = None
+Ts = 0.02
+truth_drag = [0.7, 0.7, 0.2]
+truth_substeps = 4
+hidden = [36, 36]
+activation = "tanh"
+epochs = 50
+segment_length = 20
+batch_size = 80
+lr = 0.005
 val_every = 10
-mlp_epochs = None
-mlp_lr = None
+mlp_epochs = 300
+mlp_lr = 0.001
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("quadrotor_learning", globals())
+from fnnbook.tasks.quadrotor_learning import QuadrotorLearningSettings
+settings = QuadrotorLearningSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
@@ -66,10 +66,6 @@ from fnnlib.training.residual import (ResidualRecipe, convergence_checks, predic
                                       train_residual_ensemble, train_single_step)
 
 # %%
-if len(seeds) < 1 or len(set(seeds)) != len(seeds):
-    raise ValueError(f"seeds must be distinct and non-empty, got {seeds}")
-if not 1 <= segment_length <= n_nodes:
-    raise ValueError(f"segment_length must be in 1..{n_nodes}, got {segment_length}")
 recipe = ResidualRecipe(hidden=hidden, activation=activation, segment_length=segment_length, batch_size=batch_size,
                         epochs=epochs, lr=lr)  # App. A.5.2's network and Alg. 3's training, checked
 truth = TRAINING_TRUTH.replace(drag=tuple(truth_drag))  # validates the drag (>= 0)

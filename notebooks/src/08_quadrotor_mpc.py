@@ -15,32 +15,32 @@
 # last input penalised, so the inputs are in effect free). Each gets its own verdict lines.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/quadrotor_mpc"
 upstream_dirs = {"quadrotor_learning": "outputs/manual/quadrotor_learning"}
+# the settings and their paper values, from fnnbook.tasks.quadrotor_mpc (written by `make notebooks`)
 steps = 300
-N = None
-Ts = None
-Q = None
-R = None
+N = 10
+Ts = 0.02
+Q = [100.0, 100.0, 100.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.0, 1.0, 1.0]
+R = [1.0, 1.0, 1.0, 1.0]
 costs = ["as_written", "as_flown"]
 u_max = [4.0, 6.0]
 u_max_judged = 6.0
-theta_max = None
-L = None
-beta = None
-Gamma = None
+theta_max = 1.5707963267948966
+L = 3.0
+beta = 0.1
+Gamma = 8.0
 Gamma_adapnn_grid = [0.04, 0.16, 0.64, 2.56]
 Gamma_rtol = 0.05
 validation_flights = 2
 validation_steps = 300
 validation_waypoints = 4
 validation_seed = 1000
-truth_mass = None
-truth_inertia = None
-truth_drag = None
-disturbance = None
+truth_mass = 1.33
+truth_inertia = [0.005, 0.005, 0.004]
+truth_drag = [0.6, 0.6, 0.15]
+disturbance = [0.3, 0.3, 0.3]
 disturbance_draws = 5
 disturbance_spread = 0.5
 disturbance_seed = 11
@@ -56,8 +56,8 @@ validation_vehicle_seed = 1001
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("quadrotor_mpc", globals())
+from fnnbook.tasks.quadrotor_mpc import QuadrotorMPCSettings
+settings = QuadrotorMPCSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 from pathlib import Path
@@ -80,8 +80,6 @@ residual, mlp = residual.double(), mlp.double()  # the kept ones, picked on quad
 members, mlps = ([(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
                   F.load_seed_checkpoints(up, stem, expected_kind="AeroResidual", run=upstream_parameters(up))]
                  for stem in ("residual", "mlp"))
-if u_max_judged not in u_max:
-    raise ValueError(f"u_max_judged = {u_max_judged} must be one of u_max = {u_max}")
 if disturbance_draws != len(members) or [s for s, _ in mlps] != [s for s, _ in members]:
     raise ValueError(f"one drawn disturbance per trained network: disturbance_draws = {disturbance_draws} must equal the "
                      f"{len(members)} networks of quadrotor_learning (seeds {[s for s, _ in members]}; MLP seeds "

@@ -13,10 +13,10 @@
 # seeds and compared pair by pair.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "paper"
 out_dir = "outputs/manual/own_system"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
+# the settings and their paper values, from fnnbook.tasks.own_system (written by `make notebooks`)
 seeds = [0, 1, 2, 3, 4]
 Ts = 0.02
 n_train = 500
@@ -29,25 +29,25 @@ activation = "tanh"
 iterations = 300
 noise_std = 0.01
 N = 30
-L_hand = None
-beta_hand = None
+L_hand = 20.0
+beta_hand = 0.02
 L0 = 5.0
 beta0 = 0.05
 tune_iterations = 36
 tune_lr = 0.1
-kf_q_x = None
+kf_q_x = 1e-08
 kf_q_d = 0.01
-kf_p0_d = None
-spiral_n_samples = None
-spiral_Ts = None
-spiral_test = None
-spiral_x0 = None
+kf_p0_d = 100.0
+spiral_n_samples = 1000
+spiral_Ts = 0.01
+spiral_test = [3.0, 0.05, 10.0]
+spiral_x0 = [9.0, 0.0]
 spiral_tune_x0 = [0.0, 9.0]
 spiral_tune_samples = 400
-spiral_N = None
-spiral_noise_std = None
-spiral_L = None
-spiral_beta = None
+spiral_N = 50
+spiral_noise_std = 0.01
+spiral_L = 20.0
+spiral_beta = 0.02
 spiral_tune_iterations = 36
 hand_L_grid = [0.3, 1.0, 2.0, 4.0, 8.0, 16.0]
 hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.2, 0.5]
@@ -55,8 +55,8 @@ hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.2, 0.5]
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("own_system", globals())
+from fnnbook.tasks.own_system import OwnSystemSettings
+settings = OwnSystemSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

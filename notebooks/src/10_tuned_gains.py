@@ -37,6 +37,7 @@ data_dir = "data"
 upstream_dirs = {"own_system": "outputs/manual/own_system", "bottle": "outputs/manual/bottle",
                  "quadrotor_learning": "outputs/manual/quadrotor_learning",
                  "quadrotor_mpc": "outputs/manual/quadrotor_mpc"}
+# the settings and their paper values, from fnnbook.tasks.tuned_gains (written by `make notebooks`)
 bottle_tune_throws = 1
 bottle_tune_iterations = 6
 bottle_tune_lr = 0.3
@@ -51,8 +52,8 @@ quad_hand_beta_grid = [0.02, 0.1]
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("tuned_gains", globals())
+from fnnbook.tasks.tuned_gains import TunedGainsSettings
+settings = TunedGainsSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

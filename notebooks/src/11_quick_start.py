@@ -12,6 +12,7 @@
 # %% tags=["parameters"]
 profile = "paper"
 out_dir = "outputs/manual/quick_start"
+# the settings and their paper values, from fnnbook.tasks.quick_start (written by `make notebooks`)
 T = 300
 Ts = 0.1
 N = 10
@@ -21,8 +22,8 @@ train_iterations = 200
 tune_iterations = 30
 
 # %% tags=["remove-input"]
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("quick_start", globals())
+from fnnbook.tasks.quick_start import QuickStartSettings
+settings = QuickStartSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %%
 import torch

@@ -8,48 +8,48 @@
 # retrained). The causes and the one-line summaries are computed by `fnnbook.why` from where the rule holds.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "why"
 out_dir = "outputs/manual/why_sec3"
 upstream_dirs = {"spiral": "outputs/paper/spiral", "theory": "outputs/paper/theory",
                  "ablations": "outputs/paper/ablations"}
+# the settings and their paper values, from fnnbook.tasks.why_sec3 (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
+L = 20.0
+beta = 0.02
+N = 50
+noise_std = 0.01
+L_sweep = [5.0, 10.0, 20.0, 40.0, 80.0]
+transient_time_constants = 5.0
+conservative_ratio = 2.0
+residual_base = [2.0, 0.1, 0.0]
+domega_range = [-0.72, 0.12, 0.6]
+deta_range = [-0.03, 0.005, 0.025]
+deps_range = [-14.4, 2.4, 12.0]
+noise_draws = 3
+t_switch = 7.0
+before = [3.0, 0.05, 10.0]
+after = [1.0, 0.12, 5.0]
+steady_window = 1.0
 seed = 0
-n_samples = None
-Ts = None
-x0 = None
-test = None
-L = None
-beta = None
-N = None
-noise_std = None
+test = [3.0, 0.05, 10.0]
 s3_noise = [0.001, 0.003, 0.01, 0.03]
 s3_beta = [0.01, 0.02, 0.04, 0.06]
 s5_eps = [0.0, 2.5, 5.0, 10.0]
 s5_eta = [0.05, 0.1, 0.2]
-L_sweep = [5.0, 10.0, 20.0, 40.0, 80.0]
-transient_time_constants = 5.0
-conservative_ratio = 2.0
-residual_base = None
-domega_range = None
-deta_range = None
-deps_range = None
 s8_L = [5.0, 10.0, 20.0, 40.0]
 s9_beta_steps = [0.01, 0.005]
 s9_beta_max = 0.06
 s9_noise = [0.003, 0.01, 0.03]
-noise_draws = 3
-t_switch = 7.0
-before = None
-after = [1.0, 0.12, 5.0]
-steady_window = 1.0
 s10_band = [1.02, 1.05, 1.1, 1.25, 1.5, 2.0]
 s10_settle = [0.1, 0.25, 0.5, 1.0]
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_sec3", globals())
+from fnnbook.tasks.why_sec3 import WhySec3Settings
+settings = WhySec3Settings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

@@ -12,42 +12,42 @@
 # D1 does not depend on the feedback and is not judged here.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "why"
 out_dir = "outputs/manual/why_feedback_point"
 upstream_dirs = {"spiral": "outputs/paper/spiral"}
-change = {"optimizer": "adam"}
-n_seeds = 5
-x0 = None
-nominal = None
-n_samples = None
-Ts = None
+# the settings and their paper values, from fnnbook.tasks.why_feedback_point (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
 dr_omega_range = [0.8, 0.12, 3.08]
 dr_eta_range = [0.04, 0.005, 0.135]
 dr_eps_range = [-24.0, 2.4, 21.6]
 dr_n_samples = 1000
 dr_Ts = 0.02
-fb_hidden = None
-fb_activation = None
-fb_iterations = 2000
+fb_hidden = [50, 50]
+fb_activation = "relu"
 fb_batch_size = 100
+fb_iterations = 2000
 fb_lr = 0.01
 fb_optimizer = "rmsprop"
 refresh_every = 10
-N = None
-residual_base = None
-domega_range = None
-deta_range = None
-deps_range = None
+residual_base = [2.0, 0.1, 0.0]
+domega_range = [-0.72, 0.12, 0.6]
+deta_range = [-0.03, 0.005, 0.025]
+deps_range = [-14.4, 2.4, 12.0]
 d2_factor = 1.5
 d3_ratio = 0.5
 d3_flat = 0.1
 heldout_flip = [1.0, -1.0, 1.0]
 heldout_min_distance = 3.0
+change = {"optimizer": "adam"}
+n_seeds = 5
+nominal = [2.0, 0.1, 0.0]
+N = 50
 
 # %%
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_feedback_point", globals())
+from fnnbook.tasks.why_feedback_point import WhyFeedbackPointSettings
+settings = WhyFeedbackPointSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

@@ -22,43 +22,43 @@
 # networks.
 
 # %% tags=["parameters"]
-# None: the paper value from the presets (fnnbook.settings.NOTEBOOK_PRESETS), filled in by the runner
 profile = "why"
 out_dir = "outputs/manual/why_feedback"
 upstream_dirs = {"spiral": "outputs/paper/spiral", "neural_feedback": "outputs/paper/neural_feedback"}
 data_dir = None
-x0 = None
-nominal = None
-n_samples = None
-Ts = None
-N = None
+# the settings and their paper values, from fnnbook.tasks.why_feedback (written by `make notebooks`)
+n_samples = 1000
+Ts = 0.01
+x0 = [9.0, 0.0]
 dr_omega_range = [0.8, 0.12, 3.08]
 dr_eta_range = [0.04, 0.005, 0.135]
 dr_eps_range = [-24.0, 2.4, 21.6]
-residual_base = None
-domega_range = None
-deta_range = None
-deps_range = None
+dr_n_samples = 1000
+dr_Ts = 0.02
+residual_base = [2.0, 0.1, 0.0]
+domega_range = [-0.72, 0.12, 0.6]
+deta_range = [-0.03, 0.005, 0.025]
+deps_range = [-14.4, 2.4, 12.0]
 fb_iterations = 2000
 fb_lr = 0.01
 fb_optimizer = "rmsprop"
 refresh_every = 10
-d1_factor = 1.5
 d2_factor = 1.5
 d3_ratio = 0.5
 d3_flat = 0.1
 heldout_flip = [1.0, -1.0, 1.0]
 heldout_min_distance = 3.0
-dr_n_samples = 1000
-dr_Ts = 0.02
+d1_factor = 1.5
+nominal = [2.0, 0.1, 0.0]
+N = 50
 d4_beta = [0.0, 0.02, 0.1]
 authors_ode = "Neural_ODE_ite400_loss0.2.pt"
 authors_dr_ode = "Neural_ODE_domran.pt"
 authors_feedback = "FeedbackNN_ite477_loss0.494530_conver.pt"
 
 # %%
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_feedback", globals())
+from fnnbook.tasks.why_feedback import WhyFeedbackSettings
+settings = WhyFeedbackSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

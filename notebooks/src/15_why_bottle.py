@@ -21,14 +21,15 @@ profile = "why"
 out_dir = "outputs/manual/why_bottle"
 data_dir = "data"
 upstream_dirs = {"bottle": "outputs/manual/bottle"}
+# the settings and their paper values, from fnnbook.tasks.why_bottle (written by `make notebooks`)
 L_grid = [2.5, 5.0, 10.0, 20.0]
 beta_grid = [0.005, 0.02, 0.1]
 
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_bottle", globals())
+from fnnbook.tasks.why_bottle import WhyBottleSettings
+settings = WhyBottleSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

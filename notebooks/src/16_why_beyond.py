@@ -19,6 +19,7 @@ profile = "why"
 out_dir = "outputs/manual/why_beyond"
 data_dir = "data"
 upstream_dirs = {"tuned_gains": "outputs/manual/tuned_gains", "bottle": "outputs/manual/bottle"}
+# the settings and their paper values, from fnnbook.tasks.why_beyond (written by `make notebooks`)
 objectives = ["one_step", "multi_step", "judged"]
 multi_step_N = 50
 min_seeds_grid = [2, 3, 5]
@@ -26,8 +27,8 @@ min_seeds_grid = [2, 3, 5]
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_beyond", globals())
+from fnnbook.tasks.why_beyond import WhyBeyondSettings
+settings = WhyBeyondSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time
@@ -49,8 +50,6 @@ up = {k: Path(v) for k, v in upstream_dirs.items()}
 for need in ("tuned_gains", "bottle"):
     if need not in up:
         raise ValueError(f"upstream_dirs needs {need!r} (got {sorted(up)})")
-if "judged" not in objectives:
-    raise ValueError(f"objectives must hold 'judged', the objective tuned_gains tunes on (got {objectives})")
 b1_up = F.read_results(up["tuned_gains"] / F.RESULTS_FILENAME).claim("B1")
 ran_t, ran_b = upstream_parameters(up["tuned_gains"]), upstream_parameters(up["bottle"])
 t_start = time.perf_counter()

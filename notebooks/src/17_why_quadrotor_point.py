@@ -17,14 +17,15 @@ profile = "why"
 out_dir = "outputs/manual/why_quadrotor_point"
 upstream_dirs = {"quadrotor_learning": "outputs/paper/quadrotor_learning", "quadrotor_mpc": "outputs/paper/quadrotor_mpc"}
 data_dir = None
+# the settings and their paper values, from fnnbook.tasks.why_quadrotor_point (written by `make notebooks`)
 u_max = 6.0
 Gamma_grid = [2.0, 8.0, 32.0]
 Gamma_adapnn_grid = [0.16, 0.64, 2.56]
 authors_u_max = [6.0]
 
 # %%
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_quadrotor_point", globals())
+from fnnbook.tasks.why_quadrotor_point import WhyQuadrotorPointSettings
+settings = WhyQuadrotorPointSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

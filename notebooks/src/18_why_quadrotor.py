@@ -21,10 +21,11 @@
 profile = "why"
 out_dir = "outputs/manual/why_quadrotor"
 upstream_dirs = {"quadrotor_mpc": "outputs/paper/quadrotor_mpc"}
+# the settings and their paper values, from fnnbook.tasks.why_quadrotor (written by `make notebooks`)
 
 # %%
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_quadrotor", globals())
+from fnnbook.tasks.why_quadrotor import WhyQuadrotorSettings
+settings = WhyQuadrotorSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import json

@@ -26,6 +26,7 @@
 profile = "paper"
 out_dir = "outputs/manual/cascaded_tanks"
 data_dir = "data"
+# the settings and their paper values, from fnnbook.tasks.cascaded_tanks (written by `make notebooks`)
 data = "real"
 synthetic_samples = 1024
 synthetic_noise = 0.02
@@ -59,8 +60,8 @@ baseline_starts = ["free", "encoder"]
 baseline_horizon = 100
 
 # %% tags=["remove-input"]
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("cascaded_tanks", globals())
+from fnnbook.tasks.cascaded_tanks import CascadedTanksSettings
+settings = CascadedTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 from pathlib import Path

@@ -22,6 +22,7 @@ profile = "why"
 out_dir = "outputs/manual/why_tanks"
 data_dir = "data"
 upstream_dirs = {"cascaded_tanks": "outputs/manual/cascaded_tanks"}
+# the settings and their paper values, from fnnbook.tasks.why_tanks (written by `make notebooks`)
 L_grid = [0.005, 0.01, 0.02, 0.05]
 beta_grid = [0.0, 0.1, 0.5]
 windows = ["all", "outside_overflow"]
@@ -32,8 +33,8 @@ b5_horizons = [25, 100]
 # %%
 import fnnlib as F
 
-from fnnbook.settings import check_notebook_settings  # the checks `fnn-pipeline check` runs first
-check_notebook_settings("why_tanks", globals())
+from fnnbook.tasks.why_tanks import WhyTanksSettings
+settings = WhyTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
 import time

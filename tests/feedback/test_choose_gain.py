@@ -56,7 +56,7 @@ def test_what_is_kept_is_the_best_beyond_z_spreads_or_the_reference(seed: int, s
                                                                    z: float) -> None:
     e = _errors(shift=shift, noise=noise, seed=seed)
     c = F.choose_gain(e, z=z)
-    assert c.best == int(torch.tensor(c.means).argmin())
+    assert c.best == min(range(len(c.means)), key=c.means.__getitem__)  # at float64: means may differ by 1e-13
     assert c.index == (c.best if c.improvement > z * c.se and c.best != 0 else 0)
     worse = e[:1] + abs(shift) + 1e-3    # worse than the reference at every start time
     assert F.choose_gain(torch.cat([e[:1], worse]), z=z).index == 0

@@ -151,7 +151,9 @@ def _closure(notebook: str, roots: dict[str, Path] | None = None) -> dict[str, s
 
 def test_the_notebooks_depend_on_the_fnnbook_modules_they_import() -> None:
     observers, bottle = _closure("04_observers"), _closure("06_bottle")
-    assert {"fnnbook.rules.sec3", "fnnbook.settings", "fnnlib.feedback.layer", "fnnlib.observers"} <= set(observers)
+    assert {"fnnbook.rules.sec3", "fnnbook.tasks.observers", "fnnbook.tasks._spiral", "fnnlib.feedback.layer",
+            "fnnlib.observers"} <= set(observers)
+    assert "fnnbook.tasks.bottle" in bottle and "fnnbook.tasks.observers" not in bottle
     assert "fnnbook.rules.sec3" not in bottle and "fnnbook.rules.bottle" in bottle
     assert "fnnbook.feedback_eval" in _closure("14_why_feedback")
     assert "fnnbook.feedback_eval" not in observers
@@ -196,6 +198,31 @@ def test_a_stricter_rule_changes_the_fingerprints_of_its_tasks_only(tmp_path: Pa
     moved = check(spec, "smoke", sources=packages)
     assert trigger(after.inputs["why_feedback"], moved.inputs["why_feedback"]).startswith("code: fnnbook.feedback_eval")
     assert moved.fingerprints["observers"] == after.fingerprints["observers"]
+
+
+def test_a_changed_setting_default_or_check_reruns_its_tasks_only(tmp_path: Path) -> None:
+    """A task's settings home (its module in fnnbook.tasks, and the groups it shares) is code it imports: a changed
+    paper value or check there changes its fingerprint, and its downstream tasks', no other."""
+    spec = load_spec(REPO / "pipeline.yaml").with_paths(data_dir=tmp_path / "data", output_root=tmp_path / "out")
+    (tmp_path / "data").mkdir()
+    packages = _copy_packages(tmp_path)
+    before = check(spec, "smoke", sources=packages)
+    home = tmp_path / "fnnbook" / "tasks" / "quick_start.py"
+    text = home.read_text()
+    assert text.count("setting(300, N2)") == 1, "quick_start's T moved: update this test"
+    home.write_text(text.replace("setting(300, N2)", "setting(301, N2)"))  # a paper value
+    after = check(spec, "smoke", sources=packages)
+    changed = {n for n in before.order if before.fingerprints[n] != after.fingerprints[n]}
+    assert changed == {n for n in before.order if "quick_start" in spec.closure([n])}
+    assert trigger(before.inputs["quick_start"], after.inputs["quick_start"]) == "code: fnnbook.tasks.quick_start"
+    shared = tmp_path / "fnnbook" / "tasks" / "_spiral.py"
+    text = shared.read_text()
+    assert text.count("w < self.t_switch < end - w") == 1, "the switch check moved: update this test"
+    shared.write_text(text.replace("w < self.t_switch < end - w", "w <= self.t_switch < end - w"))  # a check
+    moved = check(spec, "smoke", sources=packages)
+    changed = {n for n in before.order if after.fingerprints[n] != moved.fingerprints[n]}
+    assert {"spiral", "ablations", "why_sec3"} <= changed and not changed & {"bottle", "quadrotor_mpc", "quick_start"}
+    assert trigger(after.inputs["spiral"], moved.inputs["spiral"]) == "code: fnnbook.tasks._spiral"
 
 
 def test_code_digest_ignores_docstrings_and_comments_only() -> None:

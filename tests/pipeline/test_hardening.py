@@ -68,7 +68,7 @@ def test_data_files_enter_the_fingerprint_not_the_data_path(make_pipeline: MakeP
 ])
 def test_notebook_value_checks_run_before_anything(name: str, value: object, message: str,
                                                    tmp_path: Path) -> None:
-    """The real spiral notebook's checks (fnnbook.settings.check_notebook_settings), on a copy of pipeline.yaml."""
+    """The real spiral notebook's checks (fnnbook.tasks.spiral.SpiralSettings), on a copy of pipeline.yaml."""
     doc = yaml.safe_load((REPO / "pipeline.yaml").read_text())
     doc["claims_file"] = str(REPO / "claims.yaml")
     for task in doc["tasks"].values():
@@ -83,9 +83,38 @@ def test_notebook_value_checks_run_before_anything(name: str, value: object, mes
     assert not (tmp_path / "outputs").exists()
 
 
+@pytest.mark.parametrize(("task", "name", "value", "message"), [
+    ("bottle", "N", 0, "N must be an integer >= 1"),
+    ("quadrotor_mpc", "u_max_judged", 5.0, "u_max_judged = 5.0 must be one of u_max"),
+    ("own_system", "tune_iterations", 60, "tune_iterations and spiral_tune_iterations must equal"),
+    ("cascaded_tanks", "series_N", 7, "series_N = 7 must be one of horizons"),
+    ("why_sec3", "s3_noise", [0.003, 0.03], "noise_std = 0.01 in s3_noise"),
+    ("quick_start", "T", 300.5, "parameter 'T': got float 300.5, but the notebook's default is int"),
+    ("theory", "Lsweep", [1.0], "parameter 'Lsweep': not declared in the settings of fnnbook.tasks.theory .*"
+                                "did you mean 'L_sweep'"),
+])
+def test_a_bad_value_in_pipeline_yaml_is_refused_before_any_work(task: str, name: str, value: object, message: str,
+                                                                  tmp_path: Path) -> None:
+    """Each task's settings dataclass checks its profile's values (type, value, the values between them) when the
+    run starts: the error names task, profile and parameter, and nothing has run."""
+    doc = yaml.safe_load((REPO / "pipeline.yaml").read_text())
+    doc["claims_file"] = str(REPO / "claims.yaml")
+    for t in doc["tasks"].values():
+        t["notebook"] = str(REPO / t["notebook"])
+        t["claims"] = []
+    doc["tasks"][task]["parameters"]["smoke"][name] = value
+    (tmp_path / "data").mkdir()
+    (tmp_path / "pipeline.yaml").write_text(yaml.safe_dump(doc))
+    spec = load_spec(tmp_path / "pipeline.yaml")
+    with pytest.raises(PipelineError, match=rf"task '{task}', profile 'smoke'.*{message}"):
+        run(spec, "smoke", [task], progress_bar=False, echo=lambda _: None)
+    assert not (tmp_path / "outputs").exists()
+
+
 def test_missing_data_is_not_run_and_the_book_says_so(make_pipeline: MakePipeline, tmp_path: Path) -> None:
     write_notebook(tmp_path / "notebooks" / "bottle.ipynb", book_parameters_cell("06_bottle"),
-                   'check_notebook_settings("bottle", globals())\nraise RuntimeError("must not run")')
+                   'from fnnbook.tasks.bottle import BottleSettings\n'
+                   'BottleSettings.from_namespace(globals())\nraise RuntimeError("must not run")')
     bottle = {"title": "Bottle", "notebook": "notebooks/bottle.ipynb", "claims": ["S2"], "products": [],
               "parameters": {"smoke": {}}}
     after = {**child_task(), "upstream": ["bottle"]}

@@ -201,16 +201,19 @@ def test_unknown_claim_id_is_an_error(make_pipeline: MakePipeline) -> None:
         check(spec, "smoke")
 
 
-def test_a_none_preset_is_filled_and_typed_by_its_paper_value(make_pipeline: MakePipeline, tmp_path: Path) -> None:
-    """A cell leaves a shared paper value at None; the runner injects the preset and checks overrides by its type."""
-    write_notebook(tmp_path / "notebooks" / "02_theory.ipynb", book_parameters_cell("02_theory"),
-                   'check_notebook_settings("theory", globals())')  # one of the book's notebooks: it has presets
+def test_a_book_notebook_takes_its_values_and_types_from_its_settings(make_pipeline: MakePipeline,
+                                                                     tmp_path: Path) -> None:
+    """The runner injects the settings dataclass's paper values and checks overrides by their types, even where
+    the notebook's cell says otherwise (the dataclass is the home; the cell is written from it)."""
+    cell = book_parameters_cell("02_theory").replace("\nL = 20.0\n", "\nL = 3.0\n").replace("\nTs = 0.01\n", "\n")
+    write_notebook(tmp_path / "notebooks" / "02_theory.ipynb", cell,
+                   "from fnnbook.tasks.theory import TheorySettings")  # one of the book's notebooks
     task = {**leaf_task(), "notebook": "notebooks/02_theory.ipynb",
             "parameters": {"paper": {}, "smoke": {"L": 10}}}
     spec = load_spec(make_pipeline({"theory": task}))
     assert {k: check(spec, "paper").parameters["theory"][k] for k in ("L", "Ts")} == {"L": 20.0, "Ts": 0.01}
     assert check(spec, "smoke").parameters["theory"]["L"] == 10
     bad = {**task, "parameters": {"paper": {}, "smoke": {"Ts": "fast"}}}
-    with pytest.raises(PipelineError, match=r"parameter 'Ts': got str 'fast', but the notebook's paper preset "
+    with pytest.raises(PipelineError, match=r"parameter 'Ts': got str 'fast', but the notebook's default "
                                             r"is float 0.01"):
         check(load_spec(make_pipeline({"theory": bad})), "smoke")

@@ -8,7 +8,7 @@ import torch
 
 import fnnlib as F
 from fnnbook.feedback_eval import evaluation_setup, judge, nominal_errors
-from fnnbook.settings import notebook_presets
+from fnnbook.tasks import settings_class
 
 SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_range": [-0.03, 0.0275, 0.025],
          "deps_range": [-14.4, 13.2, 12.0], "dr_omega_range": [0.8, 0.12, 3.08], "dr_eta_range": [0.04, 0.005, 0.135],
@@ -23,7 +23,7 @@ def networks(E: int):
 
 
 def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
-    s = evaluation_setup(notebook_presets("neural_feedback") | SMALL)
+    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
     assert s.x_s8.shape == (3, 60, 2) and s.x_held.shape[1:] == (60, 2) and s.offsets.shape == (3, 3)
     f, h = networks(2)
     with torch.no_grad():
@@ -41,7 +41,7 @@ def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
 
 
 def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
-    p = notebook_presets("neural_feedback") | SMALL
+    p = settings_class("neural_feedback").defaults() | SMALL
     ours, theirs = evaluation_setup(p), evaluation_setup(p, F.data.release.release_spiral)
     assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
     with pytest.raises(ValueError, match="held-out"):
@@ -70,7 +70,7 @@ def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -
 def test_the_settled_window_the_centred_feedback_and_the_release_form_loss() -> None:
     from fnnbook.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss, settled_errors
 
-    s = evaluation_setup(notebook_presets("neural_feedback") | SMALL)
+    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
     f, h = networks(2)
     curves = rate_error_curves(f, h, s, 2)
     assert curves["neural_feedback"].shape == (2, 60)
