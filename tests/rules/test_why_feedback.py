@@ -8,7 +8,7 @@ import torch
 
 from fnnbook.feedback_eval import evaluation_setup
 from fnnbook.rules import why_feedback as WF
-from fnnbook.settings import notebook_presets
+from fnnbook.tasks import settings_class
 
 TH = WF.Thresholds(d2_factor=1.5, d3_ratio=0.5, d3_flat=0.1)
 S = 5
@@ -97,7 +97,7 @@ def test_the_usage_grid_judges_d4_at_every_metric_decay_and_first_estimate() -> 
     """With h = 0 the feedback adds nothing: the cascade equals the Euler rollout, D4 fails in every metric."""
     import fnnlib as F
 
-    setup = evaluation_setup(notebook_presets("neural_feedback") | SMALL)
+    setup = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
     f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in range(2)], [0, 1])
     h = F.NeuralFeedbackEnsemble(2, [8], "relu", [0, 1])
     with torch.no_grad():
