@@ -41,8 +41,6 @@ PENDING: dict[str, set[str]] = {
     "08_quadrotor_mpc": {"make_qp", "merged", "at_paper"},
     "09_own_system": {"hand_sweep", "pendulum_data", "pendulum_model", "pendulum_predictions", "pendulum_run",
                       "spiral_predictions", "spiral_run"},
-    "19_cascaded_tanks": {"mean_err"},
-    "20_why_tanks": {"b4_at", "b6_at", "holds"},
 }
 
 #: notebook pairs that still share a block (only shrinks)
