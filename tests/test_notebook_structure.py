@@ -37,8 +37,6 @@ EXEMPT = {
 PENDING: dict[str, set[str]] = {
     "04_observers": {"make_observers", "twin_check", "design_check"},
     "05_neural_feedback": {"level_rates", "level_errors"},
-    "07_quadrotor_learning": {"held_out"},
-    "08_quadrotor_mpc": {"make_qp", "merged", "at_paper"},
     "09_own_system": {"hand_sweep", "pendulum_data", "pendulum_model", "pendulum_predictions", "pendulum_run",
                       "spiral_predictions", "spiral_run"},
 }
