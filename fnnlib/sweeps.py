@@ -9,6 +9,7 @@ The paper writes its grids in MATLAB colon form ``{start: +step: stop}``
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -184,6 +185,35 @@ def position_gain_tuning(f: VectorField, x: Tensor, Ts: float, N: int, *, L0: An
     def objective(gains, x_, u, mask):  # the judged metric on the tuning trajectories, differentiable in the gains
         return ahead_position_loss(x_, cascade_forward(f, x_, Ts, N, gains, rows=x_.shape[-2] - N), N)
     return tune_gains(f, x, Ts, N, L0=L0, beta0=beta0, objective=objective, iterations=iterations, lr=lr)
+
+
+def level_errors(f: NeuralODEEnsemble, neural_feedback: Any, x_levels: Tensor, f_levels: Tensor, Ts: float, N: int,
+                 L: float | Tensor, beta: float = 0.0) -> tuple[dict[str, Tensor], dict[str, Tensor], float]:
+    """The neural ODE ``f``, its neural feedback (an observer of Eq. (12) with ``observe`` and ``predict``, run on
+    the stacked state of ``f``'s members) and the linear feedback of Eq. (7) at gain ``L`` on noise-free
+    trajectories ``x_levels`` (levels, T, n) with true rates ``f_levels`` (S8, Fig. S10).
+
+    Returns, per member and level (E, levels): the change-rate RMSE of each (the linear feedback's without
+    decay), the mean N-step error of each (the Euler rollout, the neural feedback's cascade, the linear cascade
+    decayed by ``beta``), and the seconds of the neural feedback's predictions.
+    """
+    from fnnlib.feedback import cascade_predict, eval_field, rollout_predict  # noqa: PLC0415
+    from fnnlib.metrics import rmse_over_time  # noqa: PLC0415
+    from fnnlib.observers.linear import LinearFeedback  # noqa: PLC0415
+
+    E = f.size
+    xs = stack_members(x_levels, E)
+    with torch.no_grad():
+        f_nn = f.split(eval_field(f, xs))
+    fhat = {"neural_ode": f_nn, "neural_feedback": f.split(neural_feedback.observe(xs).f_hat),
+            "linear_feedback": f.split(LinearFeedback(f, L, Ts, 2 * E).observe(xs).f_hat)}
+    rate = {k: rmse_over_time(v, f_levels.expand_as(v)) for k, v in fhat.items()}
+    t0 = time.perf_counter()
+    z_nf = f.split(neural_feedback.predict(xs, N))
+    seconds = time.perf_counter() - t0
+    z = {"neural_ode": f.split(rollout_predict(f, xs, Ts, N, method="euler")), "neural_feedback": z_nf,
+         "linear_feedback": f.split(cascade_predict(f, xs, Ts, N, L, beta))}
+    return rate, {k: n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}, seconds
 
 
 def outward_increase_fraction(err: Tensor, center: int) -> Tensor:

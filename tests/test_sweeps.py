@@ -21,6 +21,7 @@ from fnnlib.sweeps import (
     residual_level_runs,
     simulate_levels,
     cascade_position_errors,
+    level_errors,
     position_gain_sweep,
     position_gain_tuning,
     sweep_errors,
@@ -257,6 +258,31 @@ def test_the_hand_sweep_keeps_the_grid_pair_of_lowest_o1_loss_and_the_tuner_lowe
     tuned = position_gain_tuning(net, x, 0.01, 5, L0=5.0, beta0=0.1, iterations=4, lr=0.1)
     assert len(tuned.loss) == 4 and tuned.loss[-1] < tuned.loss[0]
     assert tuned.loss[0] == pytest.approx(table[1][1], rel=1e-4)  # the objective is O1's loss at the start
+
+
+def test_level_errors_of_a_zero_neural_feedback_are_the_neural_odes():
+    """h = 0 adds nothing: the neural feedback's rates and N-step errors are the neural ODE's; the linear
+    feedback's are each member's own LinearFeedback and cascade."""
+    from fnnlib import LinearFeedback, NeuralFeedbackEnsemble, NeuralFeedbackObserver, NeuralODEEnsemble
+
+    ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
+    h = NeuralFeedbackEnsemble(2, [8], "tanh", [0, 1])
+    with torch.no_grad():
+        for p in h.parameters():
+            p.zero_()
+    t = torch.arange(40, dtype=F64) * 0.01
+    x, f = residual_level_runs([2.0, 0.1, 0.0], paired_levels([-0.5, 0.5], [0.0, 0.0], [0.0, 1.0]),
+                               torch.tensor([9.0, 0.0], dtype=F64), t)
+    rate, ms, seconds = level_errors(ens, NeuralFeedbackObserver(ens, h, 0.01, 4), x, f, 0.01, 5, 20.0, 0.02)
+    assert rate["neural_ode"].shape == ms["neural_ode"].shape == (2, 2) and seconds >= 0
+    torch.testing.assert_close(rate["neural_feedback"], rate["neural_ode"])
+    torch.testing.assert_close(ms["neural_feedback"], ms["neural_ode"], rtol=1e-5, atol=1e-6)
+    m = ens.member(1)
+    lf = LinearFeedback(m, 20.0, 0.01, 2).observe(x[0]).f_hat
+    torch.testing.assert_close(rate["linear_feedback"][1, 0], ((lf - f[0]) ** 2).sum(-1).mean().sqrt(),
+                               rtol=1e-4, atol=1e-5)
+    z = cascade_predict(m, x[1], 0.01, 5, 20.0, 0.02)
+    torch.testing.assert_close(ms["linear_feedback"][1, 1], n_step_errors(z, x[1], 5).mean(), rtol=1e-4, atol=1e-5)
 
 
 def test_residual_level_runs_pair_each_levels_run_with_its_own_rate():
