@@ -77,6 +77,7 @@ from fnnlib.sweeps import (
     n_step_rmse,
     sweep_errors,
     cascade_position_errors,
+    n_step_gain_sweep,
     position_gain_sweep,
     position_gain_tuning,
     level_errors,
@@ -139,7 +140,7 @@ __all__ = [
     "cascade_predict_loop",
     "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "ahead_position_errors", "ahead_position_loss", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "load_seed_ensemble", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
-    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "residual_level_runs", "n_step_rmse", "sweep_errors", "cascade_position_errors", "position_gain_sweep", "position_gain_tuning", "level_errors", "switched_spiral_run", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "residual_level_runs", "n_step_rmse", "sweep_errors", "cascade_position_errors", "n_step_gain_sweep", "position_gain_sweep", "position_gain_tuning", "level_errors", "switched_spiral_run", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
     "OutputFit", "OutputRecipe", "free_run", "train_from_outputs", "init_parameters",
 ]

@@ -162,6 +162,20 @@ def cascade_position_errors(f: VectorField, x: Tensor, Ts: float, N: int, L: flo
     return ahead_position_errors(cascade_predict(f, x[:, :-N], Ts, N, L, beta), x, N)
 
 
+def n_step_gain_sweep(f: VectorField, y: Tensor, Ts: float, N: int, L_grid: Sequence[float], beta_grid: Sequence[float],
+                      u: Tensor | None = None) -> GainSweep:
+    """Gains picked by hand (B1): the (L, beta) of the grid whose N-step cascade (Eq. (11)) has the lowest mean
+    N-step error (:func:`n_step_errors`, every state) on the tuning measurements ``y`` (..., T, n), inputs ``u``
+    where the model takes them (:func:`fnnlib.feedback.sweep_gains`)."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415
+    from fnnlib.feedback.tuning import sweep_gains  # noqa: PLC0415
+
+    def cost(L: float, beta: float) -> float:
+        with torch.no_grad():
+            return float(n_step_errors(cascade_predict(f, y, Ts, N, L, beta, u=u), y, N).mean())
+    return sweep_gains(cost, L_grid, beta_grid)
+
+
 def position_gain_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L_grid: Sequence[float],
                         beta_grid: Sequence[float]) -> GainSweep:
     """Gains tuned by hand on O1's error (B1): the (L, beta) of the grid whose N-step cascade (Eq. (11)) has the

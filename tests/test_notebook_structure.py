@@ -36,8 +36,6 @@ EXEMPT = {
 #: definitions still to move into fnnlib or fnnbook, per notebook (only shrinks)
 PENDING: dict[str, set[str]] = {
     "04_observers": {"make_observers", "twin_check", "design_check"},
-    "09_own_system": {"hand_sweep", "pendulum_data", "pendulum_model", "pendulum_predictions", "pendulum_run",
-                      "spiral_predictions", "spiral_run"},
 }
 
 #: notebook pairs that still share a block (only shrinks)
