@@ -187,8 +187,6 @@ for e in range(S):
                             label=label)
         axes[0, 2].loglog(table[name]["us_per_step"], tables[e][name]["rate_rmse_settled"], "o", color=colors[name],
                           alpha=0.6, label=label)
-
-# %%
 axes[0, 0].set(xlabel="t [s]", ylabel=r"$\|\hat f - f\|$", title=f"change-rate error ({S} seeds)")
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"{N}-step prediction error ({S} seeds)")
 axes[0, 2].set(xlabel="µs per sample (observing)", ylabel="change-rate RMSE (settled)",

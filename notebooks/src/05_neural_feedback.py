@@ -186,8 +186,6 @@ lc = F.plotting.plot_rate_curve(axes[0, 2], f_nom, f_fb_nom[shown], title="(b) f
                                 label="neural feedback", vmax=vmax)
 fig.colorbar(lc, ax=axes[0, 2], label="change-rate error")
 ax = axes[0, 3]
-
-# %%
 for j, (key, color) in enumerate([("nominal_neural_ode", "neural_ode"), ("dr_neural_ode", "feedback_nodecay"),
                                   ("neural_feedback", "feedback")]):
     v = np.asarray(d12[f"rel_rmse_{key}"])
@@ -273,8 +271,6 @@ fig, axes = F.new_figure(1, 2)
 idx = np.arange(len(res_levels))
 colors = {"neural_ode": F.plotting.COLORS["neural_ode"], "neural_feedback": F.plotting.COLORS["feedback"],
           "linear_feedback": F.plotting.COLORS["feedback_nodecay"]}
-
-# %%
 for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N}-step error")]):
     for j, (key, v) in enumerate(vals.items()):
         v = v.numpy()  # (E, 12)

@@ -163,8 +163,6 @@ for ax, runs, title in [(axes[0, 0], pendulum, f"pendulum, N = {N}"), (axes[0, 1
         ax.plot([i] * len(vals), vals, "k.", ms=4)
     ax.set(xticks=range(len(names)), yscale="log", ylabel="mean N-step error", title=title)
     ax.set_xticklabels(names, rotation=20)
-
-# %%
 ax = axes[0, 2]
 tr = pendulum[0]["trace"]
 tt = np.arange(N, n_test) * Ts
