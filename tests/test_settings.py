@@ -284,8 +284,10 @@ def test_shared_values_are_plain_and_one_source() -> None:
         assert settings_class(name).defaults()["Ts"] == SP.SPIRAL_TS
     assert settings_class("own_system").defaults()["spiral_L"] == settings_class("spiral").defaults()["L"] \
         == SP.PAPER_SPIRAL_L
-    assert settings_class("neural_feedback").defaults()["dr_omega_range"] == \
-        settings_class("why_feedback").defaults()["dr_omega_range"]
+    feedback, observers = settings_class("neural_feedback").defaults(), settings_class("observers").defaults()
+    assert feedback["dr_omega_range"] == settings_class("why_feedback").defaults()["dr_omega_range"]
+    ranges = [feedback[f"dr_{k}_range"] for k in ("omega", "eta", "eps")]  # S11's Kalman tuning: Alg. 1's range
+    assert observers["kf_tuning_low"] == [r[0] for r in ranges] and observers["kf_tuning_high"] == [r[2] for r in ranges]
 
 
 def _paper_profile_cases() -> list[tuple[str, str]]:

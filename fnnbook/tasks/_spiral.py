@@ -9,6 +9,11 @@ from fnnbook.tasks._base import TaskSettings, setting
 from fnnbook.tasks._checks import ACT, GAIN, GAINS, GRID, N1, N2, NONNEG, OPTIMIZER, POS, SPIRAL3, WIDTHS, X0, need
 from fnnlib import spiral_presets as SP
 
+#: Alg. 1's randomized spirals: ``[start, step, stop]`` of ``(omega, eta, eps)``, the neural feedback's training
+#: cases (the Kalman baseline of S11 tunes its disturbance noise on spirals from the same range)
+DR_RANGES = {"dr_omega_range": (0.8, 0.12, 3.08), "dr_eta_range": (0.04, 0.005, 0.135),
+             "dr_eps_range": (-24.0, 2.4, 21.6)}
+
 
 @dataclass(frozen=True, kw_only=True)
 class SpiralTrajectory(TaskSettings):
@@ -83,9 +88,9 @@ class SwitchTest(TaskSettings):
 class DomainRandomization(TaskSettings):
     """Alg. 1's randomized spirals: ``[start, step, stop]`` of ``(omega, eta, eps)``, their samples and step (s)."""
 
-    dr_omega_range: list[float] = setting([0.8, 0.12, 3.08], GRID)
-    dr_eta_range: list[float] = setting([0.04, 0.005, 0.135], GRID)
-    dr_eps_range: list[float] = setting([-24.0, 2.4, 21.6], GRID)
+    dr_omega_range: list[float] = setting(DR_RANGES["dr_omega_range"], GRID)
+    dr_eta_range: list[float] = setting(DR_RANGES["dr_eta_range"], GRID)
+    dr_eps_range: list[float] = setting(DR_RANGES["dr_eps_range"], GRID)
     dr_n_samples: int = setting(1000, N2)
     dr_Ts: float = setting(0.02, POS)
 

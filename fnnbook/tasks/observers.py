@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import N0, N1, N2, NONNEG, SEED, SPIRAL3, gain, horizon, need, vec
-from fnnbook.tasks._spiral import MeasurementNoise, SpiralFeedback, SpiralTrajectory
+from fnnbook.tasks._spiral import DR_RANGES, MeasurementNoise, SpiralFeedback, SpiralTrajectory
 from fnnlib import spiral_presets as SP
 
 __all__ = ["ObserversSettings"]
@@ -23,8 +23,8 @@ class ObserversSettings(MeasurementNoise, SpiralFeedback, SpiralTrajectory, note
     settle: int = setting(50, N0)
     luenberger_poles: list[float] = setting([0.5, 0.5, 0.8, 0.8], vec(4))
     kf_q_x: float = setting(SP.KALMAN_SETTINGS["kf_q_x"], NONNEG)
-    kf_tuning_low: list[float] = setting([0.8, 0.04, -24.0], SPIRAL3)
-    kf_tuning_high: list[float] = setting([3.08, 0.135, 21.6], SPIRAL3)
+    kf_tuning_low: list[float] = setting([r[0] for r in DR_RANGES.values()], SPIRAL3)  # Alg. 1's range
+    kf_tuning_high: list[float] = setting([r[2] for r in DR_RANGES.values()], SPIRAL3)
     kf_tuning_cases: int = setting(20, N2)
     kf_p0_d: float = setting(SP.KALMAN_SETTINGS["kf_p0_d"], NONNEG)
     repeats: int = setting(3, N1)
