@@ -193,8 +193,8 @@ def check_task_parameters(task: Task, profile: str, declared: Mapping[str, Any])
             close = difflib.get_close_matches(name, choices, n=3)
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
             book = _book(task)
-            home = "the parameters cell" if book is None else f"the settings of fnnbook.tasks.{book}"
-            raise PipelineError(f"{where}: not declared in {home} of {nb}{hint}")
+            home = f"the parameters cell of {nb}" if book is None else f"{nb}'s settings (fnnbook.tasks.{book})"
+            raise PipelineError(f"{where}: not declared in {home}{hint}")
         default = defaults[name]
         if not _type_ok(default, value):
             raise PipelineError(f"{where}: got {_type_name(value)} {value!r}, but the notebook's "

@@ -90,8 +90,8 @@ def test_notebook_value_checks_run_before_anything(name: str, value: object, mes
     ("cascaded_tanks", "series_N", 7, "series_N = 7 must be one of horizons"),
     ("why_sec3", "s3_noise", [0.003, 0.03], "noise_std = 0.01 in s3_noise"),
     ("quick_start", "T", 300.5, "parameter 'T': got float 300.5, but the notebook's default is int"),
-    ("theory", "Lsweep", [1.0], "parameter 'Lsweep': not declared in the settings of fnnbook.tasks.theory .*"
-                                "did you mean 'L_sweep'"),
+    ("theory", "Lsweep", [1.0], r"parameter 'Lsweep': not declared in 02_theory.ipynb's settings "
+                                r"\(fnnbook.tasks.theory\); did you mean 'L_sweep'"),
 ])
 def test_a_bad_value_in_pipeline_yaml_is_refused_before_any_work(task: str, name: str, value: object, message: str,
                                                                   tmp_path: Path) -> None:
