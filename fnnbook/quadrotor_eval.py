@@ -15,9 +15,11 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from torch import nn
+
 import fnnlib.mpc as M
 
-__all__ = ["ADAPTIVE", "at_gains", "flight_numbers"]
+__all__ = ["ADAPTIVE", "at_gains", "flight_numbers", "fly_record"]
 
 #: the models flown once per value of their adaptive gain: AdapNN's (App. A.5.4), AdapFNN's Gamma (Eq. (30))
 ADAPTIVE = ("AdapNN", "AdapFNN")
@@ -39,3 +41,27 @@ def at_gains(record: Mapping[str, Any], name: str, adapnn_gamma: float, Gamma: f
     if str(gain) not in record[name]:
         raise KeyError(f"{name} was not flown at the gain {gain:g}: flown at {sorted(record[name])}")
     return record[name][str(gain)]
+
+
+def fly_record(nets: Sequence[tuple[Any, nn.Module]], mlps: Sequence[tuple[Any, nn.Module]], *,
+               tests: Sequence[M.FlightTest], mpc: M.MPC, model_settings: Mapping[str, Any], adapnn_gamma: float,
+               names: Sequence[str], adapnn_grid: Sequence[float], Gamma_grid: Sequence[float],
+               transient: int) -> dict[str, Any]:
+    r"""One cost's record (the layout :func:`at_gains` reads) for one set of networks under ``mpc``: the models in
+    ``names`` flown once per unit (:func:`fnnlib.mpc.paired_units`, AdapNN at ``adapnn_gamma``), AdapNN once per gain
+    of ``adapnn_grid`` (App. A.5.4) and AdapFNN once per :math:`\Gamma` of ``Gamma_grid`` (Eq. (30)), each AdapFNN
+    flight with the share of its steps inside Theorem 2's bound after ``transient`` steps
+    (:func:`fnnlib.mpc.theorem2_check` at ``model_settings["L"]``)."""
+    fly = dict(tests=tests, mpc=mpc)
+    base = M.paired_units(nets, mlps, **fly, model_settings=model_settings, adapnn_gamma=adapnn_gamma, only=names)
+    rec: dict[str, Any] = {n: flight_numbers(r) for n, r in base.items()}
+    rec["AdapNN"] = {str(g): flight_numbers(M.paired_units(nets, mlps, **fly, model_settings=model_settings,
+                                                           adapnn_gamma=g, only=["AdapNN"])["AdapNN"])
+                     for g in adapnn_grid}
+    rec["AdapFNN"] = {}
+    for G in Gamma_grid:
+        runs = M.paired_units(nets, mlps, **fly, model_settings={**model_settings, "Gamma": G},
+                              adapnn_gamma=adapnn_gamma, only=["AdapFNN"])["AdapFNN"]
+        rec["AdapFNN"][str(G)] = flight_numbers(runs) | {
+            "theorem2_inside": [M.theorem2_check(r, model_settings["L"], transient)["inside_fraction"] for r in runs]}
+    return rec

@@ -21,7 +21,7 @@ from torch import Tensor
 
 __all__ = ["DIVERGED", "LEVEL", "capped", "judged_again", "load_trained", "one_member", "outside_overflow",
            "save_trained", "depths", "episode_errors", "free_run", "kalman_n_step", "n_step_output_rmse",
-           "no_feedback", "overflow_episodes", "run_seeds"]
+           "no_feedback", "overflow_episodes", "overflow_table", "run_seeds"]
 
 
 def _signal(name: str, v: Any) -> np.ndarray:
@@ -120,6 +120,22 @@ def episode_errors(y_hat: Any, y: Any, episodes: Sequence[tuple[int, int]], *, a
 
 DIVERGED = 1e3
 """The error (volts) a prediction or simulation that diverged (non-finite, or beyond it) is counted as."""
+
+
+def overflow_table(errors: Sequence[Mapping[str, Sequence[Mapping[str, float | None]]]],
+                   episodes: Sequence[tuple[int, int]]) -> str:
+    """The overflow episodes as a markdown table: per episode (its samples) and model, the mean over the seeds of
+    the model's error during the episode and in the samples after it (:func:`episode_errors`); ``-`` where a seed
+    has no such error. ``errors``: one ``{model: [per episode {"during", "after"}]}`` per seed."""
+    names = list(errors[0]) if errors else []
+
+    def mean(name: str, i: int, when: str) -> str:
+        v = [e[name][i][when] for e in errors]
+        return "-" if None in v else f"{np.mean(v):.3f}"
+    rows = ["| episode (samples) | " + " | ".join(f"{n}: during / after" for n in names) + " |",
+            "|" + "---|" * (1 + len(names))]
+    return "\n".join(rows + [f"| {a}-{b - 1} | " + " | ".join(f"{mean(n, i, 'during')} / {mean(n, i, 'after')}"
+                                                              for n in names) + " |" for i, (a, b) in enumerate(episodes)])
 
 
 def capped(fn: Any, *args: Any, **kw: Any) -> float:

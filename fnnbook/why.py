@@ -48,7 +48,7 @@ from fnnlib.io import atomic_write
 from fnnlib.results import BETTER, VERDICTS
 
 __all__ = ["AXIS_KINDS", "CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "WhyGrid", "causes", "read_whys",
-           "summary", "write_whys"]
+           "reproduced", "summary", "write_whys"]
 
 #: the name of a why task's output file
 WHYS_FILENAME = "whys.json"
@@ -561,3 +561,9 @@ def read_whys(path: str | os.PathLike[str]) -> dict[str, Why]:
         return {w.claim: w for w in (Why.from_json(d) for d in data["whys"])}
     except (KeyError, TypeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: not a whys file ({exc!r})") from exc
+
+
+def reproduced(results: Any) -> np.ndarray:
+    """Where each claim result of a grid (nested lists of :class:`~fnnlib.results.ClaimResult`) reads
+    *reproduced*: the ``holds`` of a :class:`WhyGrid` whose points are judged by the claim's own rule."""
+    return np.array([[r.verdict == "reproduced" for r in row] for row in results], dtype=bool)

@@ -8,7 +8,7 @@ does not.
 
 from fnnlib._threads import set_num_threads
 from fnnlib.data import bottle_throws, load_bottle, synthetic_throws
-from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
+from fnnlib.metrics import ahead_position_errors, ahead_position_loss, error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 from fnnlib.stats import paired_win
 from fnnlib.models import MODELS, NeuralFeedback, NeuralFeedbackEnsemble, NeuralODE, NeuralODEEnsemble, mlp, split_members, stack_members
 from fnnlib.feedback import (
@@ -79,6 +79,11 @@ from fnnlib.sweeps import (
     residual_level_runs,
     n_step_rmse,
     sweep_errors,
+    cascade_position_errors,
+    n_step_gain_sweep,
+    position_gain_sweep,
+    position_gain_tuning,
+    level_errors,
     switched_spiral_run,
     outward_increase_fraction,
     paired_levels,
@@ -139,9 +144,9 @@ __all__ = [
     "NeuralODEEnsemble", "NeuralFeedbackEnsemble", "split_members", "stack_members",
     "Spiral", "BatchedSpirals", "StackedSystem", "TrainHistory", "add_measurement_noise", "add_member_noise", "cascade_predict",
     "cascade_predict_loop",
-    "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "load_seed_ensemble", "seed_checkpoint_name",
+    "check_gain", "ClaimResult", "GuaranteeFailed", "Headline", "Results", "RESULTS_FILENAME", "headline_number", "decayed_gains", "error_norm", "ahead_position_errors", "ahead_position_loss", "eval_field", "VectorField", "gain_matrix", "load_checkpoint", "load_seed_checkpoints", "load_seed_ensemble", "seed_checkpoint_name",
     "make_generator", "mean_error_norm", "mlp", "new_figure", "read_results", "relative_rmse", "save_figure",
-    "rollout_depths", "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "residual_level_runs", "n_step_rmse", "sweep_errors", "switched_spiral_run", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
+    "rollout_depths", "rollout_predict", "rmse", "rmse_over_time", "offset_spirals", "residual_level_runs", "n_step_rmse", "sweep_errors", "cascade_position_errors", "n_step_gain_sweep", "position_gain_sweep", "position_gain_tuning", "level_errors", "switched_spiral_run", "save_checkpoint", "seed_everything", "set_num_threads", "spectral_radius",
     "train_neural_ode", "verdict_from_checks", "write_results",
     "OutputFit", "OutputRecipe", "free_run", "train_from_outputs", "init_parameters",
 ]

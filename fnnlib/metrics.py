@@ -34,3 +34,19 @@ def relative_rmse(pred: Tensor, true: Tensor) -> float:
     if scale == 0.0:
         raise ValueError("relative_rmse is undefined for an all-zero reference")
     return rmse(pred, true) / scale
+
+
+def ahead_position_errors(pred: Tensor, x: Tensor, N: int) -> Tensor:
+    """O1's error (Sec. 5.1): each trajectory's mean position error ``N`` samples ahead.
+
+    ``pred`` (..., K, T - N, n): the predictions from the first T - N starts of the trajectories ``x`` (K, T, n)
+    (row k predicts ``x[:, k + N]``), whose first three states are the position. Returns (..., K).
+    """
+    return error_norm(pred[..., :3], x[:, N:, :3].expand_as(pred[..., :3])).mean(-1)
+
+
+def ahead_position_loss(x: Tensor, z: Tensor, N: int) -> Tensor:
+    """The mean of :func:`ahead_position_errors` over every start of every trajectory, as one differentiable
+    number: the objective that tunes the gains on O1's error. ``z`` (..., K, T', n) holds predictions from at least
+    the first T - N starts of ``x`` (..., K, T, n)."""
+    return error_norm(z[..., : x.shape[-2] - N, :3], x[..., N:, :3]).mean()

@@ -9,12 +9,18 @@ The paper writes its grids in MATLAB colon form ``{start: +step: stop}``
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import Tensor
 
-from fnnlib.models.ensemble import NeuralODEEnsemble
+from fnnlib.feedback.options import Gains
+from fnnlib.feedback.tuning import GainSweep, TunedGains, TuneRecipe
+from fnnlib.feedback.types import VectorField
+from fnnlib.metrics import ahead_position_errors, ahead_position_loss
+from fnnlib.models.ensemble import NeuralODEEnsemble, stack_members
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
 from fnnlib.systems.switched import SwitchedSystem
@@ -139,9 +145,91 @@ def sweep_errors(ensemble: NeuralODEEnsemble, z: Tensor, truth: Tensor, Ts: floa
     :func:`fnnlib.feedback.cascade_sweep` (Eq. (11)), from the stacked measurements ``z`` (T, E n) of the
     trajectory ``truth`` (T, n): shape (E, G), one cell per member and gain of the maps of Fig. 3 (S7)."""
     from fnnlib.feedback.cascade import cascade_sweep  # noqa: PLC0415 (the sweeps need no cascade to import)
-    from fnnlib.feedback.options import Gains  # noqa: PLC0415
 
     return n_step_errors(ensemble.split(cascade_sweep(ensemble, z, Ts, N, Gains.sweep(L, beta))), truth, N).mean(-1)
+
+
+def cascade_position_errors(f: VectorField, x: Tensor, Ts: float, N: int, L: float | Tensor,
+                            beta: float = 0.0) -> Tensor:
+    """O1's error (Sec. 5.1) of the N-step cascade (Eq. (11), gain ``L``, decay ``beta``; ``L = 0`` is the open-loop
+    Euler rollout) on the trajectories ``x`` (K, T, n): each one's mean position error N samples ahead over every
+    start (:func:`fnnlib.metrics.ahead_position_errors`), shape (K,); with a :class:`NeuralODEEnsemble` ``f``
+    every member's on the same measurements, (E, K). The cascade is causal: it runs on the first T - N rows."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415 (the sweeps need no cascade to import)
+
+    if isinstance(f, NeuralODEEnsemble):
+        z = cascade_predict(f, stack_members(x, f.size)[:, :-N], Ts, N, Gains(L, beta))
+        return ahead_position_errors(f.split(z), x, N)
+    return ahead_position_errors(cascade_predict(f, x[:, :-N], Ts, N, Gains(L, beta)), x, N)
+
+
+def n_step_gain_sweep(f: VectorField, y: Tensor, Ts: float, N: int, L_grid: Sequence[float], beta_grid: Sequence[float],
+                      u: Tensor | None = None) -> GainSweep:
+    """Gains picked by hand (B1): the (L, beta) of the grid whose N-step cascade (Eq. (11)) has the lowest mean
+    N-step error (:func:`n_step_errors`, every state) on the tuning measurements ``y`` (..., T, n), inputs ``u``
+    where the model takes them (:func:`fnnlib.feedback.sweep_gains`)."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415
+    from fnnlib.feedback.tuning import sweep_gains  # noqa: PLC0415
+
+    def cost(L: float, beta: float) -> float:
+        with torch.no_grad():
+            return float(n_step_errors(cascade_predict(f, y, Ts, N, Gains(L, beta), u=u), y, N).mean())
+    return sweep_gains(cost, L_grid, beta_grid)
+
+
+def position_gain_sweep(f: VectorField, x: Tensor, Ts: float, N: int, L_grid: Sequence[float],
+                        beta_grid: Sequence[float]) -> GainSweep:
+    """Gains tuned by hand on O1's error (B1): the (L, beta) of the grid whose N-step cascade (Eq. (11)) has the
+    lowest mean position error N samples ahead (:func:`fnnlib.metrics.ahead_position_loss`) on the trajectories
+    ``x`` (K, T, n) (:func:`fnnlib.feedback.sweep_gains`)."""
+    from fnnlib.feedback.cascade import cascade_predict  # noqa: PLC0415
+    from fnnlib.feedback.tuning import sweep_gains  # noqa: PLC0415
+
+    def cost(L: float, beta: float) -> float:
+        with torch.no_grad():
+            return float(ahead_position_loss(x, cascade_predict(f, x[..., :-N, :], Ts, N, Gains(L, beta)), N))
+    return sweep_gains(cost, L_grid, beta_grid)
+
+
+def position_gain_tuning(f: VectorField, x: Tensor, Ts: float, N: int, *, L0: Any, beta0: float, iterations: int,
+                         lr: float) -> TunedGains:
+    """Gains tuned by gradient on O1's error (B1): :func:`fnnlib.feedback.tune_gains` from ``(L0, beta0)`` with the
+    mean position error N samples ahead of the cascade on the trajectories ``x`` as its objective."""
+    from fnnlib.feedback.tuning import cascade_forward, tune_gains  # noqa: PLC0415
+
+    def objective(gains, x_, u, mask):  # the judged metric on the tuning trajectories, differentiable in the gains
+        return ahead_position_loss(x_, cascade_forward(f, x_, Ts, N, gains, rows=x_.shape[-2] - N), N)
+    return tune_gains(f, x, Ts, N,
+                      recipe=TuneRecipe(L0=L0, beta0=beta0, objective=objective, iterations=iterations, lr=lr))
+
+
+def level_errors(f: NeuralODEEnsemble, neural_feedback: Any, x_levels: Tensor, f_levels: Tensor, Ts: float, N: int,
+                 L: float | Tensor, beta: float = 0.0) -> tuple[dict[str, Tensor], dict[str, Tensor], float]:
+    """The neural ODE ``f``, its neural feedback (an observer of Eq. (12) with ``observe`` and ``predict``, run on
+    the stacked state of ``f``'s members) and the linear feedback of Eq. (7) at gain ``L`` on noise-free
+    trajectories ``x_levels`` (levels, T, n) with true rates ``f_levels`` (S8, Fig. S10).
+
+    Returns, per member and level (E, levels): the change-rate RMSE of each (the linear feedback's without
+    decay), the mean N-step error of each (the Euler rollout, the neural feedback's cascade, the linear cascade
+    decayed by ``beta``), and the seconds of the neural feedback's predictions.
+    """
+    from fnnlib.feedback import cascade_predict, eval_field, rollout_predict  # noqa: PLC0415
+    from fnnlib.metrics import rmse_over_time  # noqa: PLC0415
+    from fnnlib.observers.linear import LinearFeedback  # noqa: PLC0415
+
+    E = f.size
+    xs = stack_members(x_levels, E)
+    with torch.no_grad():
+        f_nn = f.split(eval_field(f, xs))
+    fhat = {"neural_ode": f_nn, "neural_feedback": f.split(neural_feedback.observe(xs).f_hat),
+            "linear_feedback": f.split(LinearFeedback(f, Ts, gains=Gains(L), n=2 * E).observe(xs).f_hat)}
+    rate = {k: rmse_over_time(v, f_levels.expand_as(v)) for k, v in fhat.items()}
+    t0 = time.perf_counter()
+    z_nf = f.split(neural_feedback.predict(xs, N))
+    seconds = time.perf_counter() - t0
+    z = {"neural_ode": f.split(rollout_predict(f, xs, Ts, N)), "neural_feedback": z_nf,
+         "linear_feedback": f.split(cascade_predict(f, xs, Ts, N, Gains(L, beta)))}
+    return rate, {k: n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}, seconds
 
 
 def outward_increase_fraction(err: Tensor, center: int) -> Tensor:

@@ -47,3 +47,20 @@ def test_rmse_over_time_per_series():
     true = torch.zeros(2, 2, 2)
     pred = torch.tensor([[[3.0, 4.0], [0.0, 0.0]], [[1.0, 0.0], [0.0, 1.0]]])
     torch.testing.assert_close(rmse_over_time(pred, true), torch.tensor([math.sqrt(25 / 2), 1.0]))
+
+
+def test_ahead_position_errors_read_the_position_n_samples_ahead():
+    """Row k predicts x[:, k + N]: an exact prediction scores 0; one off by (3, 4, 0) in position, and anything in
+    the velocity, scores 5 at every start; the loss is their mean over starts and trajectories."""
+    from fnnlib import ahead_position_errors, ahead_position_loss
+
+    x = torch.arange(2 * 7 * 6, dtype=torch.float64).reshape(2, 7, 6)
+    N = 2
+    exact = x[:, N:].clone()  # (K, T - N, 6)
+    assert ahead_position_errors(exact, x, N).tolist() == [0.0, 0.0]
+    off = exact + torch.tensor([3.0, 4.0, 0.0, 9.0, 9.0, 9.0], dtype=torch.float64)
+    assert ahead_position_errors(off, x, N).tolist() == [5.0, 5.0]
+    assert ahead_position_errors(off[None].expand(3, -1, -1, -1), x, N).shape == (3, 2)
+    off[1, :, 0] += 12.0  # the second trajectory: (15, 4, 0) off, norm sqrt(241)
+    torch.testing.assert_close(ahead_position_loss(x, off, N), torch.tensor((5.0 + math.sqrt(241.0)) / 2,
+                                                                            dtype=torch.float64))

@@ -59,12 +59,21 @@ def is_one_figure(source: str) -> bool:
     return figure or bool(helper)
 
 
+def is_imports(source: str) -> bool:
+    """A cell of imports alone (one subject: what the notebook uses)."""
+    try:
+        body = ast.parse(source).body
+    except SyntaxError:
+        return False
+    return bool(body) and all(isinstance(s, (ast.Import, ast.ImportFrom)) for s in body)
+
+
 def long_cells(nb) -> list[tuple[int, int]]:
     """The code cells over their limit, as (cell index, non-blank lines): :data:`MAX_CELL_LINES`, or
-    :data:`MAX_FIGURE_CELL_LINES` for :func:`is_one_figure`. The ``parameters`` cell is exempt (papermill
-    overwrites it as one cell, one line a parameter)."""
+    :data:`MAX_FIGURE_CELL_LINES` for :func:`is_one_figure`. The ``parameters`` cell (papermill overwrites it as one
+    cell, one line a parameter) and a cell of imports alone are exempt."""
     return [(i, n) for i, c in enumerate(nb.cells)
-            if c.cell_type == "code" and "parameters" not in c.metadata.get("tags", [])
+            if c.cell_type == "code" and "parameters" not in c.metadata.get("tags", []) and not is_imports(c.source)
             and (n := sum(1 for line in c.source.splitlines() if line.strip()))
             > (MAX_FIGURE_CELL_LINES if is_one_figure(c.source) else MAX_CELL_LINES)]
 
@@ -75,9 +84,10 @@ def test_the_cell_length_rule_gives_a_figure_room_and_nothing_else() -> None:
     helper = "def plot_a(ax):\n" + "\n".join(f"    ax.plot({i})" for i in range(20))
     two = helper + "\n\n\ndef plot_b(ax):\n    pass"
     logic = helper + "\nv = 1"
-    nb = jupytext.reads("\n".join(f"# %%\n{s}\n" for s in (code, figure, helper, two, logic, figure + "\n" + code)),
-                        fmt="py:percent")
-    assert long_cells(nb) == [(0, 16), (3, 23), (4, 22), (5, 38)]
+    imports = "\n".join(f"import m{i}" for i in range(20))
+    nb = jupytext.reads("\n".join(f"# %%\n{s}\n" for s in (code, figure, helper, two, logic, figure + "\n" + code,
+                                                             imports, imports + "\nv = 1")), fmt="py:percent")
+    assert long_cells(nb) == [(0, 16), (3, 23), (4, 22), (5, 38), (7, 21)]
 
 
 @pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])

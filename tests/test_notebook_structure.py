@@ -10,8 +10,7 @@ Two rules over ``notebooks/src/*.py`` (jupytext's percent format, so markdown ce
   folded; blank lines, comment-only lines, import lines and the ``parameters`` cells left out: papermill needs
   each notebook's own) stands in two notebooks.
 
-:data:`EXEMPT` names what a notebook keeps on purpose; :data:`PENDING` what is still to move (it may only shrink:
-a listed name that is gone, or a listed pair that no longer repeats, fails too, so the list stays true).
+:data:`EXEMPT` names what a notebook keeps on purpose (a listed name that is gone fails too, so the list stays true).
 """
 
 from __future__ import annotations
@@ -32,29 +31,6 @@ EXEMPT = {
     # the quick start teaches how a user writes their own plant: the class is the lesson
     "11_quick_start": {"Cart"},
 }
-
-#: definitions still to move into fnnlib or fnnbook, per notebook (only shrinks)
-PENDING: dict[str, set[str]] = {
-    "04_observers": {"make_observers", "twin_check", "design_check"},
-    "05_neural_feedback": {"level_rates", "level_errors"},
-    "07_quadrotor_learning": {"held_out"},
-    "08_quadrotor_mpc": {"make_qp", "merged", "at_paper"},
-    "09_own_system": {"hand_sweep", "pendulum_data", "pendulum_model", "pendulum_predictions", "pendulum_run",
-                      "spiral_predictions", "spiral_run"},
-    "10_tuned_gains": {"o1_loss", "bottle_tuning_throws", "bottle_hand", "bottle_tune",
-                       "o1_errors", "fnn_flight", "quad_hand", "quad_tune", "flight_summary"},
-    "14_why_feedback": {"ensemble", "levels_won", "counted", "d2_settled", "measured", "points_along", "axis_grid",
-                        "authors_networks", "authors_checks", "window_grid", "release_curves", "curves_grid",
-                        "d4_at_usage", "usage_grid", "curves_of", "why_figure"},
-    "15_why_bottle": {"o1_errors", "judged"},
-    "16_why_beyond": {"tuned_on", "test_errors", "b2_at", "readings_of"},
-    "17_why_quadrotor_point": {"fly_adapfnn", "fly_set", "authors_networks"},
-    "19_cascaded_tanks": {"mean_err"},
-    "20_why_tanks": {"b4_at", "b6_at", "holds"},
-}
-
-#: notebook pairs that still share a block (only shrinks)
-PENDING_PAIRS: set[frozenset[str]] = set()
 
 _PLOT_NAME = re.compile(r"^(plot|draw)_")
 _FIGURE_CALLS = {("F", "new_figure"), ("F", "save_figure"), ("F", "plotting")}
@@ -162,18 +138,15 @@ def test_the_duplicate_rule_finds_a_repeated_block_in_other_white_space(tmp_path
 
 @pytest.mark.parametrize("src", SOURCES, ids=[p.stem for p in SOURCES])
 def test_a_notebook_defines_no_logic(src: Path) -> None:
-    found = defined_logic(src) - EXEMPT.get(src.stem, set())
-    pending = PENDING.get(src.stem, set())
-    assert found <= pending, (f"{src.name} defines {sorted(found - pending)}: move them into fnnlib (science) or "
-                              "fnnbook (verdicts, whys) with tests; a notebook keeps only plot_*/draw_* helpers")
-    assert found == pending, f"{src.name} no longer defines {sorted(pending - found)}: strike them from PENDING"
+    found, exempt = defined_logic(src), EXEMPT.get(src.stem, set())
+    assert found <= exempt, (f"{src.name} defines {sorted(found - exempt)}: move them into fnnlib (science) or "
+                             "fnnbook (verdicts, whys) with tests; a notebook keeps only plot_*/draw_* helpers")
+    assert found == exempt, f"{src.name} no longer defines {sorted(exempt - found)}: strike them from EXEMPT"
 
 
 def test_no_block_repeats_across_notebooks() -> None:
     lines = {src.stem: code_lines(src) for src in SOURCES}
-    repeated = {frozenset((a, b)): blocks for a, b in combinations(sorted(lines), 2)
+    repeated = {(a, b): blocks[0] for a, b in combinations(sorted(lines), 2)
                 if (blocks := shared_blocks(lines[a], lines[b]))}
-    new = {pair: blocks[0] for pair, blocks in repeated.items() if pair not in PENDING_PAIRS}
-    assert not new, "blocks repeated across notebooks (move them into a module): " + "; ".join(
-        f"{sorted(p)}: {list(b)}" for p, b in new.items())
-    assert set(repeated) == PENDING_PAIRS, f"no longer repeated: {PENDING_PAIRS - set(repeated)}"
+    assert not repeated, "blocks repeated across notebooks (move them into a module): " + "; ".join(
+        f"{a} and {b}: {list(block)}" for (a, b), block in repeated.items())

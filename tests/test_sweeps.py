@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -19,6 +20,10 @@ from fnnlib.sweeps import (
     paired_levels,
     residual_level_runs,
     simulate_levels,
+    cascade_position_errors,
+    level_errors,
+    position_gain_sweep,
+    position_gain_tuning,
     sweep_errors,
     switched_spiral_run,
 )
@@ -212,6 +217,72 @@ def test_sweep_errors_are_each_members_mean_error_at_each_gain():
             torch.testing.assert_close(got[e, g], want, rtol=1e-4, atol=1e-5)
         open_loop = n_step_errors(rollout_predict(m, x, 0.01, 5), x, 5).mean()
         torch.testing.assert_close(got[e, 0], open_loop, rtol=1e-4, atol=1e-5)
+
+
+def _throws(K: int = 2, T: int = 40) -> torch.Tensor:
+    """K short projectile-like runs (K, T, 6): position and velocity under gravity, Ts = 0.01."""
+    t = torch.arange(T, dtype=torch.float64)[:, None] * 0.01
+    v0 = torch.tensor([[1.0, 0.5, 3.0], [0.5, -1.0, 2.0]], dtype=torch.float64)[:K, None]
+    g = torch.tensor([0.0, 0.0, -9.81], dtype=torch.float64)
+    return torch.cat([v0 * t + 0.5 * g * t**2, v0 + g * t], -1).float()
+
+
+def test_cascade_position_errors_of_an_ensemble_are_each_members_own():
+    """An ensemble's row e is member e's O1 error alone; L = 0 is the open-loop Euler rollout's."""
+    from fnnlib import NeuralODEEnsemble, ahead_position_errors, rollout_predict
+
+    x = _throws()
+    ens = NeuralODEEnsemble(6, [8], "tanh", [0, 1])
+    got = cascade_position_errors(ens, x, 0.01, 5, 2.0, 0.1)
+    assert got.shape == (2, 2)
+    for e in range(2):
+        torch.testing.assert_close(got[e], cascade_position_errors(ens.member(e), x, 0.01, 5, 2.0, 0.1),
+                                   rtol=1e-5, atol=1e-6)
+    net = ens.member(0)
+    open_loop = ahead_position_errors(rollout_predict(net, x[:, :-5], 0.01, 5), x, 5)
+    torch.testing.assert_close(cascade_position_errors(net, x, 0.01, 5, 0.0, 0.0), open_loop, rtol=1e-5, atol=1e-6)
+
+
+def test_the_hand_sweep_keeps_the_grid_pair_of_lowest_o1_loss_and_the_tuner_lowers_it():
+    from fnnlib import NeuralODE, ahead_position_loss, seed_everything
+
+    x = _throws()
+    seed_everything(0)
+    net = NeuralODE(6, [8], "tanh")
+    sweep = position_gain_sweep(net, x, 0.01, 5, [0.5, 5.0, 50.0], [0.0, 0.1])
+    with torch.no_grad():
+        table = [[float(ahead_position_loss(x, cascade_predict(net, x[..., :-5, :], 0.01, 5, Gains(L, b)), 5))
+                  for b in (0.0, 0.1)] for L in (0.5, 5.0, 50.0)]
+    np.testing.assert_allclose(sweep.table, table, rtol=1e-6)
+    assert sweep.cost == pytest.approx(min(min(r) for r in table))
+    tuned = position_gain_tuning(net, x, 0.01, 5, L0=5.0, beta0=0.1, iterations=4, lr=0.1)
+    assert len(tuned.loss) == 4 and tuned.loss[-1] < tuned.loss[0]
+    assert tuned.loss[0] == pytest.approx(table[1][1], rel=1e-4)  # the objective is O1's loss at the start
+
+
+def test_level_errors_of_a_zero_neural_feedback_are_the_neural_odes():
+    """h = 0 adds nothing: the neural feedback's rates and N-step errors are the neural ODE's; the linear
+    feedback's are each member's own LinearFeedback and cascade."""
+    from fnnlib import LinearFeedback, NeuralFeedbackEnsemble, NeuralFeedbackObserver, NeuralODEEnsemble
+
+    ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
+    h = NeuralFeedbackEnsemble(2, [8], "tanh", [0, 1])
+    with torch.no_grad():
+        for p in h.parameters():
+            p.zero_()
+    t = torch.arange(40, dtype=F64) * 0.01
+    x, f = residual_level_runs([2.0, 0.1, 0.0], paired_levels([-0.5, 0.5], [0.0, 0.0], [0.0, 1.0]),
+                               torch.tensor([9.0, 0.0], dtype=F64), t)
+    rate, ms, seconds = level_errors(ens, NeuralFeedbackObserver(ens, 0.01, h=h, n=4), x, f, 0.01, 5, 20.0, 0.02)
+    assert rate["neural_ode"].shape == ms["neural_ode"].shape == (2, 2) and seconds >= 0
+    torch.testing.assert_close(rate["neural_feedback"], rate["neural_ode"])
+    torch.testing.assert_close(ms["neural_feedback"], ms["neural_ode"], rtol=1e-5, atol=1e-6)
+    m = ens.member(1)
+    lf = LinearFeedback(m, 0.01, gains=Gains(20.0), n=2).observe(x[0]).f_hat
+    torch.testing.assert_close(rate["linear_feedback"][1, 0], ((lf - f[0]) ** 2).sum(-1).mean().sqrt(),
+                               rtol=1e-4, atol=1e-5)
+    z = cascade_predict(m, x[1], 0.01, 5, Gains(20.0, 0.02))
+    torch.testing.assert_close(ms["linear_feedback"][1, 1], n_step_errors(z, x[1], 5).mean(), rtol=1e-4, atol=1e-5)
 
 
 def test_residual_level_runs_pair_each_levels_run_with_its_own_rate():

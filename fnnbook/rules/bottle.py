@@ -39,6 +39,13 @@ def o1(*, feedback: Any, neural_ode: Any, drag: Any) -> ClaimResult:
                     per_seed={"feedback": fb.mean(0), "neural_ode": nn.mean(0)})
 
 
+def o1_per_seed(*, feedback: Any, neural_ode: Any, drag: Any) -> ClaimResult:
+    """O1 (Fig. 6) on errors laid out one row per seed: ``feedback``, ``neural_ode`` (seeds, throws) (tensors or
+    arrays: their means are taken in their own type), ``drag`` (throws,): :func:`o1_means` of their marginals."""
+    return o1_means(per_throw={"feedback": feedback.mean(0), "neural_ode": neural_ode.mean(0), "drag": drag},
+                    per_seed={"feedback": feedback.mean(1), "neural_ode": neural_ode.mean(1)})
+
+
 def o1_means(*, per_throw: Mapping[str, Any], per_seed: Mapping[str, Any]) -> ClaimResult:
     """O1 (Fig. 6) from the marginals its checks read: :func:`o1` on the (throws, seeds) errors is this on
     their means, so a stored result (``per_throw_m``, ``per_seed_m`` of the bottle task) can be judged again.

@@ -13,6 +13,7 @@ variant); the notebook joins the settings into one claim. A rule without guarant
 from __future__ import annotations
 
 from collections.abc import Hashable, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from torch import Tensor
@@ -22,7 +23,7 @@ from fnnlib.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_c
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_readings", "joined_verdict",
+__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_costs", "join_readings", "joined_verdict",
            "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction", "q5_adaptive", "q6_training_cost",
            "rules_at_setting"]
 
@@ -198,6 +199,20 @@ def join_readings(per_setting: Iterable[ClaimResult]) -> dict[str, Reading] | No
         return None
     return {name: Reading(first.sentence, {k: v for c in claims for k, v in (c.readings or {})[name].checks.items()})
             for name, first in claims[0].readings.items()}
+
+
+def join_costs(per_cost: Mapping[str, ClaimResult], *, numbers: Mapping[str, Any] | None = None,
+               **fields: Any) -> ClaimResult:
+    """One claim over the cost variants of Eq. (28), as the flight test reports it: every variant's checks,
+    guarantees, readings (:func:`join_readings`) and better-than-claimed marks together, its numbers by variant
+    (and ``numbers`` beside them), the other ``fields`` (figure, headline, ...) set on the first variant's result."""
+    claims = list(per_cost.values())
+    return claims[0].replace(
+        checks={k: v for c in claims for k, v in c.checks.items()},
+        guarantees={k: v for c in claims for k, v in (c.guarantees or {}).items()},
+        readings=join_readings(claims),
+        better={k: v for c in claims for k, v in (c.better or {}).items()} or None,
+        numbers={cost: c.numbers for cost, c in per_cost.items()} | dict(numbers or {}), **fields)
 
 
 def rules_at_setting(rmse: Mapping[str, Sequence[float]], acc_rmse: Mapping[str, Sequence[float]],

@@ -34,7 +34,7 @@ import numpy as np
 from fnnlib.results import ClaimResult, headline_number
 from fnnlib.stats import paired_win
 
-__all__ = ["SAME", "b4", "b5", "b6"]
+__all__ = ["SAME", "b4", "b4_at", "b5", "b6", "b6_at"]
 
 PerSeed = Sequence[float]
 
@@ -141,3 +141,16 @@ def b6(errors: Mapping[int, Mapping[str, PerSeed]]) -> ClaimResult:
                         "validation record (lower in >= S-1 of S seeds and the 90 % interval of the mean paired "
                         "difference below 0)",
                         "tuned / hand")
+
+
+def b4_at(errors: Mapping[str, Mapping[int, PerSeed]], horizons: Sequence[int], feedback: str = "tuned") -> ClaimResult:
+    """:func:`b4` at one point of a why grid: ``errors`` holds each model's N-step errors by horizon (the cascade's
+    columns ``"tuned"``, ``"hand"`` or a fixed gain's, and ``"open_loop"``); the cascade ``feedback`` against the open
+    loop at every horizon of ``horizons``."""
+    return b4({N: {"feedback": errors[feedback][N], "open_loop": errors["open_loop"][N]} for N in horizons})
+
+
+def b6_at(errors: Mapping[str, Mapping[int, PerSeed]], horizons: Sequence[int]) -> ClaimResult:
+    """:func:`b6` at one point of a why grid: the tuned gains against the hand gains at every horizon of
+    ``horizons`` (``errors`` as :func:`b4_at` reads them)."""
+    return b6({N: {"tuned": errors["tuned"][N], "hand": errors["hand"][N]} for N in horizons})

@@ -57,7 +57,8 @@ __all__ = [
     "ALLOWED_GLOBALS", "BOTTLE_ODE_NAMES", "RELEASE_FILES", "RESIDUAL_RUNS", "MLP_RUNS", "SPIRAL_FEEDBACK_NAMES",
     "SPIRAL_LOSS_NAMES", "SPIRAL_ODE_NAMES", "MAX_PICKLE_BYTES", "PickledModule", "ReleaseError", "UnsafePickleError",
     "load_release_bottle_ode", "load_release_feedback_losses", "load_release_losses", "load_release_mlp",
-    "load_release_residual", "load_release_spiral_feedback", "load_release_spiral_ode", "present_loss_names",
+    "load_release_quadrotor_networks", "load_release_residual", "load_release_spiral_feedback",
+    "load_release_spiral_networks", "load_release_spiral_ode", "load_present_feedback_losses", "present_loss_names",
     "read_pickled_module", "release_files", "release_present", "release_spiral",
 ]
 
@@ -460,6 +461,17 @@ def load_release_spiral_feedback(data_dir: str | Path, name: str, *, mirror: boo
                        lambda n, hidden, act: NeuralFeedback(n, hidden, act))
 
 
+def load_release_spiral_networks(data_dir: str | Path | None, ode: str, feedback: str,
+                                  dr_ode: str) -> tuple[NeuralODE, NeuralFeedback, NeuralODE] | None:
+    """The authors' networks of Sec. 4: the nominal neural ODE ``ode``, the neural feedback ``feedback`` trained
+    against it (Alg. 1) and the domain-randomized neural ODE ``dr_ode``; ``None`` unless all three are in
+    ``data_dir`` with their published SHA-256 (:func:`release_present`)."""
+    if not all(release_present(data_dir, f"{_SPIRAL}/{n}") for n in (ode, feedback, dr_ode)):
+        return None
+    return (load_release_spiral_ode(data_dir, ode), load_release_spiral_feedback(data_dir, feedback),
+            load_release_spiral_ode(data_dir, dr_ode))
+
+
 def load_release_bottle_ode(data_dir: str | Path, name: str) -> NeuralODE:
     r"""A release bottle neural ODE (Sec. 5.1, App. A.4; Fig. 6, O1) as a :class:`~fnnlib.models.NeuralODE`.
 
@@ -556,6 +568,18 @@ def load_release_mlp(data_dir: str | Path, run: str) -> AeroResidual:
     return _residual_from(layers)
 
 
+def load_release_quadrotor_networks(data_dir: str | Path,
+                                    units: int) -> tuple[list[tuple[str, AeroResidual]], list[tuple[str, AeroResidual]]]:
+    """The authors' networks for ``units`` flight units (Sec. 5.2.2): unit k flies the release's residual run k
+    (:data:`RESIDUAL_RUNS`, random initialisations of Alg. 3) and MLP k mod 2 (the release has two,
+    :data:`MLP_RUNS`); ``[(run, network)]`` each, in float64."""
+    if units > len(RESIDUAL_RUNS):
+        raise ValueError(f"{units} units, the release has {len(RESIDUAL_RUNS)} residual runs")
+    theirs = [(r, load_release_residual(data_dir, r).double()) for r in RESIDUAL_RUNS[:units]]
+    mlp_run = [MLP_RUNS[k % len(MLP_RUNS)] for k in range(units)]
+    return theirs, [(r, load_release_mlp(data_dir, r).double()) for r in mlp_run]
+
+
 def load_release_losses(data_dir: str | Path, run: str) -> np.ndarray:
     """The per-epoch training loss of a residual run (``loss_record.npy``), float64, shape (epochs,).
 
@@ -596,3 +620,9 @@ def load_release_feedback_losses(data_dir: str | Path, name: str) -> np.ndarray:
             (values[K:] != 0).any():
         raise ReleaseError(f"{path}: expected {K} positive losses then zeros, got {values.size} values")
     return values[:K].copy()
+
+
+def load_present_feedback_losses(data_dir: str | Path | None) -> dict[str, np.ndarray]:
+    """Every loss curve of the release's neural-feedback trainings (Fig. 5(c)) that is in ``data_dir`` with its
+    published SHA-256, by name (:func:`load_release_feedback_losses`); empty without the release."""
+    return {name: load_release_feedback_losses(data_dir, name) for name in present_loss_names(data_dir)}

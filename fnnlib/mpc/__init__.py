@@ -15,7 +15,8 @@ from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, FlightSetup, PairedFlights, TableKey,
                                    acc_pred_rmse, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
                                    disturbance_realisations, fallback_note, flight_row, flight_table_json,
-                                   flight_tests_from_settings, fnn_model, make_mpc, mpc_from_settings, paired_units,
+                                   flight_tests_from_settings, flown_gain_sweep, fnn_model, hand_gains_on_flights,
+                                   make_mpc, mpc_from_settings, paired_units,
                                    pooled_speed, speed_summary, theorem2_check, thrust_needed, unjudged_bound_note)
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearize import Linearization, StepFn, linearize
@@ -39,7 +40,8 @@ __all__ = [
     "FlightRow", "FlightSetup", "FlightTest", "GainSelection", "Linearization", "LinearizedMPC", "MPCSolution",
     "OSQPMPC", "PairedFlights", "PredictionModel", "RebuildMPC", "StepFn", "TableKey", "acc_pred_rmse",
     "adapnn_flights", "adapnn_gain_on_validation", "adapnn_model", "disturbance_realisations", "fallback_note",
-    "flight_row", "flight_table_json", "flight_tests_from_settings", "fly", "fnn_model", "lissajous_reference", "linearize",
+    "flight_row", "flight_table_json", "flight_tests_from_settings", "flown_gain_sweep", "fly", "fnn_model",
+    "hand_gains_on_flights", "lissajous_reference", "linearize",
     "make_mpc", "mpc_from_settings", "paired_units", "paper_models", "pooled_speed", "randomization_coordinates",
     "randomized_vehicles", "select_gain_on_validation", "shift_plan", "speed_summary", "theorem2_check",
     "thrust_needed", "tracking_rmse", "unjudged_bound_note", "validation_references", "warm_up",

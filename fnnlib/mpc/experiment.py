@@ -47,7 +47,9 @@ __all__ = [
     "flight_row",
     "flight_table_json",
     "flight_tests_from_settings",
+    "flown_gain_sweep",
     "fnn_model",
+    "hand_gains_on_flights",
     "make_mpc",
     "mpc_from_settings",
     "paired_units",
@@ -397,3 +399,40 @@ def theorem2_check(r: FlightResult, L: float, transient_steps: int) -> dict[str,
     ball_x, _ = theorem1_balls(L, gamma, 12)
     return {"gamma": gamma, "ball_x": ball_x, "inside_fraction": float(np.mean(e <= ball_x)),
             "max_error": float(e.max())}
+
+
+def hand_gains_on_flights(model: PredictionModel, x: Tensor, u: Tensor, Ts: float, N: int, L_grid: Sequence[float],
+                          beta_grid: Sequence[float]):
+    """Gains tuned by hand on recorded flights, never a flown loop (B1, Sec. 5.2.2): the (L, beta) of the grid
+    (a scalar L times I) whose N-step cascade of Sec. 3.3 on ``model`` (Euler steps of ``Ts``, the recorded thrusts
+    ``u`` (K, T, 4) as inputs) has the lowest mean N-step position error (m) along the flights ``x`` (K, T, 12)."""
+    import torch  # noqa: PLC0415
+
+    from fnnlib.feedback import cascade_predict, sweep_gains  # noqa: PLC0415
+    from fnnlib.sweeps import n_step_errors  # noqa: PLC0415
+
+    def cost(L: float, beta: float) -> float:
+        with torch.no_grad():
+            z = cascade_predict(lambda t, x_, u_: model.f(x_, u_), x, Ts, N, Gains(L, beta), u=u)
+        return float(n_step_errors(z[..., :3], x[..., :3], N).mean())
+    return sweep_gains(cost, L_grid, beta_grid)
+
+
+def flown_gain_sweep(residual: nn.Module, tests: Sequence[FlightTest], mpc: LinearizedMPC | OSQPMPC, *,
+                     L_grid: Sequence[float], beta_grid: Sequence[float], plant: Quadrotor, N: int, Ts: float):
+    """Gains tuned through the closed loop they serve (B1, Sec. 5.2.2): FNN (:func:`fnn_model`: the nominal
+    ``plant`` plus ``residual``, the cascade at (L, beta)) flies every flight of ``tests`` under ``mpc`` (Eq. (28))
+    at each grid pair; the pair with the lowest mean tracking RMSE is kept (:func:`fnnlib.feedback.sweep_gains`),
+    a flight that diverges or leaves the model's domain scoring inf."""
+    from fnnlib.feedback import sweep_gains  # noqa: PLC0415
+
+    def rmse(L: float, beta: float) -> float:
+        out = []
+        for test in tests:
+            try:
+                r = fly(fnn_model(residual, L, beta, plant=plant, N=N, Ts=Ts), mpc, test)
+            except ValueError:
+                return float("inf")
+            out.append(float("inf") if r.diverged else tracking_rmse(r.x, r.x_ref)["mean_axis"])
+        return float(np.mean(out))
+    return sweep_gains(rmse, L_grid, beta_grid)

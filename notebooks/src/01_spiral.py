@@ -207,8 +207,6 @@ for ax, std in zip(axes[0, :2], [0.0, noise_std]):
     ax.plot(tn[N:], z_dec[:-N, 0], "--", color=F.plotting.COLORS["feedback"], label="with decay")
     ax.set(xlabel="t [s]", ylabel="x", ylim=(-lim, lim), title=f"(g) {N}-step prediction, noise std {std}")
     ax.legend(fontsize=8)
-
-# %%
 ax = axes[0, 2]
 xs_plot = np.maximum(sweep["noise_std"], 1e-4)
 for key, color in [("neural_ode", "neural_ode"), ("feedback_decay", "feedback"),

@@ -154,8 +154,6 @@ for j, (ylab, ball, name) in enumerate([(r"$\|\tilde x\|$", ball1, r"$\gamma/\la
     ax.set(xlabel="t [s]", ylabel=ylab, title=f"({'ab'[j]}) L = {L:g}, {S} seeds, gamma {float(gamma.min()):.3g}-"
                                               f"{float(gamma.max()):.3g}")
     ax.legend(fontsize=7, loc="lower right")
-
-# %%
 ax = axes[0, 2]
 for v, style, color, label in [(ball_sweep, "o:", "0.3", r"ball $\gamma/L$"),
                                (limits, "o-", F.plotting.COLORS["feedback"], "measured limit")]:
@@ -211,8 +209,6 @@ for g in [100.0, 199.0, 200.0, 201.0, 210.0, 0.0]:
         ax.semilogy(tn, err_d[0, i].clamp_min(1e-8), lw=1, label=f"L = {g:g} (rho = {float(rho[i]):.3g})")
 ax.set(xlabel="t [s]", ylabel=r"$\|\tilde x_k\|$", title=f"(a) observer error, Eq. (25) (seed {seeds[0]})")
 ax.legend(fontsize=7)
-
-# %%
 ax = axes[0, 1]
 for e in range(S):  # every seed's runs
     d = diverges[e]
@@ -225,8 +221,6 @@ ax.axvline(1.0, color="k", lw=0.8)
 ax.set(xlabel=r"$\rho(I - T_s L)$", ylabel="growth factor", title=f"(b) divergence starts at rho = 1 ({S} seeds)")
 ax.legend(fontsize=8)
 ax = axes[0, 2]
-
-# %%
 for e in range(S):
     ax.semilogy(rho[stable], err_d[e].amax(-1)[stable], "o", color=F.plotting.COLORS["feedback"], alpha=0.6,
                 label=r"max $\|\tilde x_k\|$" if e == 0 else None)

@@ -160,8 +160,6 @@ for ax, err, name in [(axes[0, 0], err_noisy, f"(a) noise std {noise_std}"), (ax
     ax.set_yticks(range(len(gains)), [f"{g:g}" for g in gains.tolist()], fontsize=7)
     ax.set(xlabel=r"level $\omega/\eta/\varepsilon$", ylabel="gain L", title=f"{name}, mean over {S} seeds")
     fig.colorbar(im, ax=ax, label="log10 error")
-
-# %%
 ax = axes[0, 2]
 for i in range(len(levels)):
     plot_band(ax, gains, err_noisy[:, :, i], plt.cm.viridis(i / max(1, len(levels) - 1)), None)
@@ -311,8 +309,6 @@ s10
 # %%
 fig, axes = F.new_figure(1, 3)
 ax = axes[0, 0]
-
-# %%
 ax.plot(tn, x10[:, 0], color=F.plotting.COLORS["truth"], label="x")
 ax.plot(tn, x10[:, 1], color=F.plotting.COLORS["truth"], ls="--", label="y")
 ax.set(xlabel="t [s]", ylabel="state", title="(a) switched spiral")
@@ -325,20 +321,14 @@ for e in range(S):  # one faint line per seed
                         label=r"feedback $\|\tilde f\|$" if first else None)
     axes[0, 1].semilogy(tn, e_x[e], color=F.plotting.COLORS["feedback"], ls=":", lw=0.8, alpha=0.6,
                         label=r"feedback $\|\tilde x\|$" if first else None)
-
-# %%
 for e in range(S):
     first = e == 0
     axes[0, 2].semilogy(tn[N:], F.n_step_errors(z_nn10[e], x10, N), color=F.plotting.COLORS["neural_ode"], lw=0.8,
                         alpha=0.6, label="neural ODE" if first else None)
     axes[0, 2].semilogy(tn[N:], e_ms[e], color=F.plotting.COLORS["feedback"], lw=0.8, alpha=0.6,
                         label="feedback" if first else None)
-
-# %%
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"(b) change-rate and observer errors ({S} seeds)")
 axes[0, 1].legend(fontsize=7)
-
-# %%
 ax = axes[0, 2]
 ax.set(xlabel="t [s] (predicted time)", ylabel=f"{N}-step error", title=f"(c) {N}-step prediction ({S} seeds)")
 ax.legend(fontsize=8)

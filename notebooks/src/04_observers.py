@@ -43,13 +43,13 @@ settings = ObserversSettings.from_namespace(globals())  # checked as `fnn-pipeli
 import math
 from pathlib import Path
 
-import control
 import numpy as np
 import torch
 from IPython.display import Markdown, display
 
 import fnnlib as F
 from fnnbook.rules import sec3
+from fnnlib.observers import comparison as OC
 
 # %%
 out = Path(out_dir)
@@ -103,22 +103,8 @@ for s, model, meta in nets:
 # One such set of observers is built per seed, on that seed's network and $q_d$.
 
 # %% tags=["remove-output"]
-def make_observers(model, q_d):
-    """The seven observers of one seed's network."""
-    Q, R, P0 = [kf_q_x] * 2 + [q_d] * 2, noise_std ** 2, [noise_std ** 2] * 2 + [kf_p0_d] * 2
-    return {
-        "neural ODE": F.LinearFeedback(model, Ts, gains=F.Gains(0.0), n=2),
-        "linear feedback": F.LinearFeedback(model, Ts, gains=F.Gains(L, beta), n=2),
-        "Luenberger (as LF)": F.LuenbergerObserver.with_gain(model, Ts, n=2, L=F.linear_feedback_gain(L, Ts, 2)),
-        "Luenberger": F.LuenbergerObserver(model, Ts, n=2, poles=luenberger_poles),
-        "Kalman": F.KalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0)),
-        "Kalman, steady state": F.KalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0), steady_state=True),
-        "EKF": F.ExtendedKalmanObserver(model, Ts, n=2, cov=F.Covariances(Q, R, P0=P0)),
-    }
-
-
-# %% tags=["remove-output"]
-observers = [make_observers(model, q_d) for (_, model, _), q_d in zip(nets, kf_q_d)]  # one set per seed
+observers = [OC.observer_set(model, Ts, L=L, beta=beta, poles=luenberger_poles, noise_std=noise_std, q_x=kf_q_x,
+                             q_d=q_d, p0_d=kf_p0_d) for (_, model, _), q_d in zip(nets, kf_q_d)]  # one set per seed
 observers[0]
 
 # %% [markdown]
@@ -162,24 +148,8 @@ display(Markdown(F.observers.metrics_table(table)))
 # $\gamma/\lambda_{min}(L)$, rather than at the noise level. Both statements are checked on the numbers:
 
 # %%
-def twin_check(rep, model, y_e, d_true_e):
-    """The low-pass recursion and the Luenberger twin against the feedback's own estimate, for one seed."""
-    lf, lu_lf = rep["linear feedback"].estimate, rep["Luenberger (as LF)"].estimate
-    with torch.no_grad():
-        r_k = (y_e[1:] - y_e[:-1]) / Ts - F.eval_field(model, y_e[:-1])  # measured model residual
-        d_lf = lf.f_hat - F.eval_field(model, y_e)  # = L (y - x_hat), Eq. (7)
-    d_rec = [torch.zeros(2)]
-    for k in range(n_samples - 1):
-        d_rec.append((1 - Ts * L) * d_rec[-1] + Ts * L * r_k[k])  # d_{k+1} = (1 - Ts L) d_k + Ts L r_k
-    scale = float(lf.f_hat.abs().max())
-    return d_lf, {"max_rel_diff_lowpass": float((torch.stack(d_rec) - d_lf).abs().max()) / scale,
-                  "max_rel_diff_luenberger": float((lu_lf.f_hat - lf.f_hat).abs().max()) / scale,
-                  "lf_state_err_mean": float((lf.x_hat - x).norm(dim=-1).mean()),
-                  "mean_abs_delta_f_over_L": float(d_true_e.norm(dim=-1).mean()) / L}
-
-
-# %%
-twins = [twin_check(rep, model, y_e, d_e) for rep, (_, model, _), y_e, d_e in zip(reports, nets, y, d_true)]
+twins = [OC.lowpass_twin({k: rep[k].estimate for k in ("linear feedback", "Luenberger (as LF)")}, model, y_e, x, d_e,
+                         Ts, L) for rep, (_, model, _), y_e, d_e in zip(reports, nets, y, d_true)]
 d_lf = [d for d, _ in twins]  # per seed
 equiv = {k: [eq[k] for _, eq in twins] for k in twins[0][1]}  # per key: one value per seed
 equiv
@@ -192,25 +162,7 @@ equiv
 # radius is the discrete stability test of Eq. (25) / App. A.2, observer by observer.
 
 # %%
-def design_check(obs):
-    """Poles, Riccati gain and error-dynamics radii of one seed's observers against their closed forms."""
-    lu, kf, L_fb = obs["Luenberger"], obs["Kalman"], obs["linear feedback"].L
-    pole_err = float(np.abs(np.sort_complex(lu.error_poles()) - np.sort_complex(np.array(luenberger_poles, complex))).max())
-    L_dlqe, P_dlqe, _ = control.dlqe(kf.A.numpy(), np.eye(4), kf.C.numpy(), kf.Q.numpy(), kf.R.numpy())
-    ss = kf.stationary
-    K_filterpy = kf.gain_history(n_samples)[-1]
-    return {"luenberger_pole_err": pole_err,
-            "kf_L_rel_err_vs_dlqe": float(np.abs(ss.L - L_dlqe).max() / np.abs(L_dlqe).max()),
-            "kf_P_rel_err_vs_dlqe": float(np.abs(ss.P - P_dlqe).max() / np.abs(P_dlqe).max()),
-            "filterpy_K_rel_err": float(np.abs(K_filterpy - ss.K).max() / np.abs(ss.K).max()),
-            "rho_linear_feedback": F.spectral_radius(torch.eye(2, dtype=torch.float64) - Ts * L_fb),
-            "rho_luenberger": float(np.abs(lu.error_poles()).max()),
-            "rho_kalman_steady": float(np.abs(np.linalg.eigvals(kf.A.numpy() - L_dlqe @ kf.C.numpy())).max()),
-            "kf_stationary_poles": sorted(np.abs(np.linalg.eigvals(kf.A.numpy() - ss.L @ kf.C.numpy())).tolist())}
-
-
-# %%
-designs = [design_check(obs) for obs in observers]
+designs = [OC.design_checks(obs, luenberger_poles, n_samples, Ts) for obs in observers]
 design = {k: [d[k] for d in designs] for k in designs[0]}  # per key: one value per seed
 design
 
@@ -235,8 +187,6 @@ for e in range(S):
                             label=label)
         axes[0, 2].loglog(table[name]["us_per_step"], tables[e][name]["rate_rmse_settled"], "o", color=colors[name],
                           alpha=0.6, label=label)
-
-# %%
 axes[0, 0].set(xlabel="t [s]", ylabel=r"$\|\hat f - f\|$", title=f"change-rate error ({S} seeds)")
 axes[0, 1].set(xlabel="t [s]", ylabel="error", title=f"{N}-step prediction error ({S} seeds)")
 axes[0, 2].set(xlabel="µs per sample (observing)", ylabel="change-rate RMSE (settled)",

@@ -186,8 +186,6 @@ lc = F.plotting.plot_rate_curve(axes[0, 2], f_nom, f_fb_nom[shown], title="(b) f
                                 label="neural feedback", vmax=vmax)
 fig.colorbar(lc, ax=axes[0, 2], label="change-rate error")
 ax = axes[0, 3]
-
-# %%
 for j, (key, color) in enumerate([("nominal_neural_ode", "neural_ode"), ("dr_neural_ode", "feedback_nodecay"),
                                   ("neural_feedback", "feedback")]):
     v = np.asarray(d12[f"rel_rmse_{key}"])
@@ -243,32 +241,9 @@ fig_c = F.save_figure(fig, out, "fig5c_feedback_loss")
 # ODE when it beats it (lower in at least S-1 of the S seeds, and the 90 % interval of the mean paired difference
 # below 0) both in change-rate RMSE and in mean $N$-step error. Checks: it does at every S8 level; and at every
 # held-out level.
-
-# %%
-def level_rates(xs, f_levels):
-    """Per seed and level (E, levels): change-rate RMSE of the neural ODE, the neural feedback and the linear
-    feedback on the members' stacked measurements ``xs``."""
-    with torch.no_grad():
-        f_nn = f_ens.split(F.eval_field(f_ens, xs))
-    fhat = {"neural_ode": f_nn, "neural_feedback": f_ens.split(nf.observe(xs).f_hat),
-            "linear_feedback": f_ens.split(F.LinearFeedback(f_ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs).f_hat)}
-    return {k: F.rmse_over_time(v, f_levels.expand_as(v)) for k, v in fhat.items()}
-
-
-# %%
-def level_errors(x_levels, f_levels):
-    """Per seed and level (E, levels): change-rate RMSE (:func:`level_rates`) and mean N-step error of the neural
-    ODE, the neural feedback and (reported beside them) the linear feedback, on noise-free measurements
-    ``x_levels``; and the seconds of the neural feedback's predictions."""
-    xs = F.stack_members(x_levels, E)
-    rate = level_rates(xs, f_levels)
-    t0 = time.perf_counter()
-    z_nf = f_ens.split(nf.predict(xs, N))
-    seconds = time.perf_counter() - t0
-    z = {"neural_ode": f_ens.split(F.rollout_predict(f_ens, xs, Ts, N)), "neural_feedback": z_nf,
-         "linear_feedback": f_ens.split(F.cascade_predict(f_ens, xs, Ts, N, F.Gains(L, beta)))}
-    multistep = {k: F.n_step_errors(v, x_levels, N).mean(-1) for k, v in z.items()}
-    return rate, multistep, seconds
+#
+# Per seed and level, `F.level_errors` gives the change-rate RMSE and the mean $N$-step error of the neural ODE,
+# the neural feedback and (reported beside them) the linear feedback, on noise-free measurements.
 
 
 # %%
@@ -277,7 +252,7 @@ systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
 params32 = torch.tensor([[s.omega, s.eta, s.eps] for s in systems]).tolist()
 x8 = F.simulate_levels([F.Spiral(*p) for p in params32], x0_t, t, exact=True).float()  # (12, T, 2)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems, x8)])
-rate, ms, cascade_s = level_errors(x8, f8)  # each (E, 12)
+rate, ms, cascade_s = F.level_errors(f_ens, nf, x8, f8, Ts, N, L, beta)  # each (E, 12)
 
 # %%
 rate_better, ms_better = rate["neural_feedback"] < rate["neural_ode"], ms["neural_feedback"] < ms["neural_ode"]
@@ -296,8 +271,6 @@ fig, axes = F.new_figure(1, 2)
 idx = np.arange(len(res_levels))
 colors = {"neural_ode": F.plotting.COLORS["neural_ode"], "neural_feedback": F.plotting.COLORS["feedback"],
           "linear_feedback": F.plotting.COLORS["feedback_nodecay"]}
-
-# %%
 for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N}-step error")]):
     for j, (key, v) in enumerate(vals.items()):
         v = v.numpy()  # (E, 12)
@@ -326,7 +299,7 @@ if not held:
 x_h = F.simulate_levels([F.Spiral(*torch.tensor([s.omega, s.eta, s.eps]).tolist()) for s in held], x0_t, t,
                         exact=True).float()
 f_h = torch.stack([s.rate(x) for s, x in zip(held, x_h)])
-rate_h, ms_h, _ = level_errors(x_h, f_h)
+rate_h, ms_h, _ = F.level_errors(f_ens, nf, x_h, f_h, Ts, N, L, beta)
 held_out = {"params": p_flip[far].tolist(), "distance_steps": dist[far].tolist(),
             "all_distances_steps": dist.tolist(),
             **{f"rate_rmse_{k}": rate_h[k].tolist() for k in ("neural_ode", "neural_feedback")},  # [seed][level]

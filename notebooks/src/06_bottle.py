@@ -111,8 +111,6 @@ for name, e in err.items():
     c = F.plotting.COLORS[colors[name]]
     ax.plot(t_test[N:], mu, color=c, label=name)
     ax.fill_between(t_test[N:], mu - sd, mu + sd, color=c, alpha=0.2)
-
-# %%
 ax.set(xlabel="t [s] (time of the predicted position)", ylabel="0.5 s position error [m]",
        title=f"Fig. 6: mean ± std over test throws and {E} seeds")
 ax.legend()

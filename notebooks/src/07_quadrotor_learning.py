@@ -48,6 +48,7 @@ settings = QuadrotorLearningSettings.from_namespace(globals())  # checked as `fn
 
 # %% tags=["hide-input"]
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -203,15 +204,11 @@ print(f"{len(seeds)} MLPs in {mlp_s:.1f} s; single-step MSE " + ", ".join(
 
 # %%
 true = heldout.x[..., :12]
-
-
-def held_out(res):
-    """The closed loop with residual ``res`` (None: nominal) re-flown on the held-out flights: (K, T + 1, 12)."""
-    return predict_flights(res, heldout, controller=controller, plant=model_plant)[..., :12]
-
-
-pred_members = [held_out(m.double()) for m in fit.members]  # every trained network
-pred = {"neural ODE": pred_members[best], "nominal": held_out(None), "MLP": held_out(mlps[best_mlp])}  # kept ones
+# the closed loop with a residual (None: nominal) re-flown on the held-out flights: (K, T + 1, 18)
+held_out = partial(predict_flights, flights=heldout, controller=controller, plant=model_plant)
+pred_members = [held_out(m.double())[..., :12] for m in fit.members]  # every trained network
+pred = {"neural ODE": pred_members[best], "nominal": held_out(None)[..., :12],
+        "MLP": held_out(mlps[best_mlp])[..., :12]}  # the kept ones
 rel = {"neural ODE": [state_group_errors(x, true) for x in pred_members]} | {
     name: state_group_errors(pred[name], true) for name in ("nominal", "MLP")}
 for s, r in zip(seeds, rel["neural ODE"]):

@@ -60,6 +60,7 @@ from fnnbook.tasks.quadrotor_mpc import QuadrotorMPCSettings
 settings = QuadrotorMPCSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -90,12 +91,8 @@ setup = M.flight_tests_from_settings(globals())  # the test vehicle: the paper's
 test_params, forces, x_r, u_r, tests = setup.vehicle, setup.forces, setup.x_r, setup.u_r, setup.tests
 numerics = M.Backend(backend, linearize_method)
 models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)
-
-
-# %%
-def make_qp(cost, umax):
-    """Eq. (28) with this run's weights and cost variant, thrust box [0, umax] and |Theta| <= theta_max."""
-    return M.make_mpc(qp, N, Q, R, cost=cost, u_max=umax, theta_max=theta_max, solver=solver)
+# Eq. (28) with this run's weights; a cost variant and thrust box [0, u_max] make one MPC, |Theta| <= theta_max
+make_qp = partial(M.make_mpc, qp, N, Q, R, theta_max=theta_max, solver=solver)
 
 
 # %%
@@ -158,7 +155,7 @@ val_refs = validation_references(validation_flights, validation_steps, N, seed=v
                                  n_waypoints=validation_waypoints, box=PAPER_FLIGHT_DATA["box"],
                                  max_speed=PAPER_FLIGHT_DATA["max_speed"], params=NOMINAL)
 gamma_sel = {cost: M.adapnn_gain_on_validation(residual, Gamma_adapnn_grid, val_refs, val_vehicles,
-                                               make_qp(cost, u_max_judged), steps=validation_steps, Ts=Ts,
+                                               make_qp(cost=cost, u_max=u_max_judged), steps=validation_steps, Ts=Ts,
                                                substeps=truth_substeps, backend=numerics, rtol=Gamma_rtol)
              for cost in costs}
 
@@ -180,7 +177,8 @@ for cost, sel in gamma_sel.items():
 # +-1). Neither feeds the choice above.
 
 # %%
-oracle = {cost: M.adapnn_flights(residual, Gamma_adapnn_grid, make_qp(cost, u_max_judged), tests[0]) for cost in costs}
+oracle = {cost: M.adapnn_flights(residual, Gamma_adapnn_grid, make_qp(cost=cost, u_max=u_max_judged), tests[0])
+          for cost in costs}
 for cost, runs in oracle.items():
     best = min(runs, key=lambda g: M.tracking_rmse(runs[g].x, runs[g].x_ref)["mean_axis"])
     print(f"{cost}: test-flight RMSE by Gamma " + ", ".join(
@@ -213,11 +211,11 @@ print("test vehicle in the validation ranges, in half-widths (outside beyond +-1
 # flown once per model; it shows the paper's condition and counts toward no verdict.
 
 # %%
-grid = {cost: M.paired_units(members, mlps, tests=setup.unit_tests, mpc=make_qp(cost, u_max_judged),
+grid = {cost: M.paired_units(members, mlps, tests=setup.unit_tests, mpc=make_qp(cost=cost, u_max=u_max_judged),
                              model_settings=models_kw, adapnn_gamma=gamma_sel[cost].value) for cost in costs}
-main = {cost: {m.name: M.fly(m, make_qp(cost, u_max_judged), setup.paper_test) for m in  # the paper's flight
+main = {cost: {m.name: M.fly(m, make_qp(cost=cost, u_max=u_max_judged), setup.paper_test) for m in  # the paper's flight
                M.paper_models(residual, mlp, **models_kw, adapnn_gamma=gamma_sel[cost].value)} for cost in costs}
-context = {M.TableKey(cost, umax): {m.name: M.fly(m, make_qp(cost, umax), setup.paper_test) for m in
+context = {M.TableKey(cost, umax): {m.name: M.fly(m, make_qp(cost=cost, u_max=umax), setup.paper_test) for m in
                                     M.paper_models(residual, mlp, **models_kw, adapnn_gamma=gamma_sel[cost].value)}
            for umax in u_max if umax != u_max_judged for cost in costs}
 
@@ -362,39 +360,26 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
         print("   holds in " + ", ".join(f"{k}: {w['wins']}/{w['seeds']}" for k, w in held.items())
               if held else f"   AdapFNN within 25 % of FNN in {100 * r[c].numbers['within_fraction']:.0f} % of the units")
 
-# %%
-context_rows = [(k, rows) for k, rows in table.items() if k.u_max != u_max_judged]  # reported, never judged
-
-
-def merged(r, **fields):
-    """One claim over the cost variants: every variant's checks and guarantees, its numbers by variant."""
-    return r[costs[0]].replace(
-        checks={k: v for c in costs for k, v in r[c].checks.items()},
-        guarantees={k: v for c in costs for k, v in (r[c].guarantees or {}).items()},
-        readings=rules.join_readings(r[c] for c in costs),
-        better={k: v for c in costs for k, v in (r[c].better or {}).items()} or None,
-        numbers={c: r[c].numbers for c in costs} | {"context_4N_mean_axis": {
-            k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()} for k, rows in context_rows}},
-        **fields)
-
+# %% [markdown]
+# Each claim joins its cost variants (`rules.join_costs`), with the flights at the other bounds as context (reported,
+# never judged), and says what the paper's stated setting gives and why it is not judged there
+# (`M.unjudged_bound_note`).
 
 # %%
+context_numbers = {"context_4N_mean_axis": {k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()}
+                                            for k, rows in table.items() if k.u_max != u_max_judged}}
+merged = partial(rules.join_costs, numbers=context_numbers)
 S = len(grid[costs[0]].units)  # the independent units of every comparison
 paper_rows = table.get(M.TableKey("as_written", PAPER_THRUST_MAX))  # the paper's stated setting: R = I, 4 N (or None)
-
-
-def at_paper(metric, unit, compare):
-    """The outcome at the paper's stated setting and why it is not judged there (the row's at_paper_setting)."""
-    return M.unjudged_bound_note(paper_rows, metric=metric, unit=unit, need=need, u_max=PAPER_THRUST_MAX, compare=compare,
-                                 setting="the paper's setting (Eq. (28) as written, R = I)",
-                                 flown="kept network, the paper's force, one flight per model")
-
+at_paper = partial(M.unjudged_bound_note, paper_rows, need=need, u_max=PAPER_THRUST_MAX,
+                   setting="the paper's setting (Eq. (28) as written, R = I)",
+                   flown="kept network, the paper's force, one flight per model")
 
 # %%
 q3 = merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
             headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
             paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
-            title="MPC tracking with the feedback model", n=S, at_paper_setting=at_paper("mean_axis", "m", ("FNN", "Nomi")),
+            title="MPC tracking with the feedback model", n=S, at_paper_setting=at_paper(metric="mean_axis", unit="m", compare=("FNN", "Nomi")),
             rule=f"paired wins over {S} independent units per cost at {u_max_judged:g} N")
 
 # %%
@@ -403,12 +388,12 @@ claims = [
     merged(r4, figure=f"figures/acc_prediction_{costs[-1]}.png",
            headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
            paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
-           title="First-step prediction", n=S, at_paper_setting=at_paper("acc_pred_rmse", "m/s^2", ("FNN", "Nomi")),
+           title="First-step prediction", n=S, at_paper_setting=at_paper(metric="acc_pred_rmse", unit="m/s^2", compare=("FNN", "Nomi")),
            rule=f"FNN paired-beats the other five over {S} independent units per cost"),
     merged(r5, figure="figures/adapfnn.png",
            headline=F.headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
            paper="AdapFNN is comparable to FNN with a slightly larger RMSE (Fig. S14, Theorem 2)",
-           title="Adaptive feedback network", n=S, at_paper_setting=at_paper("mean_axis", "m", ("AdapFNN", "FNN")),
+           title="Adaptive feedback network", n=S, at_paper_setting=at_paper(metric="mean_axis", unit="m", compare=("AdapFNN", "FNN")),
            rule=f"within 25 % in >= S - 1 of S = {S} independent units and mean >= FNN's; Theorem 2 ball a guarantee"),
 ]
 

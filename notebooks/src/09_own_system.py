@@ -66,6 +66,7 @@ import numpy as np
 import torch
 
 from fnnbook.rules.beyond import b1, b1_budget, b1_coverage, b1_paired
+from fnnlib import own_system as OS
 
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
@@ -104,80 +105,22 @@ print(f"hand-picked gain: noise amplification {F.noise_amplification(F.Gains(L_h
 # (`b1_coverage`). The tuner fits one gain per state (a diagonal $L$), the sweep a scalar $L$ times $I$.
 
 # %%
-def hand_sweep(model, y, Ts_, N_, u=None) -> F.GainSweep:
-    """The (L, beta) of the hand grid with the lowest N-step error on the tuning measurements ``y``."""
-    def cost(L, beta):
-        with torch.no_grad():
-            return float(F.n_step_errors(F.cascade_predict(model, y, Ts_, N_, F.Gains(L, beta), u=u), y, N_).mean())
-    return F.sweep_gains(cost, hand_L_grid, hand_beta_grid)
-
-
 hand_points = len(hand_L_grid) * len(hand_beta_grid)
 budget = b1_budget({"pendulum": {"tuned": tune_iterations, "hand": hand_points},
                     "spiral": {"tuned": spiral_tune_iterations, "hand": hand_points}})  # refuses unequal budgets
 print(f"budget per setting: {budget} evaluations of the cost on the tuning data, tuned and hand alike")
 
 
-# %%
-def pendulum_data(seed: int) -> tuple:
-    """One seed's pendulum records: its generator (drawn from again later), the time grid ``t``, the known torques
-    ``u`` (train (n_train, 1), tune and eval (n_test, 1)), three start states ``x0`` (3, 2) and the nominal
-    training trajectory (n_train, 2)."""
-    gen = F.make_generator(seed)
-    t = torch.arange(max(n_train, n_test), dtype=torch.float64) * Ts
-    def inputs(T):  # a known torque, two sines with random phases
-        p = 2 * torch.pi * torch.rand(2, generator=gen, dtype=torch.float64)
-        return u_amp * (torch.sin(0.9 * t[:T] + p[0]) + 0.5 * torch.sin(2.3 * t[:T] + p[1]))[:, None]
-    u = inputs(n_train), inputs(n_test), inputs(n_test)
-    x0 = 0.5 * torch.randn(3, 2, generator=gen, dtype=torch.float64)
-    return gen, t, u, x0, F.Pendulum(*nominal).simulate(x0[0], t[:n_train], u[0]).float()
-
-
-# %%
-def pendulum_model(seed: int, t, x_train, u_train) -> F.NeuralODE:
-    """The neural ODE of one seed, trained on the nominal pendulum's record (the quick recipe)."""
-    F.seed_everything(seed)
-    model = F.NeuralODE(2, hidden, activation, n_input=1)
-    F.train_neural_ode(model, t[:n_train].float(), x_train, F.QUICK_RECIPE.replace(iterations=iterations),
-                       seed=seed, u=u_train.float(), progress=False)
-    return model
-
-
-# %%
-def pendulum_predictions(model, y_eval, u_eval, hand: F.GainSweep, tuned: F.TunedGains) -> dict:
-    """Each observer's N-step predictions on the evaluation measurements ``y_eval`` (n_test, 2)."""
-    kalman = F.KalmanObserver(model, Ts, n=2, cov=F.Covariances([kf_q_x] * 2 + [kf_q_d] * 2, noise_std ** 2,
-                                                           P0=[noise_std ** 2] * 2 + [kf_p0_d] * 2),
-                              steady_state=True)
-    with torch.no_grad():
-        return {"open_loop": F.cascade_predict(model, y_eval, Ts, N, F.Gains(0.0), u=u_eval),
-                "hand": F.cascade_predict(model, y_eval, Ts, N, F.Gains(hand.L, hand.beta), u=u_eval),
-                "paper": F.cascade_predict(model, y_eval, Ts, N, F.Gains(L_hand, beta_hand), u=u_eval),
-                "tuned": F.cascade_predict(model, y_eval, Ts, N, tuned.schedule(), u=u_eval),
-                "kalman": kalman.predict(y_eval, N, u=u_eval).float()}
-
-
-# %%
-def pendulum_run(seed: int) -> dict:
-    gen, t, (u_train, u_tune, u_eval), x0, x_train = pendulum_data(seed)
-    model = pendulum_model(seed, t, x_train, u_train)
-    plant = F.Pendulum(*test)
-    x_tune, x_eval = (plant.simulate(x, t[:n_test], u).float() for x, u in [(x0[1], u_tune), (x0[2], u_eval)])
-    y_tune, y_eval = (F.add_measurement_noise(x, noise_std, gen) for x in (x_tune, x_eval))
-    u_tune, u_eval = u_tune.float(), u_eval.float()
-    tuned = F.tune_gains(model, y_tune, Ts, N,
-                         recipe=F.TuneRecipe(L0=L0, beta0=beta0, iterations=tune_iterations, lr=tune_lr), u=u_tune)
-    hand = hand_sweep(model, y_tune, Ts, N, u=u_tune)
-    preds = pendulum_predictions(model, y_eval, u_eval, hand, tuned)
-    return {"errors": {k: float(F.n_step_errors(z, x_eval, N).mean()) for k, z in preds.items()},
-            "L": tuned.L.tolist(), "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
-            "hand_sweep": hand.as_dict(),
-            "trace": {k: z[: n_test - N, 0].numpy() for k, z in preds.items()} | {"truth": x_eval[N:, 0].numpy()}}
-
+# %% [markdown]
+# One seed of the pendulum (`fnnlib.own_system.pendulum_run`): its records (`pendulum_records`: the known
+# torques and three starts drawn from the seed), the neural ODE trained on the nominal pendulum with the quick
+# recipe (`pendulum_model`), the test pendulum measured with noise, the gains tuned on one test trajectory
+# (`tune_gains`) and picked by hand on it (`n_step_gain_sweep`), and each predictor on another (`predictions`:
+# the open loop, the hand-picked, the paper's and the tuned gains, and a steady-state Kalman filter).
 
 # %%
 t0 = time.perf_counter()
-pendulum = [pendulum_run(s) for s in seeds]
+pendulum = [OS.pendulum_run(s, settings) for s in seeds]
 pendulum_seconds = time.perf_counter() - t0
 print(f"{len(seeds)} pendulum runs in {pendulum_seconds:.1f} s")
 {k: np.round([r["errors"][k] for r in pendulum], 4).tolist() for k in pendulum[0]["errors"]}
@@ -200,36 +143,8 @@ x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples
 
 
 # %%
-def spiral_predictions(model_s, y, hand: F.GainSweep, tuned: F.TunedGains) -> dict:
-    """Each observer's N-step predictions on the spiral's judged measurements ``y`` (T, 2)."""
-    kalman_s = F.KalmanObserver(model_s, spiral_Ts, n=2,
-                                cov=F.Covariances([kf_q_x] * 2 + [kf_q_d] * 2, spiral_noise_std ** 2,
-                                                  P0=[spiral_noise_std ** 2] * 2 + [kf_p0_d] * 2),
-                                steady_state=True)
-    with torch.no_grad():
-        return {"open_loop": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(0.0)),
-                "hand": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(hand.L, hand.beta)),
-                "paper": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, F.Gains(spiral_L, spiral_beta)),
-                "tuned": F.cascade_predict(model_s, y, spiral_Ts, spiral_N, tuned.schedule()),
-                "kalman": kalman_s.predict(y, spiral_N).float()}
-
-
-# %%
-def spiral_run(seed: int, model_s) -> dict:
-    gen = F.make_generator(1000 + seed)
-    y_tune, y = (F.add_measurement_noise(x, spiral_noise_std, gen) for x in (x_s_tune, x_s))
-    tuned = F.tune_gains(model_s, y_tune, spiral_Ts, spiral_N,
-                         recipe=F.TuneRecipe(L0=L0, beta0=beta0, iterations=spiral_tune_iterations, lr=tune_lr))
-    hand = hand_sweep(model_s, y_tune, spiral_Ts, spiral_N)
-    preds = spiral_predictions(model_s, y, hand, tuned)
-    return {"errors": {k: float(F.n_step_errors(z, x_s, spiral_N).mean()) for k, z in preds.items()},
-            "L": tuned.L.tolist(), "beta": tuned.beta, "tune_seconds": tuned.seconds, "loss": tuned.loss,
-            "hand_sweep": hand.as_dict(), "seed": seed}
-
-
-# %%
 t0 = time.perf_counter()
-spiral = [spiral_run(s, net) for s, net, _ in spiral_nets]
+spiral = [OS.spiral_run(s, net, x_s_tune, x_s, settings) for s, net, _ in spiral_nets]
 spiral_seconds = time.perf_counter() - t0
 print(f"{len(spiral)} spiral runs (one per network) in {spiral_seconds:.1f} s")
 {k: np.round([r["errors"][k] for r in spiral], 4).tolist() for k in spiral[0]["errors"]}
@@ -248,8 +163,6 @@ for ax, runs, title in [(axes[0, 0], pendulum, f"pendulum, N = {N}"), (axes[0, 1
         ax.plot([i] * len(vals), vals, "k.", ms=4)
     ax.set(xticks=range(len(names)), yscale="log", ylabel="mean N-step error", title=title)
     ax.set_xticklabels(names, rotation=20)
-
-# %%
 ax = axes[0, 2]
 tr = pendulum[0]["trace"]
 tt = np.arange(N, n_test) * Ts

@@ -122,55 +122,29 @@ if b_seeds != b_ran["seeds"]:
 print(f"{len(b_nets)} neural ODEs of bottle loaded (seeds {b_seeds}); hand-tuned L = {bottle_L:g}, "
       f"beta = {bottle_beta:g}, N = {bN}")
 
-# %%
-def o1_loss(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-    """The O1 error of cascade predictions ``z`` of throws ``x``: mean position error N = 0.5 s ahead."""
-    return F.error_norm(z[..., : x.shape[-2] - bN, :3], x[..., bN:, :3]).mean()
-
-
-def bottle_tuning_throws(seed: int) -> torch.Tensor:
-    """The training throws both tunings of the network with this seed see (drawn with its seed)."""
-    return x_b_train[torch.randperm(x_b_train.shape[0], generator=F.make_generator(seed))[:bottle_tune_throws]]
-
-
-def bottle_hand(seed: int, net) -> F.GainSweep:
-    """The network's hand gains: the sweep's (L, beta) with the lowest O1 error on its tuning throws."""
-    x = bottle_tuning_throws(seed)
-
-    def cost(L, beta):
-        with torch.no_grad():
-            return float(o1_loss(x, F.cascade_predict(net, x[..., :-bN, :], b_Ts, bN, F.Gains(L, beta))))
-    return F.sweep_gains(cost, bottle_hand_L_grid, bottle_hand_beta_grid)
-
+# %% [markdown]
+# Each network's tuning throws (drawn with its seed), its hand gains (`F.position_gain_sweep`) and its tuned gains
+# (`F.position_gain_tuning`), both on O1's error; then each test throw's O1 error with either
+# (`F.cascade_position_errors`).
 
 # %%
-def bottle_tune(seed: int, net) -> F.TunedGains:
-    """The network's (L, beta), from the paper's values, tuned on the O1 error of its tuning throws."""
-    def objective(gains, x, u, mask):  # the judged metric on the training throws, differentiable in the gains
-        return o1_loss(x, F.cascade_forward(net, x, b_Ts, bN, gains, rows=x.shape[-2] - bN))
-    return F.tune_gains(net, bottle_tuning_throws(seed), b_Ts, bN,
-                        recipe=F.TuneRecipe(L0=bottle_L, beta0=bottle_beta, objective=objective,
-                                            iterations=bottle_tune_iterations, lr=bottle_tune_lr))
-
-
-def o1_errors(pred: torch.Tensor) -> torch.Tensor:
-    """Each test throw's mean 0.5 s position error (O1's error) of predictions from its first T - N starts."""
-    return F.error_norm(pred[..., :3], x_b_test[:, bN:, :3].expand_as(pred[..., :3])).mean(-1)
-
-
-# %%
+tuning = {s: x_b_train[torch.randperm(x_b_train.shape[0], generator=F.make_generator(s))[:bottle_tune_throws]]
+          for s in b_seeds}
 t0 = time.perf_counter()
-b_hand = [bottle_hand(s, net) for s, net in zip(b_seeds, b_nets)]
+b_hand = [F.position_gain_sweep(net, tuning[s], b_Ts, bN, bottle_hand_L_grid, bottle_hand_beta_grid)
+          for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_hand_sweep"] = time.perf_counter() - t0
 t0 = time.perf_counter()
-b_tuned = [bottle_tune(s, net) for s, net in zip(b_seeds, b_nets)]
+b_tuned = [F.position_gain_tuning(net, tuning[s], b_Ts, bN, L0=bottle_L, beta0=bottle_beta,
+                                  iterations=bottle_tune_iterations, lr=bottle_tune_lr) for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_tune"] = time.perf_counter() - t0
+
+# %%
 t0 = time.perf_counter()
-starts = x_b_test[:, :-bN]  # the cascade is causal: the first T - N rows are those of the whole run
 with torch.no_grad():
-    tuned_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, r.schedule()))
+    tuned_per_seed = torch.stack([F.cascade_position_errors(net, x_b_test, b_Ts, bN, r.L, r.beta)
                                   for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
-    hand_per_seed = torch.stack([o1_errors(F.cascade_predict(net, starts, b_Ts, bN, F.Gains(h.L, h.beta)))
+    hand_per_seed = torch.stack([F.cascade_position_errors(net, x_b_test, b_Ts, bN, h.L, h.beta)
                                  for net, h in zip(b_nets, b_hand)])
 
 # %%
@@ -258,54 +232,24 @@ if not 1 <= quad_tune_cases <= len(val_tests):
                      f"got {quad_tune_cases}")
 
 
-# %% tags=["hide-input"]
-def fnn_flight(net, L, beta, test: M.FlightTest, cost: str) -> M.FlightRow:
-    """FNN (residual ``net``, gains ``L``, ``beta``) flown as `quadrotor_mpc` flies it: its row of the flight table."""
-    fnn = M.fnn_model(net, L, beta, plant=plant, N=quad_N, Ts=quad_Ts)
-    return M.flight_row(M.fly(fnn, mpcs[cost], test))
+# %% [markdown]
+# Each network's hand gains on the training flights, as trained on (`M.hand_gains_on_flights`), and its tuned
+# gains per cost through closed-loop flights on the validation cases drawn with its seed (`M.flown_gain_sweep`).
 
 # %%
 train_flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")  # the training set, as trained on
 x_train_q, u_train_q = train_flights.x[:, :-1, :12], train_flights.u  # (K, T, 12) states, (K, T, 4) thrusts
-
-
-def quad_hand(net) -> F.GainSweep:
-    """The network's hand (L, beta): the grid pair with the lowest mean N-step position error (m) of the
-    Sec. 3.3 cascade on the nominal model plus ``net`` along the training flights (never a flown loop)."""
-    neural = M.PredictionModel("Neural", plant, net, Ts=quad_Ts)
-
-    def cost(L, beta):
-        with torch.no_grad():
-            z = F.cascade_predict(lambda t, x, u: neural.f(x, u), x_train_q, train_flights.Ts, quad_N,
-                                  F.Gains(L, beta), u=u_train_q)
-        return float(F.n_step_errors(z[..., :3], x_train_q[..., :3], quad_N).mean())
-    return F.sweep_gains(cost, quad_hand_L_grid, quad_hand_beta_grid)
-
-
-# %%
-def quad_tune(seed: int, net, cost: str) -> F.GainSweep:
-    """The network's (L, beta) for MPC cost ``cost``: the grid pair with the lowest mean tracking RMSE of
-    closed-loop flights on validation cases drawn with its seed (never the test flight)."""
-    which = torch.randperm(len(val_tests), generator=F.make_generator(seed))[:quad_tune_cases].tolist()
-
-    def rmse(L, beta):  # a flight that diverges or leaves the model's domain scores inf
-        out = []
-        for i in which:
-            try:
-                r = M.fly(M.fnn_model(net, L, beta, plant=plant, N=quad_N, Ts=quad_Ts), mpcs[cost], val_tests[i])
-            except ValueError:
-                return float("inf")
-            out.append(float("inf") if r.diverged else M.tracking_rmse(r.x, r.x_ref)["mean_axis"])
-        return float(np.mean(out))
-    return F.sweep_gains(rmse, quad_L_grid, quad_beta_grid)
-
+cases = {s: [val_tests[i] for i in torch.randperm(len(val_tests), generator=F.make_generator(s))[:quad_tune_cases].tolist()]
+         for s, _ in members}  # the validation cases each network is tuned on, never the test flight
 
 # %%
 t0 = time.perf_counter()
-q_hand = [quad_hand(net) for _, net in members]
+q_hand = [M.hand_gains_on_flights(M.PredictionModel("Neural", plant, net, Ts=quad_Ts), x_train_q, u_train_q,
+                                  train_flights.Ts, quad_N, quad_hand_L_grid, quad_hand_beta_grid) for _, net in members]
 seconds["quad_hand_sweep"] = time.perf_counter() - t0
 t0 = time.perf_counter()
-q_tuned = {cost: [quad_tune(s, net, cost) for s, net in members] for cost in costs}
+q_tuned = {cost: [M.flown_gain_sweep(net, cases[s], mpcs[cost], L_grid=quad_L_grid, beta_grid=quad_beta_grid,
+                                     plant=plant, N=quad_N, Ts=quad_Ts) for s, net in members] for cost in costs}
 seconds["quad_tune"] = time.perf_counter() - t0
 hand_sweeps["quadrotor"] = [h.as_dict() | {"seed": s} for (s, _), h in zip(members, q_hand)]
 tuned_values["quadrotor"] = {cost: [{"seed": s, "L": r.L, "beta": r.beta, "validation_rmse": r.cost,
@@ -313,18 +257,19 @@ tuned_values["quadrotor"] = {cost: [{"seed": s, "L": r.L, "beta": r.beta, "valid
                              for cost in costs}
 
 
+# %% [markdown]
+# FNN then flies the test as `quadrotor_mpc` flies it, with each network's tuned and hand gains: its rows of the
+# flight table, of which the B1 numbers keep, beyond the RMSE, the fallbacks and whether it diverged.
+
 # %%
-def flight_summary(row: M.FlightRow) -> dict:
-    """What the B1 numbers keep of one flight beyond its RMSE: its fallbacks and whether it diverged."""
-    return {"fallbacks": row.fallbacks, "fallback_reasons": row.fallback_reasons, "diverged": row.diverged}
-
-
 t0 = time.perf_counter()
 tuned_flights, hand_flights = {}, {}
 for cost in costs:  # unit k: network k with drawn disturbance k, as quadrotor_mpc pairs them
-    rows = {p: [fnn_flight(net, g.L, g.beta, t, cost) for (_, net), g, t in zip(members, gains, unit_tests)]
+    rows = {p: [M.flight_row(M.fly(M.fnn_model(net, g.L, g.beta, plant=plant, N=quad_N, Ts=quad_Ts), mpcs[cost], t))
+                for (_, net), g, t in zip(members, gains, unit_tests)]
             for p, gains in (("tuned", q_tuned[cost]), ("hand", q_hand))}
-    tuned_flights[cost], hand_flights[cost] = ([flight_summary(r) for r in rows[p]] for p in ("tuned", "hand"))
+    tuned_flights[cost], hand_flights[cost] = ([{k: getattr(r, k) for k in ("fallbacks", "fallback_reasons", "diverged")}
+                                                for r in rows[p]] for p in ("tuned", "hand"))
     errors[f"quadrotor {cost}"] = {p: [r.mean_axis for r in rows[p]] for p in ("tuned", "hand")} | {
         "open_loop": q_rmse[cost]["Neural"]}
     paper_errors[f"quadrotor {cost}"] = q_rmse[cost]["FNN"]  # FNN at the paper's L = 3 I, beta = 0.1

@@ -71,9 +71,9 @@ import torch
 
 import fnnlib as F
 from fnnbook import why as W
-from fnnbook.feedback_eval import (CentredFeedback, d4_result, evaluation_setup, feedback_ensemble, field_errors, judge,
-                                   rate_error_curves, release_form_loss)
+from fnnbook.feedback_eval import evaluation_setup, feedback_ensemble, judge, rate_error_curves, release_form_loss
 from fnnbook.rules import sec4
+from fnnbook.rules import why_feedback as WF
 from fnnlib.data import release
 
 # %%
@@ -95,27 +95,29 @@ print(f"{len(points)} grid points: {[p['change'] for p in points]}")
 # the paper profile's checks of D1, D2 and D4 (checked below); D3 reads the paper profile's loss numbers.
 
 # %%
-def ensemble(stem, kind, build):
-    folder = Path(upstream_dirs["spiral"]) if stem == "neural_ode" else nf_dir
-    loaded = F.load_seed_checkpoints(folder, stem=stem, expected_kind=kind)
-    return build([m for _, m, _ in loaded], [s for s, _, _ in loaded]), [s for s, _, _ in loaded]
-
-
-f_ours, seeds = ensemble("neural_ode", "NeuralODE", F.NeuralODEEnsemble.from_members)
-h_ours, _ = ensemble("neural_feedback", "NeuralFeedback", feedback_ensemble)
-dr_ours, _ = ensemble("neural_ode_dr", "NeuralODE", F.NeuralODEEnsemble.from_members)
+f_ours = F.load_seed_ensemble(upstream_dirs["spiral"])
+seeds = f_ours.seeds
+h_loaded = F.load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")
+h_ours = feedback_ensemble([m for _, m, _ in h_loaded], [s for s, _, _ in h_loaded])
+dr_ours = F.load_seed_ensemble(nf_dir, "neural_ode_dr")
 
 # %% [markdown]
 # They are judged by D1, D2 and D4's rules on the evaluation built from this notebook's parameters; D3 takes the
 # paper profile's loss numbers; every check must be the paper profile's own.
 
 # %%
+th = WF.Thresholds(d2_factor=d2_factor, d3_ratio=d3_ratio, d3_flat=d3_flat, d1_factor=d1_factor)
 setup = evaluation_setup(globals())
 ours, ours_numbers = judge(f_ours, h_ours, setup, len(seeds), loss=None, factor=d2_factor, ratio_max=d3_ratio,
                            flat=d3_flat, f_dr=dr_ours, d1_factor=d1_factor)
 d3n = paper.claim("D3").numbers
 ours["D3"] = sec4.d3(ratio=d3n["ratio"], trend=d3n["last_window_trend_relative"], ratio_max=d3_ratio, flat=d3_flat)
 ours_numbers |= {"ratio": np.asarray(d3n["ratio"]), "last_window_trend_relative": np.asarray(d3n["last_window_trend_relative"])}
+
+# %% [markdown]
+# D3's release-form reading needs our feedback's loss in the release's form, on the randomized training cases.
+
+# %%
 cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
 X_dr = F.simulate_levels([F.Spiral(*row) for row in cases.tolist()], torch.tensor(x0, dtype=torch.float64), t_dr,
@@ -128,31 +130,15 @@ print({cid: c.verdict for cid, c in ours.items()}, "= the paper profile's verdic
 
 # %% [markdown]
 # ## The grid: one setting changed at a time
-# Each axis is named for what the paper leaves open or states (`paper`: the stated value, `None` when the
-# paper is silent or says two things). The profile point (the paper profile's own run, 5 seeds) lies on every
+# Each axis is named for what the paper leaves open or states (`WF.AXES`; `paper`: the stated value, `None` when
+# the paper is silent or says two things). The profile point (the paper profile's own run, 5 seeds) lies on every
 # axis. At each point a claim *holds* when its rule's verdict there is "reproduced" (D4: the counted, strict
-# reading); the numbers per seed are kept beside it.
-
-# %%
-AXES = {  # change key -> (parameter, the profile's value, what the paper says, the silence it probes)
-    "optimizer": ("fb_optimizer", lambda r: r["optimizer"], None,
-                  "the feedback's optimizer: Alg. 1 names Adam, App. A.3.3 (and the release) RMSprop"),
-    "lr_times": ("fb_lr", lambda r: r["lr"], 0.01, "the feedback's learning rate (App. A.3.3 states 0.01)"),
-    "iterations_times": ("fb_iterations", lambda r: r["iterations"], 2000,
-                         "whether longer training helps (App. A.3.3 states 2000 iterations)"),
-    "refresh_every": ("refresh_every", lambda r: r["refresh_every"], 1,
-                      "the rollout refresh (Alg. 1 reruns the feedback at every iteration; ours every 10)"),
-}
-TITLES = {"optimizer": "optimizer", "lr_times": "learning rate", "iterations_times": "iterations",
-          "refresh_every": "rollout refresh"}  # each grid's name in the summary line
-
-# %% [markdown]
-# The profile's recipe is the neural_feedback task's (its checkpoints record the iterations and the refresh);
-# each grid point must change exactly one setting of it.
+# reading); the numbers per seed are kept beside it. The profile's recipe is the neural_feedback task's (its
+# checkpoints record the iterations and the refresh); each grid point must change exactly one setting of it.
 
 # %%
 profile_recipe = {"optimizer": fb_optimizer, "lr": fb_lr, "iterations": fb_iterations, "refresh_every": refresh_every}
-meta = F.load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")[0][2]
+meta = h_loaded[0][2]
 if (meta["iterations"], meta["refresh_every"]) != (fb_iterations, refresh_every):
     raise ValueError(f"the neural_feedback task ran {meta['iterations']} iterations, refresh every "
                      f"{meta['refresh_every']}; this notebook was given {fb_iterations}, {refresh_every}")
@@ -161,135 +147,20 @@ for p in points:  # every point changes one setting of the profile's recipe, and
         raise ValueError(f"a grid point must change exactly one setting of {profile_recipe}: {p['recipe']}")
 
 # %% [markdown]
-# What each point measured, per claim: its rule's verdict and the per-seed numbers the figures show (D4: the S8
-# levels won per seed).
+# What each point measured, per claim (`WF.measured`): its counted verdict (D4: as worded), D2 over the whole record
+# and after the estimate has settled, D3 in each reading, and the per-seed numbers the figures show (D4: the S8
+# levels won per seed). Then one grid per claim and changed setting (`WF.setting_grid`): the profile point and the
+# points that change that setting, sorted by the setting's value (D2 crossed with the window, D3 with its
+# readings); n is the fewest seeds at a point. The unit: the S seeds are S initialisations of one ensemble,
+# trained side by side on shared mini-batches of the same randomized cases and judged on one nominal trajectory:
+# they share the data and the batches, not the weights. Their spread is that of the initialisation alone.
 
 # %%
-def levels_won(s8):
-    """Per seed: the S8 levels where the feedback is lower in both metrics (the per-seed count of Fig. S10)."""
-    s8 = {k: np.asarray(v) for k, v in s8.items()}
-    return ((s8["rate_neural_feedback"] < s8["rate_neural_ode"])
-            & (s8["err_N_neural_feedback"] < s8["err_N_neural_ode"])).sum(-1)
-
-
-# %% [markdown]
-# The counted reading of each claim: the one the paper's words support (D4: as worded).
-
-# %%
-WORDS = {"D4": "as worded"}  # the reading the paper's words support, counted on the scoreboard (claims.yaml)
-
-
-def counted(result, cid):
-    """The verdict of claim ``cid``'s counted reading in ``result`` (a ClaimResult or its JSON)."""
-    r = result if isinstance(result, dict) else result.to_json()
-    return r["readings"][WORDS[cid]]["verdict"] if cid in WORDS and r.get("readings") else r["verdict"]
-
-
-# %% [markdown]
-# D2 after the estimate has settled: its rule over the window from each seed's settling time.
-
-# %%
-def d2_settled(numbers):
-    """D2's rule over the window after the feedback's estimate has settled (per seed)."""
-    return sec4.d2(rel_feedback=numbers["rel_rmse_settled_neural_feedback"], frozen_unchanged=True,
-                   rel_nominal=numbers["rel_rmse_settled_nominal_neural_ode"], factor=d2_factor)
-
-
-# %% [markdown]
-# What each point measured, per claim and reading.
-
-# %%
-def measured(results, numbers):
-    """Per claim: the rule's verdict (D2 in both windows, D3 in each reading), and the per-seed numbers."""
-    n = {k: np.asarray(v) for k, v in numbers.items() if not isinstance(v, dict)}
-    d3 = {r: sec4.reading_holds_d3(r, ratio=n["ratio"], trend=n["last_window_trend_relative"], flat=d3_flat,
-                                   release_final=n.get("release_form_final"), ratio_max=d3_ratio) for r in D3_READ}
-    return {"verdict": {k: counted(results[k], k) for k in ("D2", "D3", "D4")},
-            "D2_window": {"whole record": counted(results["D2"], "D2") == "reproduced",
-                          "after settling": d2_settled(numbers).verdict == "reproduced"},
-            "D3_reading": d3,
-            "D2": n["rel_rmse_neural_feedback"] / n["rel_rmse_nominal_neural_ode"],
-            "D2_settled": n["rel_rmse_settled_neural_feedback"] / n["rel_rmse_settled_nominal_neural_ode"],
-            "settle_seconds": n["settle_seconds"],
-            "D3_ratio": n["ratio"], "D3_trend": n["last_window_trend_relative"],
-            "D3_release": n.get("release_form_final", np.full(n["ratio"].shape, np.nan)),
-            "D4": levels_won(numbers["s8"])}
-
-
-# %%
-D3_READ = tuple(sec4.D3_READINGS)
-profile_m = measured(ours, ours_numbers)
-point_m = [measured(p["claims"], p["numbers"]) for p in points]
-
-# %% [markdown]
-# The claims' rules, as each grid states them: D2 and D3 over the seeds (D2 in the window of the point, D3 in the
-# reading of the point), D4 in its counted reading (as worded: the levels with a residual, and the held-out ones).
-
-# %%
-RULES = {"D2": f"the frozen neural ODE with the feedback is within {d2_factor:g}x the nominal model's relative RMSE "
-               "in >= S-1 of S seeds (sec4.d2)",
-         "D3": "the loss read as the point's reading says (sec4.D3_READINGS: falls and ends flat, falls, or reaches "
-               "the release's stopping level in the release's loss form) in >= S-1 of S seeds (sec4.reading_holds_d3)",
-         "D4": "the feedback beats the neural ODE in the point's metric at every S8 level with a residual and every "
-               "held-out level (sec4.d4, as-worded reading, the one counted)"}
-
-# %% [markdown]
-# One grid per claim and changed setting: the profile point and the points that change that setting, sorted by
-# the setting's value; n is the fewest seeds at a point.
-
-# %%
-WINDOW = W.Axis("window", ("whole record", "after settling"), "the window Fig. 5b's accuracy is scored over: "
-                "the paper shows trajectories, no number", ours="whole record", kind="reading")
-READING_D3 = W.Axis("reading", D3_READ, "what 'converges' means for a curve the release cuts at its stopping level",
-                    ours="falls and ends flat", kind="reading")
-
-
-# %% [markdown]
-# A claim's grid along one changed setting: D2 crossed with the window, D3 with its readings.
-
-# %%
-def points_along(key):
-    """The profile point and the points that change setting ``key``: value -> what it measured; the axis."""
-    name, value_of, stated, silence = AXES[key]
-    at = {value_of(profile_recipe): profile_m} | {value_of(p["recipe"]): m for p, m in zip(points, point_m)
-                                                  if key in p["change"]}
-    values = sorted(at, key=lambda v: (isinstance(v, str), v))
-    return at, values, W.Axis(name, tuple(values), silence, paper=stated, ours=value_of(profile_recipe))
-
-
-# %%
-def axis_grid(key, cid):
-    """Claim ``cid`` along one changed setting (the profile point included)."""
-    at, values, axis = points_along(key)
-    if cid == "D2":
-        holds = np.array([[at[v]["D2_window"][w] for w in WINDOW.values] for v in values])
-        keys, axes = ("D2", "D2_settled", "settle_seconds"), (axis, WINDOW)
-    elif cid == "D3":
-        holds = np.array([[at[v]["D3_reading"][r] for r in D3_READ] for v in values])
-        keys, axes = ("D3_ratio", "D3_trend", "D3_release"), (axis, READING_D3)
-    else:
-        holds = np.array([at[v]["verdict"][cid] == "reproduced" for v in values])
-        keys, axes = (cid,), (axis,)
-    nums = {k: [np.nan_to_num(at[v][k], nan=-1.0).tolist() for v in values] for k in keys}
-    n = min(len(at[v][keys[0]]) for v in values)
-    return W.WhyGrid(axes, holds, n, RULES[cid], numbers=nums, title=TITLES[key], unit=UNIT)
-
-
-# %% [markdown]
-# The units: the S seeds are S initialisations of one ensemble, trained side by side on shared mini-batches of the
-# same randomized cases and judged on one nominal trajectory: they share the data and the batches, not the
-# weights. Their spread is that of the initialisation alone, not of independent experiments.
-
-# %%
-UNIT = "seed (one ensemble)"
-
-
-# %% [markdown]
-# The grids of D2, D3 and D4 along every setting some point changes, and their one-line summaries.
-
-# %%
-changed = [k for k in AXES if any(k in p["change"] for p in points)]
-grids = {cid: [axis_grid(k, cid) for k in changed] for cid in ("D2", "D3", "D4")}
+profile_m = WF.measured(ours, ours_numbers, th)
+point_m = [WF.measured(p["claims"], p["numbers"], th) for p in points]
+changed = [k for k in WF.AXES if any(k in p["change"] for p in points)]
+grids = {cid: [WF.setting_grid(k, cid, profile_recipe=profile_recipe, profile=profile_m, points=points,
+                               point_measured=point_m, th=th) for k in changed] for cid in ("D2", "D3", "D4")}
 for cid, gs in grids.items():
     print(cid, W.summary(gs))
 
@@ -300,40 +171,19 @@ for cid, gs in grids.items():
 # of `fnnlib.data.release` (a refusing unpickler, pinned SHA-256). They were trained on the release's spiral,
 # the transpose of Eq. (26) (`release.release_spiral`: $\omega$ negated), so they are judged on that spiral's
 # nominal task, S8 and held-out levels (same parameters, metrics and rules as ours). One network of each kind:
-# n = 1, so "in >= S-1 of S seeds" reads "in the run" and a win is "lower".
+# n = 1, so "in >= S-1 of S seeds" reads "in the run" and a win is "lower". Each check names the networks it
+# judged; without the release no authors' check is made.
 
 # %%
-names = (authors_ode, authors_feedback, authors_dr_ode)  # each must be there, its SHA-256 the published one
-
-
-def authors_networks():
-    """The authors' f, h and domain-randomized f, or None (with a printed line) without their release."""
-    if not all(release.release_present(data_dir, f"spiral_curve/trained_model/{n}") for n in names):
-        print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
-              f"all in data_dir = {data_dir!r} with their published SHA-256")
-        return None
-    return (release.load_release_spiral_ode(data_dir, authors_ode),
-            release.load_release_spiral_feedback(data_dir, authors_feedback),
-            release.load_release_spiral_ode(data_dir, authors_dr_ode))
-
-
-# %%
-def authors_checks(f, h, f_dr):
-    """D1, D2, D4 with the authors' networks on the release's spiral, beside ours; and their numbers."""
-    theirs, numbers = judge(f, h, evaluation_setup(globals(), release.release_spiral), 1, loss=None,
-                            factor=d2_factor, ratio_max=d3_ratio, flat=d3_flat, f_dr=f_dr, d1_factor=d1_factor)
-    return {cid: W.AuthorsCheck(verdict=counted(theirs[cid], cid), ours=counted(ours[cid], cid),
-                                checks=theirs[cid].checks, networks=NETS[cid], n=1) for cid in NETS}, numbers
-
-
-# %% [markdown]
-# Each check names the networks it judged; without the release no authors' check is made.
-
-# %%
+nets = release.load_release_spiral_networks(data_dir, authors_ode, authors_feedback, authors_dr_ode)
 NETS = {"D1": f"{authors_dr_ode} vs {authors_ode}", "D2": f"{authors_ode} + {authors_feedback}",
         "D4": f"{authors_ode} + {authors_feedback}"}
-authors = None if (nets := authors_networks()) is None else authors_checks(*nets)
-if authors is not None:
+authors, setup_theirs = None, evaluation_setup(globals(), release.release_spiral)
+if nets is None:
+    print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
+          f"all in data_dir = {data_dir!r} with their published SHA-256")
+else:
+    authors = WF.authors_checks(*nets, setup_theirs, ours, NETS, th)
     for cid, a in authors[0].items():
         print(f"{cid}: authors' networks {a.verdict:15s} ours {a.ours:15s} {dict(a.checks)}")
     print({k: np.round(np.asarray(v), 4).tolist() for k, v in authors[1].items() if k.startswith("rel_rmse")})
@@ -343,103 +193,42 @@ if authors is not None:
 # D2's window for the authors' network (one network, n = 1), beside ours in the grids above.
 
 # %%
-def window_grid(numbers, units, unit, networks, title):
-    """D2 over the window: the whole record and after the estimate has settled."""
-    whole = sec4.d2(rel_feedback=numbers["rel_rmse_neural_feedback"], rel_nominal=numbers["rel_rmse_nominal_neural_ode"],
-                    frozen_unchanged=True, factor=d2_factor).verdict == "reproduced"
-    holds = np.array([whole, d2_settled(numbers).verdict == "reproduced"])
-    nums = {"ratio": [np.asarray(numbers["rel_rmse_neural_feedback"]) / np.asarray(numbers["rel_rmse_nominal_neural_ode"]),
-                      np.asarray(numbers["rel_rmse_settled_neural_feedback"])
-                      / np.asarray(numbers["rel_rmse_settled_nominal_neural_ode"])],
-            "settle_seconds": np.asarray(numbers["settle_seconds"])}
-    return W.WhyGrid((WINDOW,), holds, units, RULES["D2"], numbers=nums, title=title, unit=unit, networks=networks)
-
-
 authors_grids = {"D2": [], "D3": [], "D4": []}
 if authors is not None:
-    authors_grids["D2"].append(window_grid(authors[1], 1, "network", "authors", "authors' networks: window"))
+    authors_grids["D2"].append(WF.window_grid(authors[1], th, units=1, unit="network", networks="authors",
+                                              title="authors' networks: window"))
     print(W.summary(authors_grids["D2"]))
 
 # %% [markdown]
 # D3 on the release's own loss curves: one curve per feedback training of the release (`release.SPIRAL_LOSS_NAMES`,
-# each the run that saved a `FeedbackNN_ite<K>` network; `load_release_feedback_losses`), in the release's loss
+# each the run that saved a `FeedbackNN_ite<K>` network; `load_present_feedback_losses`), in the release's loss
 # form (the mean absolute change-rate error over the cases), each cut where it fell below the release's stopping
 # level 0.5. Every reading of D3 is applied to them (n = the curves, trained separately).
 
 # %%
-def release_curves():
-    """The release's loss curves present in data_dir (its published SHA-256), or None (with a printed line)."""
-    names = release.present_loss_names(data_dir)
-    missing = [n for n in release.SPIRAL_LOSS_NAMES if n not in names]
-    if missing:
-        print(f"{len(missing)} of the release's {len(release.SPIRAL_LOSS_NAMES)} loss curves are not in "
-              f"data_dir = {data_dir!r}: {missing}")
-    if not names:
-        return None
-    return {name: release.load_release_feedback_losses(data_dir, name) for name in names}
-
-
-# %%
-def curves_grid(curves):
-    """D3's readings over the release's curves (one unit per training run)."""
-    cols = list(curves.values())
-    ratio_t, trend_t = (np.concatenate(v) for v in zip(*(sec4.loss_convergence(c) for c in cols)))
-    final_t = np.array([c[-1] for c in cols])
-    holds = np.array([sec4.reading_holds_d3(r, ratio=ratio_t, trend=trend_t, release_final=final_t,
-                                            ratio_max=d3_ratio, flat=d3_flat) for r in D3_READ])
-    return W.WhyGrid((READING_D3,), holds, len(cols), RULES["D3"], unit="training run", networks="authors",
-                     numbers={"ratio": ratio_t, "trend": trend_t, "final": final_t,
-                              "iterations": [len(c) for c in cols]}, title="authors' loss curves: reading")
-
-
-# %%
-curves = release_curves()
-if curves is not None:
-    authors_grids["D3"].append(curves_grid(curves))
+curves = release.load_present_feedback_losses(data_dir)
+missing = [n for n in release.SPIRAL_LOSS_NAMES if n not in curves]
+if missing:
+    print(f"{len(missing)} of the release's {len(release.SPIRAL_LOSS_NAMES)} loss curves are not in "
+          f"data_dir = {data_dir!r}: {missing}")
+if curves:
+    authors_grids["D3"].append(WF.curves_grid(curves, th))
     print(W.summary(authors_grids["D3"]))
     print({n: (len(c), round(float(c[-1]), 4)) for n, c in curves.items()})
 
 # %% [markdown]
-# D4 over its metric and the cascade's usage, for our paper-profile networks and the authors': the metric
-# (`rate`: the change rate Fig. S10 and the release's test compare; `err_N`: the N-step error of the cascade;
-# `both`: the paper profile's rule), the cascade's decay `d4_beta` (Sec. 4 states none; 0 is the paper profile's,
-# 0.02 the spiral's of Sec. 3.3, 0.1 the quadrotor's) and its first estimate (each layer starts at its input;
-# the learned feedback as it is, or centred so that h(0) = 0 there).
+# D4 over its metric and the cascade's usage, for our paper-profile networks and the authors' (`WF.usage_grid`):
+# the metric (`rate`: the change rate Fig. S10 and the release's test compare; `err_N`: the N-step error of the
+# cascade; `both`: the paper profile's rule), the cascade's decay `d4_beta` (Sec. 4 states none; 0 is the paper
+# profile's, 0.02 the spiral's of Sec. 3.3, 0.1 the quadrotor's) and its first estimate (each layer starts at its
+# input; the learned feedback as it is, or centred so that h(0) = 0 there).
 
 # %%
-METRIC = W.Axis("metric", sec4.D4_METRICS, "what 'better generalization' compares: Fig. S10 and the release's test "
-                "show the change rate; the N-step cascade is not run for Sec. 4", ours="both", kind="reading")
-DECAY = W.Axis("beta", tuple(float(b) for b in d4_beta), "the cascade's decay for the neural feedback (Sec. 4 states "
-               "none)", ours=0.0, kind="usage")
-FIRST = W.Axis("first estimate", ("h as learned", "h centred"), "each layer's first estimate at its input, where a "
-               "learned h(0) need not be zero", ours="h as learned", kind="usage")
-
-
-def d4_at_usage(f, h, E, setup_, beta):
-    """D4's counted reading in every metric at one decay, with the feedback ``h``; and the S8 levels won (both)."""
-    s8, held = (field_errors(f, h, x, ft, setup_, E, beta=beta)
-                for x, ft in ((setup_.x_s8, setup_.f_s8), (setup_.x_held, setup_.f_held)))
-    return [counted(d4_result(s8, held, setup_, m), "D4") == "reproduced" for m in METRIC.values], levels_won(s8)
-
-
-# %%
-def usage_grid(f, h, E, setup_, unit, networks, title):
-    """D4's counted reading at every metric x decay x first estimate."""
-    holds = np.zeros((len(METRIC.values), len(DECAY.values), len(FIRST.values)), bool)
-    won = np.zeros((len(DECAY.values), len(FIRST.values), E))
-    for k, first in enumerate(FIRST.values):
-        for j, b in enumerate(DECAY.values):
-            holds[:, j, k], won[j, k] = d4_at_usage(f, h if first == "h as learned" else CentredFeedback(h), E,
-                                                    setup_, b)
-    return W.WhyGrid((METRIC, DECAY, FIRST), holds, E, RULES["D4"], numbers={"S8_levels_won_both": won},
-                     title=title, unit=unit, networks=networks)
-
-
-# %%
-usage = {"ours": usage_grid(f_ours, h_ours, len(seeds), setup, UNIT, "ours", "metric x usage")}
+usage = {"ours": WF.usage_grid(f_ours, h_ours, len(seeds), setup, th, betas=d4_beta, unit=WF.UNIT, networks="ours",
+                               title="metric x usage")}
 if nets is not None:
-    usage["authors"] = usage_grid(nets[0], nets[1], 1, evaluation_setup(globals(), release.release_spiral), "network",
-                                  "authors", "authors' networks: metric x usage")
+    usage["authors"] = WF.usage_grid(nets[0], nets[1], 1, setup_theirs, th, betas=d4_beta, unit="network",
+                                     networks="authors", title="authors' networks: metric x usage")
     authors_grids["D4"].append(usage["authors"])
 for k, g in usage.items():
     print(k, W.summary([g]))
@@ -450,23 +239,19 @@ for k, g in usage.items():
 # (`sec4.settling_index`) dashed.
 
 # %%
-def curves_of(f, h, E, setup_):
-    c = rate_error_curves(f, h, setup_, E)
-    return c, sec4.settling_index(c["neural_feedback"]) * setup_.Ts
-
-
-runs = {"ours": curves_of(f_ours, h_ours, len(seeds), setup)}
+runs = {"ours": rate_error_curves(f_ours, h_ours, setup, len(seeds))}
 if nets is not None:
-    runs["authors'"] = curves_of(nets[0], nets[1], 1, evaluation_setup(globals(), release.release_spiral))
-print({who: np.round(ts, 2).tolist() for who, (c, ts) in runs.items()}, "settling times (s)")
+    runs["authors'"] = rate_error_curves(nets[0], nets[1], setup_theirs, 1)
+settle = {who: sec4.settling_index(c["neural_feedback"]) * setup.Ts for who, c in runs.items()}
+print({who: np.round(ts, 2).tolist() for who, ts in settle.items()}, "settling times (s)")
 
 # %%
 fig, ax = F.new_figure()
 t_nom = np.arange(setup.x_nom.shape[0]) * setup.Ts
-for (who, (c, ts)), ls in zip(runs.items(), ("-", ":")):
+for (who, c), ls in zip(runs.items(), ("-", ":")):
     ax.plot(t_nom, c["neural_ode"].mean(0), ls, color=F.plotting.COLORS["neural_ode"], label=f"{who}: neural ODE")
     ax.plot(t_nom, c["neural_feedback"].mean(0), ls, color=F.plotting.COLORS["feedback"], label=f"{who}: + feedback")
-    ax.axvline(float(np.median(ts)), ls="--", color="k", lw=0.6)
+    ax.axvline(float(np.median(settle[who])), ls="--", color="k", lw=0.6)
 ax.set(xlabel="t (s)", ylabel="||f_hat - f|| / RMS ||f||", yscale="log", title="D2: per-time change-rate error")
 ax.legend(fontsize=7)
 curve_fig = F.save_figure(fig, out, "why_d2_per_time")
@@ -492,11 +277,9 @@ def plot_points(ax, cid, key):
     return labels
 
 
-# %% [markdown]
-# A claim's figure: its points, the authors' star and the rule's threshold.
-
 # %%
-def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
+def plot_why(cid, key, threshold, ylabel, theirs=None, log=False):
+    """A claim's figure: its points, the authors' star and the rule's threshold."""
     fig, ax = F.new_figure()
     labels = plot_points(ax, cid, key)
     if theirs is not None:
@@ -511,12 +294,12 @@ def why_figure(cid, key, threshold, ylabel, theirs=None, log=False):
 # %%
 a_num = None if authors is None else authors[1]
 figs = {
-    "D2": why_figure("D2", "D2", d2_factor, "rel. RMSE: feedback / alone",
-                     None if a_num is None else float(a_num["rel_rmse_neural_feedback"][0]
-                                                      / a_num["rel_rmse_nominal_neural_ode"][0]), log=True),
-    "D3": why_figure("D3", "D3_ratio", d3_ratio, "loss: last / first 10 %"),
-    "D4": why_figure("D4", "D4", len(setup.offsets) - 0.5, f"S8 levels won of {len(setup.offsets)}",
-                     None if a_num is None else float(levels_won(a_num["s8"])[0])),
+    "D2": plot_why("D2", "D2", d2_factor, "rel. RMSE: feedback / alone",
+                   None if a_num is None else float(a_num["rel_rmse_neural_feedback"][0]
+                                                    / a_num["rel_rmse_nominal_neural_ode"][0]), log=True),
+    "D3": plot_why("D3", "D3_ratio", d3_ratio, "loss: last / first 10 %"),
+    "D4": plot_why("D4", "D4", len(setup.offsets) - 0.5, f"S8 levels won of {len(setup.offsets)}",
+                   None if a_num is None else float(WF.levels_won(a_num["s8"])[0])),
 }
 
 # %% [markdown]
@@ -553,7 +336,7 @@ for cid in ("D1", "D2", "D3", "D4"):
         continue
     c = paper.claim(cid)
     extra = ([usage["ours"]] if cid == "D4" else []) + authors_grids.get(cid, [])
-    whys.append(W.Why(cid, counted(c, cid), grids=tuple(grids.get(cid, ())) + tuple(extra),
+    whys.append(W.Why(cid, WF.counted(c, cid), grids=tuple(grids.get(cid, ())) + tuple(extra),
                       authors=None if authors is None else authors[0].get(cid),
                       readings=c.reading_verdicts(), figure=curve_fig if cid == "D2" else figs.get(cid),
                       note=NOTES[cid]))

@@ -43,7 +43,6 @@ from fnnbook import why as W
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import bottle as rules
 from fnnlib.data import release
-from fnnlib.results import ClaimResult
 
 # %% tags=["hide-input"]
 out = Path(out_dir)
@@ -83,24 +82,14 @@ drag_per_throw = stored["per_throw_m"]["drag model"]  # the fitted drag model ha
 FEEDBACK_CHECKS = ("feedback<neural_ode per throw", "feedback<neural_ode over seeds")
 
 
-# %%
-def o1_errors(model, E: int, L: float, beta: float) -> torch.Tensor:
-    """Each network's O1 error per test throw, (E, throws): mean 0.5 s position error over every start.
-    ``L = 0`` is the open-loop neural ODE (the cascade without feedback equals the Euler rollout)."""
-    starts = F.stack_members(x_test, E)[:, :-N]  # the cascade is causal: these rows are those of the whole run
-    z = F.split_members(F.cascade_predict(model, starts, Ts, N, F.Gains(L, beta)), E)  # (E, throws, T - N, 6)
-    return F.error_norm(z[..., :3], x_test[:, N:, :3].expand_as(z[..., :3])).mean(-1)
-
-
-def judged(fb: torch.Tensor, nn: torch.Tensor) -> ClaimResult:
-    """O1's rule on (E, throws) errors of the feedback and the neural ODE, with the stored drag errors."""
-    return rules.o1_means(per_throw={"feedback": fb.mean(0), "neural_ode": nn.mean(0), "drag": drag_per_throw},
-                          per_seed={"feedback": fb.mean(1), "neural_ode": nn.mean(1)})
-
+# %% [markdown]
+# Each network's O1 error per test throw, (E, throws) (`F.cascade_position_errors`: the mean 0.5 s position error
+# over every start); $L = 0$ is the open-loop neural ODE (the cascade without feedback is the Euler rollout).
+# O1's rule reads them with the stored drag errors (`rules.o1_per_seed`).
 
 # %% tags=["hide-input"]
 t0 = time.perf_counter()
-nn_err = o1_errors(ens, E, 0.0, 0.0)  # (E, throws): the open loop, once
+nn_err = F.cascade_position_errors(ens, x_test, Ts, N, 0.0, 0.0)  # (E, throws): the open loop, once
 if not np.allclose(nn_err.mean(0), stored["per_throw_m"]["neural ODE"], rtol=1e-3):
     raise ValueError("the open-loop errors of the loaded networks are not those bottle measured")
 
@@ -114,8 +103,8 @@ for i, j in tqdm([(i, j) for i in range(len(L_grid)) for j in range(len(beta_gri
                                                           (("feedback", "feedback"), ("neural_ode", "neural ODE"))})
         gap_cm[i, j] = 100 * (np.mean(per_throw["feedback"]) - np.mean(per_throw["neural_ode"]))
     else:
-        fb = o1_errors(ens, E, L_grid[i], beta_grid[j])
-        r = judged(fb, nn_err)
+        fb = F.cascade_position_errors(ens, x_test, Ts, N, L_grid[i], beta_grid[j])
+        r = rules.o1_per_seed(feedback=fb, neural_ode=nn_err, drag=drag_per_throw)
         gap_cm[i, j] = float(100 * (fb - nn_err).mean())
     results[i, j] = r
 grid_seconds = time.perf_counter() - t0
@@ -173,8 +162,8 @@ except release.ReleaseError as exc:
 if theirs is not None:
     t0, A = time.perf_counter(), len(theirs)
     ens_a = F.NeuralODEEnsemble.from_members(theirs, list(range(A)))
-    fb_a, nn_a = o1_errors(ens_a, A, L_ours, beta_ours), o1_errors(ens_a, A, 0.0, 0.0)
-    authors_result = judged(fb_a, nn_a)
+    fb_a, nn_a = (F.cascade_position_errors(ens_a, x_test, Ts, N, L, b) for L, b in ((L_ours, beta_ours), (0.0, 0.0)))
+    authors_result = rules.o1_per_seed(feedback=fb_a, neural_ode=nn_a, drag=drag_per_throw)
     authors = W.AuthorsCheck(verdict=authors_result.verdict, ours=o1_up.verdict, checks=authors_result.checks,
                              networks=", ".join(release.BOTTLE_ODE_NAMES), n=A)
     print(f"authors' networks ({time.perf_counter() - t0:.0f} s): {authors_result.verdict} "
@@ -200,8 +189,6 @@ ax.set(xticks=range(len(beta_grid)), xticklabels=[f"{b:g}" for b in beta_grid], 
        yticklabels=[f"{v:g}" for v in L_grid], xlabel="beta", ylabel="L",
        title=f"feedback − neural ODE [cm], {E} seeds")
 fig.colorbar(im, ax=ax)
-
-# %% tags=["hide-input"]
 ax = axes[0, 1]
 ours_fb = np.asarray(stored["per_seed_m"]["feedback"])
 ax.plot(range(E), nn_err.mean(1), "o", color=F.plotting.COLORS["neural_ode"], label="our neural ODEs")
@@ -225,9 +212,8 @@ fig_why = F.save_figure(fig, out, "why_o1")
 # minutes for two seeds alone, beyond this page's budget (the losses after 20 iterations agreed to 1e-4).
 
 # %% tags=["nbval-check-output"]
-readings = ({o1_up.reading_name or "counted": o1_up.verdict} | {k: r.verdict for k, r in o1_up.readings.items()}
-            if o1_up.readings else {})
-why = W.Why(claim="O1", verdict=o1_up.verdict, grids=(gain_grid, full_grid), authors=authors, readings=readings,
+why = W.Why(claim="O1", verdict=o1_up.verdict, grids=(gain_grid, full_grid), authors=authors,
+            readings=o1_up.reading_verdicts(),
             figure=fig_why,
             note="the gains move only the feedback checks; the neural ODE vs drag checks are those of the "
                  "trained networks (ours at every grid point, the authors' in their check)")

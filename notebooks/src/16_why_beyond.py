@@ -32,6 +32,7 @@ settings = WhyBeyondSettings.from_namespace(globals())  # checked as `fnn-pipeli
 
 # %% tags=["hide-input"]
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -78,21 +79,16 @@ if len(hand) != len(b_nets):
     raise ValueError(f"tuned_gains swept {len(hand)} bottle networks, bottle saved {len(b_nets)}")
 HORIZON = {"one_step": 1, "multi_step": multi_step_N, "judged": bN}
 
+# %% [markdown]
+# At each objective, every network's $(L, \beta)$ is tuned as `tuned_gains` tunes them (`F.tune_gains`, Adam from
+# the paper's gains, on the tuning throws it drew with the network's seed) on the objective's horizon, and each
+# test throw's O1 error is read with the tuned gains (`F.cascade_position_errors`), averaged over the networks.
 
-# %%
-def tuned_on(seed: int, net, N_tune: int) -> F.TunedGains:
-    """The network's (L, beta) tuned as tuned_gains tunes them, on the N_tune-step error of the whole state."""
-    which = torch.randperm(x_train.shape[0], generator=F.make_generator(seed))[:ran_t["bottle_tune_throws"]]
-    recipe = F.TuneRecipe(L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
-                          lr=ran_t["bottle_tune_lr"])
-    return F.tune_gains(net, x_train[which], Ts, N_tune, recipe)
-
-
-def test_errors(net, L, beta: float) -> torch.Tensor:
-    """Each test throw's O1 error (mean 0.5 s position error over every start) with gains (L, beta)."""
-    z = F.cascade_predict(net, x_test[:, :-bN], Ts, bN, F.Gains(torch.as_tensor(L), beta))
-    return F.error_norm(z[..., :3], x_test[:, bN:, :3].expand_as(z[..., :3])).mean(-1)
-
+# %% tags=["hide-input"]
+tuning = {s: x_train[torch.randperm(x_train.shape[0], generator=F.make_generator(s))[:ran_t["bottle_tune_throws"]]]
+          for s in b_seeds}
+tune = partial(F.tune_gains, L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
+               lr=ran_t["bottle_tune_lr"])
 
 # %% tags=["hide-input"]
 t0 = time.perf_counter()
@@ -102,8 +98,9 @@ for obj in tqdm(objectives, desc="objectives"):
         tuned = stored["tuned"]
         tuned_at[obj] = b1_numbers["tuned"]["bottle"]
     else:
-        runs = [tuned_on(s, net, HORIZON[obj]) for s, net in zip(b_seeds, b_nets)]
-        tuned = torch.stack([test_errors(net, r.L, r.beta) for net, r in zip(b_nets, runs)]).mean(0).tolist()
+        runs = [tune(net, tuning[s], Ts, HORIZON[obj]) for s, net in zip(b_seeds, b_nets)]
+        tuned = torch.stack([F.cascade_position_errors(net, x_test, Ts, bN, torch.as_tensor(r.L), r.beta)
+                             for net, r in zip(b_nets, runs)]).mean(0).tolist()
         tuned_at[obj] = [{"seed": s, "L": r.L.tolist(), "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, runs)]
     b1_at[obj] = rules.b1({"bottle": {"tuned": tuned, "hand": stored["hand"], "open_loop": stored["open_loop"]}})
     b1_at[obj] = b1_at[obj].replace(numbers={"tuned": tuned})
@@ -147,14 +144,12 @@ left_out = [", ".join(no_spread[:k]) or "none" for k in range(len(no_spread) + 1
 print(f"{len(headlines)} judged claims from {len(results)} tasks; without a seed spread: {what}")
 
 
+# %% [markdown]
+# B2's rule at each `min_seeds` over every judged claim but the first $k$ without a seed spread.
+
 # %%
-def b2_at(min_seeds: int, k: int):
-    """B2's rule over every judged claim but the first ``k`` without a seed spread."""
-    kept = {cid: h for cid, h in headlines.items() if cid not in no_spread[:k]}
-    return rules.b2(kept, min_seeds=int(min_seeds))
-
-
-b2_res = [[b2_at(m, k) for k in range(len(left_out))] for m in min_seeds_grid]
+b2_res = [[rules.b2({cid: h for cid, h in headlines.items() if cid not in no_spread[:k]}, min_seeds=int(m))
+           for k in range(len(left_out))] for m in min_seeds_grid]
 axes = [W.Axis("min_seeds", [int(m) for m in min_seeds_grid], "how many seeds count as several (the paper "
                "shows single runs)", ours=rules.MIN_SEEDS)]
 if len(left_out) >= 2:  # some claim shows no spread: leave them out one by one
@@ -212,12 +207,7 @@ fig_b2 = F.save_figure(fig, out, "why_b2")
 # the test, beyond this page's budget, which the bottle's objective grid already fills.
 
 # %% tags=["nbval-check-output"]
-def readings_of(c) -> dict[str, str]:
-    return ({c.reading_name or "counted": c.verdict} | {k: r.verdict for k, r in c.readings.items()}
-            if c.readings else {})
-
-
-whys = [W.Why(claim="B1", verdict=b1_up.verdict, grids=(objective_grid,), readings=readings_of(b1_up),
+whys = [W.Why(claim="B1", verdict=b1_up.verdict, grids=(objective_grid,), readings=b1_up.reading_verdicts(),
               figure=fig_b1, note="the bottle setting only; the quadrotor's failing check is not probed here"),
         W.Why(claim="B2", verdict=b2_profile.verdict, grids=(b2_grid,), figure=fig_b2,
               note="claims whose headline is one number: " + "; ".join(f"{k} ({v})" for k, v in what.items()))]

@@ -30,6 +30,7 @@ settings = WhyQuadrotorPointSettings.from_namespace(globals())  # checked as `fn
 # %% tags=["hide-input"]
 import json
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ import numpy as np
 import fnnlib as F
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
-from fnnbook.quadrotor_eval import at_gains, flight_numbers
+from fnnbook.quadrotor_eval import at_gains, fly_record
 from fnnlib.data import release
 from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
@@ -86,41 +87,14 @@ print(f"u_max = {u_max:g} N; the test vehicle needs {need['hover']:.2f} N per mo
 # ## The flights
 # The five models without an adaptive gain fly once per unit and cost; AdapNN once per value of
 # `Gamma_adapnn_grid`, AdapFNN once per value of `Gamma_grid` (the other models do not depend on them).
-# First AdapFNN's flights per $\Gamma$, with the share of each flight's steps inside Theorem 2's bound.
-
-# %% tags=["hide-input"]
-def fly_adapfnn(nets, nn_mlps, pu, cost):
-    """AdapFNN flown over the units once per Gamma of `Gamma_grid`, with the share of its steps inside Theorem 2's
-    bound (after the transient)."""
-    transient = int(round(ran["transient_s"] / ran["Ts"]))
-    rec = {}
-    for G in Gamma_grid:
-        runs = M.paired_units(nets, nn_mlps, **pu, model_settings={**kw, "Gamma": G}, adapnn_gamma=chosen[cost],
-                              only=["AdapFNN"])["AdapFNN"]
-        rec[str(G)] = flight_numbers(runs) | {
-            "theorem2_inside": [M.theorem2_check(r, ran["L"], transient)["inside_fraction"] for r in runs]}
-    return rec
-
-
-# %% [markdown]
-# One set of networks under one cost: the models in `names` once per unit, AdapNN once per gain of its grid,
-# then AdapFNN per $\Gamma$ (above).
-
-# %% tags=["hide-input"]
-def fly_set(nets, nn_mlps, mpc, cost, names):
-    """``names`` flown over the units; AdapNN per gain of its grid, AdapFNN per Gamma (with Theorem 2's check)."""
-    pu = dict(tests=setup.unit_tests, mpc=mpc)
-    base = M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=chosen[cost], only=names)
-    rec = {n: flight_numbers(r) for n, r in base.items()}
-    rec["AdapNN"] = {str(g): flight_numbers(M.paired_units(nets, nn_mlps, **pu, model_settings=kw, adapnn_gamma=g,
-                                                           only=["AdapNN"])["AdapNN"]) for g in Gamma_adapnn_grid}
-    rec["AdapFNN"] = fly_adapfnn(nets, nn_mlps, pu, cost)
-    return rec
-
+# AdapFNN's flights keep the share of each flight's steps inside Theorem 2's bound (`fly_record`).
 
 # %% tags=["hide-input"]
 mpcs = {c: M.mpc_from_settings(ran, cost=c, u_max=u_max) for c in costs}
-ours = {c: fly_set(members, mlps, mpcs[c], c, ["Nomi", "Neural", "MLP", "FB", "FNN"]) for c in costs}
+fly = partial(fly_record, tests=setup.unit_tests, model_settings=kw, adapnn_grid=Gamma_adapnn_grid,
+              Gamma_grid=Gamma_grid, transient=int(round(ran["transient_s"] / ran["Ts"])))  # one set, one cost
+ours = {c: fly(members, mlps, mpc=mpcs[c], adapnn_gamma=chosen[c], names=["Nomi", "Neural", "MLP", "FB", "FNN"])
+        for c in costs}
 units = [f"network {s}, MLP {m}, disturbance {k + 1}" for k, ((s, _), (m, _)) in enumerate(zip(members, mlps))]
 if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to the last digit of the record
     for c in costs:
@@ -137,21 +111,14 @@ if u_max == ran["u_max_judged"]:  # the profile's point: its flights again, to t
 # two MLPs). Nomi and FB carry no network: their flights are ours above, flight for flight.
 
 # %% tags=["hide-input"]
-def authors_networks():
-    """The release's first S residual runs and MLP k mod 2 for unit k; None (a line says why) where not flown."""
-    if not release.release_present(data_dir, "quadrotor/"):  # every file there, its SHA-256 the published one
-        print(f"authors' networks: not evaluated, ours judged only (the release's quadrotor networks are not all "
-              f"in data_dir = {data_dir!r} with their published SHA-256)")
-        return None
-    if u_max not in authors_u_max:
-        print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")
-        return None
-    S = len(setup.unit_tests)  # the release's first S runs (all five for the paper profile's five units)
-    if S > len(release.RESIDUAL_RUNS):
-        raise ValueError(f"{S} units, the release has {len(release.RESIDUAL_RUNS)} residual runs")
-    theirs = [(r, release.load_release_residual(data_dir, r).double()) for r in release.RESIDUAL_RUNS[:S]]
-    mlp_run = [release.MLP_RUNS[k % len(release.MLP_RUNS)] for k in range(S)]
-    return theirs, [(r, release.load_release_mlp(data_dir, r).double()) for r in mlp_run]
+their = None
+if not release.release_present(data_dir, "quadrotor/"):  # every file there, its SHA-256 the published one
+    print(f"authors' networks: not evaluated, ours judged only (the release's quadrotor networks are not all "
+          f"in data_dir = {data_dir!r} with their published SHA-256)")
+elif u_max not in authors_u_max:
+    print(f"authors' networks: not flown at {u_max:g} N (authors_u_max = {authors_u_max})")
+else:  # the release's first S runs (all five for the paper profile's five units), MLP k mod 2 for unit k
+    their = release.load_release_quadrotor_networks(data_dir, len(setup.unit_tests))
 
 
 # %% [markdown]
@@ -160,11 +127,12 @@ def authors_networks():
 
 # %% tags=["hide-input"]
 authors = None
-if (their := authors_networks()) is not None:
+if their is not None:
     theirs, their_mlps = their
     compile_s += M.warm_up(*[n for _, n in theirs + their_mlps]) if ran["backend"] == "numba" else 0.0
-    authors = {c: {"Nomi": ours[c]["Nomi"], "FB": ours[c]["FB"]} | fly_set(theirs, their_mlps, mpcs[c], c,
-                                                                          ["Neural", "MLP", "FNN"]) for c in costs}
+    authors = {c: {"Nomi": ours[c]["Nomi"], "FB": ours[c]["FB"]}
+               | fly(theirs, their_mlps, mpc=mpcs[c], adapnn_gamma=chosen[c], names=["Neural", "MLP", "FNN"])
+               for c in costs}
     authors["units"] = [f"release run {r}, MLP {m}, disturbance {k + 1}"
                         for k, ((r, _), (m, _)) in enumerate(zip(theirs, their_mlps))]
     print(f"authors' networks flown: {len(theirs)} residual runs, MLPs {sorted(set(m for m, _ in their_mlps))}")

@@ -242,15 +242,9 @@ ax.legend(loc="lower right", fontsize=7)
 figure = F.save_figure(fig, out, "tanks_predictions")
 
 # %% tags=["hide-input"]
-episodes = first["overflow"]["episodes"]
-names = list(first["overflow"]["errors"])
-def mean_err(name, i, when):  # noqa: E301
-    v = [r["overflow"]["errors"][name][i][when] for r in runs.values()]
-    return "-" if None in v else f"{np.mean(v):.3f}"
-rows = ["| episode (samples) | " + " | ".join(f"{n}: during / after" for n in names) + " |", "|" + "---|" * (1 + len(names))]
-rows += [f"| {a}-{b - 1} | " + " | ".join(f"{mean_err(n, i, 'during')} / {mean_err(n, i, 'after')}" for n in names) + " |"
-         for i, (a, b) in enumerate(episodes)]
-display(Markdown("\n".join(rows) if episodes else "No overflow episode in this validation record."))
+episodes = first["overflow"]["episodes"]  # each model's error during and after each, the mean over the seeds
+display(Markdown(TE.overflow_table([r["overflow"]["errors"] for r in runs.values()], episodes) if episodes
+                 else "No overflow episode in this validation record."))
 
 # %% [markdown]
 # ## Why a claim does not hold, where it does not

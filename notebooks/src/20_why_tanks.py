@@ -76,27 +76,18 @@ for col in ("open_loop", "tuned", "hand"):
 print(f"{len(errs)} window x first-estimate points and {len(grid)} gains in {time.perf_counter() - t_start:.0f} s")
 
 
-# %%
-def b4_at(e: dict, feedback: str = "tuned"):
-    return rules.b4({N: {"feedback": e[feedback][N], "open_loop": e["open_loop"][N]} for N in Ns})
-
-
-def b6_at(e: dict):
-    return rules.b6({N: {"tuned": e["tuned"][N], "hand": e["hand"][N]} for N in Ns})
-
-
-def holds(verdicts) -> np.ndarray:
-    return np.array([[v == "reproduced" for v in row] for row in verdicts])
-
+# %% [markdown]
+# B4 with the cascade at each fixed $(L, \beta)$ in place of the tuned gains (`rules.b4_at`); a point holds where
+# the rule reads *reproduced* (`W.reproduced`).
 
 # %% tags=["hide-input"]
 E = len(trained["seeds"])
 UNIT = "seed (one ensemble)"  # the chapter's seeds train side by side as one stacked ensemble: not independent
-gain_res = [[b4_at(own, f"L={L:g}, beta={b:g}") for b in beta_grid] for L in L_grid]
+gain_res = [[rules.b4_at(own, Ns, f"L={L:g}, beta={b:g}") for b in beta_grid] for L in L_grid]
 gain_grid = W.WhyGrid(
     axes=(W.Axis("L", L_grid, "the base gain L of the cascade for this plant is not given"),
           W.Axis("beta", beta_grid, "the decay rate beta of Eq. (11) for this plant is not given")),
-    holds=holds([[r.verdict for r in row] for row in gain_res]), n=E, title="B4: fixed gains L x beta",
+    holds=W.reproduced(gain_res), n=E, title="B4: fixed gains L x beta",
     unit=UNIT,
     rule="the claim holds at a grid point when B4's rule holds there with the cascade at that fixed (L, beta) in "
          "place of the tuned gains: it wins over the open loop at every horizon N > 1, paired over the seeds",
@@ -108,8 +99,9 @@ axes = (W.Axis("window", windows, "which samples an N-step error is scored on (t
                "smooth model has seen)", ours="all", kind="reading"),
         W.Axis("first_estimate", first_estimates, "the observer's first estimate of the unmeasured upper tank",
                ours="first_level", kind="usage"))
-res = {c: [[f(errs[w, fe]) for fe in first_estimates] for w in windows] for c, f in (("B4", b4_at), ("B6", b6_at))}
-wf = {c: W.WhyGrid(axes=axes, holds=holds([[r.verdict for r in row] for row in res[c]]), n=E,
+res = {c: [[f(errs[w, fe], Ns) for fe in first_estimates] for w in windows]
+       for c, f in (("B4", rules.b4_at), ("B6", rules.b6_at))}
+wf = {c: W.WhyGrid(axes=axes, holds=W.reproduced(res[c]), n=E,
                    title=f"{c}: window x first estimate", unit=UNIT,
                    rule=f"the claim holds at a grid point when {c}'s rule holds there (every horizon N > 1 wins, "
                         "paired over the seeds)",
@@ -140,7 +132,7 @@ b5_grid = W.WhyGrid(
     axes=(W.Axis("start", b5_starts, "how the model trained without feedback gets a segment's initial state"),
           W.Axis("segment", [int(H) for H in b5_horizons], "the segment length of the training without feedback",
                  ours=int(ran["baseline_horizon"]))),
-    holds=holds([[r.verdict for r in row] for row in b5_res]), n=E, title="B5: baseline start x segment", unit=UNIT,
+    holds=W.reproduced(b5_res), n=E, title="B5: baseline start x segment", unit=UNIT,
     rule="the claim holds at a grid point when B5's rule holds there: the observer-trained free-run RMSE wins "
          "over the baseline's, paired over the seeds",
     numbers={"no_feedback_free_run_V": [[b5_free[a, H] for H in b5_horizons] for a in b5_starts],

@@ -488,3 +488,26 @@ def test_real_feedback_loss_curves_end_where_their_networks_were_saved() -> None
         ite = name.rsplit("/", 1)[-1].split("_")[1].removesuffix(".txt")
         assert len(curve) == int(ite.removeprefix("ite")) and curve[-1] < 0.5 < curve[0]
         assert abs(curve[-1] - saved[ite]) < 1e-5
+
+
+def test_without_the_release_the_grouped_loaders_give_nothing(tmp_path) -> None:
+    """The authors' spiral networks load only as a set; the loss curves only where present; a unit beyond the
+    release's residual runs is refused."""
+    assert release.load_release_spiral_networks(tmp_path, "Neural_ODE_ite400_loss0.2.pt", SPIRAL_FB,
+                                                "Neural_ODE_domran.pt") is None
+    assert release.load_present_feedback_losses(tmp_path) == {}
+    with pytest.raises(ValueError, match="residual runs"):
+        release.load_release_quadrotor_networks(tmp_path, len(release.RESIDUAL_RUNS) + 1)
+
+
+@real
+def test_real_grouped_loaders_pair_the_units_and_load_the_spiral_set() -> None:
+    f, h, f_dr = release.load_release_spiral_networks(DATA, "Neural_ODE_ite400_loss0.2.pt", SPIRAL_FB,
+                                                      "Neural_ODE_domran.pt")
+    assert type(f).__name__ == type(f_dr).__name__ == "NeuralODE" and type(h).__name__ == "NeuralFeedback"
+    theirs, mlps = release.load_release_quadrotor_networks(DATA, 5)
+    assert [r for r, _ in theirs] == list(release.RESIDUAL_RUNS[:5])
+    assert [r for r, _ in mlps] == [release.MLP_RUNS[k % len(release.MLP_RUNS)] for k in range(5)]
+    assert all(p.dtype == torch.float64 for _, n in theirs + mlps for p in n.parameters())
+    curves = release.load_present_feedback_losses(DATA)
+    assert list(curves) == list(release.present_loss_names(DATA)) and all(c.ndim == 1 for c in curves.values())

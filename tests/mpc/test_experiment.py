@@ -268,3 +268,25 @@ def test_fnn_flown_again_from_the_settings_is_the_paired_units_flight():
     other = flight_tests_from_settings(_settings(truth_mass=0.9, disturbance_draws=2)).unit_tests[0]
     moved = fly(fnn_model(nets[0][1], 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, other)
     assert not np.array_equal(moved.x, grid.unit(0)["FNN"].x)
+
+
+def test_flown_and_hand_gain_sweeps_keep_the_grid_pair_of_least_error():
+    """The flown sweep scores each (L, beta) by the mean tracking RMSE of FNN's flights; the hand sweep by the
+    N-step position error of the cascade along recorded flights, which the flights of a unit provide."""
+    from fnnlib.mpc.experiment import flown_gain_sweep, hand_gains_on_flights
+    from fnnlib.mpc.flight import tracking_rmse
+    from fnnlib.mpc.models import PredictionModel
+
+    nets, _, tests, mpc, kw = _tiny_units()
+    net = nets[0][1]
+    sweep = flown_gain_sweep(net, tests, mpc, L_grid=[1.0, 3.0], beta_grid=[0.1], plant=kw["plant"], N=3, Ts=0.02)
+    want = [[float(np.mean([tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in
+                            (fly(fnn_model(net, L, 0.1, plant=kw["plant"], N=3, Ts=0.02), mpc, t) for t in tests)]))]
+             for L in (1.0, 3.0)]
+    assert sweep.table == want and sweep.cost == min(w[0] for w in want)
+    flown = fly(fnn_model(net, 3.0, 0.1, plant=kw["plant"], N=3, Ts=0.02), mpc, tests[0])
+    x = torch.as_tensor(flown.x[None, :-1], dtype=torch.float64)  # (1, T, 12), the thrusts (1, T, 4)
+    u = torch.as_tensor(flown.u[None], dtype=torch.float64)
+    neural = PredictionModel("Neural", kw["plant"], net, Ts=0.02)
+    hand = hand_gains_on_flights(neural, x, u, 0.02, 1, [1.0, 3.0], [0.0, 0.1])
+    assert np.isfinite(hand.table).all() and hand.cost == min(min(r) for r in hand.table)

@@ -8,6 +8,7 @@ verdicts), so a changed marked output fails too.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -49,10 +50,17 @@ def checked_cells(notebook: Path) -> int:
 
 
 def run_nbval(notebook: Path, timeout_s: int = 900) -> subprocess.CompletedProcess[str]:
-    """``pytest --nbval-lax notebook`` in the current environment; the result with its output."""
+    """``pytest --nbval-lax notebook`` in the current environment; the result with its output.
+
+    The rerun computes on one thread (``OMP_NUM_THREADS=1``, which torch reads as it starts), as the pipeline's
+    kernels do in the run it is compared with: by default torch would take every core, and beside the other
+    xdist worker the two would fight over them (a why notebook's rerun: 16 s instead of 7 s here).
+    """
     cmd = [sys.executable, "-m", "pytest", "--nbval-lax", "--nbval-current-env", "--nbval-cell-timeout=600",
            f"--nbval-sanitize-with={SANITIZE}",
            # a bare pytest: without the xdist and hypothesis plugins it starts in ~0.5 s of CPU instead of ~1.5 s
            "-p", "no:cacheprovider", "-p", "no:xdist", "-p", "no:hypothesispytest", "-o", "addopts=", "-q",
            "--rootdir", str(notebook.parent), str(notebook)]
-    return subprocess.run(cmd, cwd=notebook.parent, capture_output=True, text=True, timeout=timeout_s, check=False)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    return subprocess.run(cmd, cwd=notebook.parent, capture_output=True, text=True, timeout=timeout_s, check=False,
+                          env=env)

@@ -46,13 +46,14 @@ def _printed(source: str, text: str, tags: list[str]) -> nbformat.NotebookNode:
 def test_nbval_fails_on_a_raising_cell_and_on_a_changed_marked_output(tmp_path: Path) -> None:
     cells = [_printed("print('S1: reproduced')", "S1: reproduced\n", [CHECKED]),  # same output: passes
              _printed("import time; print(time.time())", "0\n", []),  # unmarked: may differ
+             _printed("import torch; print(torch.get_num_threads())", "1\n", [CHECKED]),  # one thread, as the run
              _printed("print('S1: partly')", "S1: reproduced\n", [CHECKED]),  # a marked output that changed
              nbformat.v4.new_code_cell("raise RuntimeError('a broken cell')")]
     notebook = for_rerun(_notebook(tmp_path / "src.ipynb", cells), tmp_path / "run")
     done = run_nbval(notebook, timeout_s=300)
     assert done.returncode == 1, done.stdout[-3000:]
-    assert "2 failed, 3 passed" in done.stdout, done.stdout[-3000:]  # the injected cell and the first two pass
+    assert "2 failed, 4 passed" in done.stdout, done.stdout[-3000:]  # the injected cell and the first three pass
     failed = [line.split(" - ")[0] for line in done.stdout.splitlines() if line.startswith("FAILED")]
-    assert failed == ["FAILED src.ipynb::Cell 3", "FAILED src.ipynb::Cell 4"], failed  # changed, raised
+    assert failed == ["FAILED src.ipynb::Cell 4", "FAILED src.ipynb::Cell 5"], failed  # changed, raised
     assert "S1: partly" in done.stdout  # nbval shows the new output against the stored one
     assert "a broken cell" in done.stdout

@@ -78,3 +78,13 @@ def test_o1_means_refuses_bad_marginals() -> None:
     with pytest.raises(ValueError, match="drag"):
         bottle.o1_means(per_throw={"feedback": DRAG, "neural_ode": DRAG}, per_seed={"feedback": [0.1],
                                                                                    "neural_ode": [0.1]})
+
+
+def test_o1_per_seed_is_o1_on_the_seed_rows() -> None:
+    rng = np.random.default_rng(0)
+    fb, nn = 0.1 + 0.01 * rng.random((3, 9)), 0.2 + 0.01 * rng.random((3, 9))  # (seeds, throws)
+    drag = 0.3 + 0.01 * rng.random(9)
+    a = bottle.o1_per_seed(feedback=fb, neural_ode=nn, drag=drag)
+    b = bottle.o1(feedback=fb.T, neural_ode=nn.T, drag=drag)
+    assert a.checks == b.checks and a.verdict == b.verdict == "reproduced"
+    assert not bottle.o1_per_seed(feedback=nn, neural_ode=fb, drag=drag).checks["feedback<neural_ode per throw"]

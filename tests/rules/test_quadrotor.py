@@ -183,3 +183,16 @@ def test_rules_at_a_setting_are_the_claims_own_rules_and_join_like_the_notebook(
     assert joined_verdict([r["Q5"], None]) == ("not reproduced", {})
     with pytest.raises(ValueError):
         joined_verdict([])
+
+
+def test_join_costs_keeps_every_variants_checks_and_its_numbers_by_variant() -> None:
+    from fnnbook.rules.quadrotor import join_costs
+    from fnnlib.results import ClaimResult
+
+    a = ClaimResult("Q3", checks={"as_written: FNN beats Nomi": True}, numbers={"mean": 1.0}, rule="r")
+    b = ClaimResult("Q3", checks={"as_flown: FNN beats Nomi": False}, numbers={"mean": 2.0}, rule="r",
+                    better={"as_flown: FNN beats Nomi": True})
+    j = join_costs({"as_written": a, "as_flown": b}, numbers={"context": 3}, title="t")
+    assert j.checks == {"as_written: FNN beats Nomi": True, "as_flown: FNN beats Nomi": False}
+    assert j.numbers == {"as_written": {"mean": 1.0}, "as_flown": {"mean": 2.0}, "context": 3}
+    assert j.better == {"as_flown: FNN beats Nomi": True} and j.title == "t" and j.verdict != "reproduced"

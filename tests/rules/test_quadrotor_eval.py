@@ -37,3 +37,37 @@ def test_the_adaptive_models_are_read_at_their_own_gain_the_others_as_flown() ->
     assert at_gains(record, "AdapFNN", 0.16, 2.0) == {"rmse": [4.0]}
     with pytest.raises(KeyError, match="AdapFNN was not flown at the gain 32"):
         at_gains(record, "AdapFNN", 0.16, 32.0)
+
+
+def test_a_record_flies_each_model_once_per_unit_and_the_adaptive_ones_per_gain() -> None:
+    """Two tiny units: the named models once per unit, AdapNN per gain of its grid, AdapFNN per Gamma with Theorem
+    2's share; each entry the numbers of the flights paired_units flies at that gain."""
+    import torch
+
+    import fnnlib.mpc as M
+    from fnnbook.quadrotor_eval import fly_record
+    from fnnlib.models import AeroResidual
+    from fnnlib.mpc.backends import Backend
+    from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
+    from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+
+    torch.manual_seed(0)
+    nets = [(k, AeroResidual((4,), "tanh").double()) for k in range(2)]
+    mlps = [(k, AeroResidual((4,), "tanh").double()) for k in range(2)]
+    x_r, u_r = M.lissajous_reference(3, 3, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    tests = [M.FlightTest(Quadrotor(TEST_TRUTH.replace(force_disturbance=f)), x_r, u_r, steps=3, Ts=0.02, substeps=1,
+                          backend=Backend("torch", "forward")) for f in ((0.3, 0.3, 0.3), (0.1, 0.4, 0.2))]
+    mpc = M.make_mpc("osqp", 3, PAPER_MPC_WEIGHTS["Q"], PAPER_MPC_WEIGHTS["R"], cost="as_flown", u_max=6.0,
+                     theta_max=1.5, solver="OSQP")
+    kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=3, Gamma=0.16, Ts=0.02)
+    rec = fly_record(nets, mlps, tests=tests, mpc=mpc, model_settings=kw, adapnn_gamma=0.16, names=["FNN", "Nomi"],
+                     adapnn_grid=[0.16, 0.64], Gamma_grid=[2.0, 8.0], transient=1)
+    assert set(rec) == {"Nomi", "FNN", "AdapNN", "AdapFNN"}
+    assert list(rec["AdapNN"]) == ["0.16", "0.64"] and list(rec["AdapFNN"]) == ["2.0", "8.0"]
+    assert all(len(v["rmse"]) == 2 for v in (rec["FNN"], rec["AdapNN"]["0.64"], rec["AdapFNN"]["8.0"]))
+    assert all(0.0 <= s <= 1.0 for s in rec["AdapFNN"]["2.0"]["theorem2_inside"])
+    again = M.paired_units(nets, mlps, tests=tests, mpc=mpc, model_settings={**kw, "Gamma": 8.0}, adapnn_gamma=0.64,
+                           only=["AdapNN", "AdapFNN"])
+    assert rec["AdapNN"]["0.64"] == flight_numbers(again["AdapNN"])
+    assert {k: v for k, v in rec["AdapFNN"]["8.0"].items() if k != "theorem2_inside"} == flight_numbers(again["AdapFNN"])
+    assert rec["AdapFNN"]["2.0"]["rmse"] != rec["AdapFNN"]["8.0"]["rmse"]  # Gamma is used

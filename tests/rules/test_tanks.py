@@ -69,3 +69,22 @@ def test_b6_per_horizon() -> None:
 def test_bad_numbers_are_refused(call, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_the_rules_at_a_grid_point_read_the_named_columns() -> None:
+    """b4_at pits the named cascade column against the open loop, b6_at the tuned gains against the hand gains."""
+    from fnnbook.rules.tanks import b4_at, b6_at
+
+    point = {"tuned": {2: WIN, 5: WIN}, "hand": {2: LOSE, 5: LOSE}, "L=0.01, beta=0": {2: NOISY, 5: NOISY},
+             "open_loop": {2: LOSE, 5: LOSE}}
+    assert b4_at(point, [2, 5]).verdict == "reproduced"
+    assert b4_at(point, [2, 5], "L=0.01, beta=0").verdict == "not reproduced"
+    assert b6_at(point, [2, 5]).verdict == "reproduced"
+    assert b6_at(point | {"tuned": point["hand"], "hand": point["tuned"]}, [2]).verdict == "not reproduced"
+
+
+def test_reproduced_marks_the_points_whose_rule_reads_reproduced() -> None:
+    from fnnbook.why import reproduced
+
+    assert reproduced([[b4({2: {"feedback": WIN, "open_loop": LOSE}}), b4({2: {"feedback": LOSE, "open_loop": WIN}})]]
+                      ).tolist() == [[True, False]]

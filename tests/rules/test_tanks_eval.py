@@ -183,3 +183,13 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
                            Ts=rec.Ts, u=rec.u_est, seed=seed, progress=False)
         for a, b in zip(both.member(e).parameters(), one.parameters()):
             torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
+
+
+def test_the_overflow_table_averages_each_models_episode_errors_over_the_seeds() -> None:
+    from fnnbook.tanks_eval import overflow_table
+
+    seeds = [{"tuned": [{"during": 0.2, "after": 0.1}], "open_loop": [{"during": 0.4, "after": None}]},
+             {"tuned": [{"during": 0.4, "after": 0.3}], "open_loop": [{"during": 0.6, "after": 0.5}]}]
+    rows = overflow_table(seeds, [(10, 20)]).splitlines()
+    assert rows[0] == "| episode (samples) | tuned: during / after | open_loop: during / after |"
+    assert rows[2] == "| 10-19 | 0.300 / 0.200 | 0.500 / - |"  # a seed without an error after it: no mean
