@@ -408,7 +408,7 @@ def hand_gains_on_flights(model: PredictionModel, x: Tensor, u: Tensor, Ts: floa
     ``u`` (K, T, 4) as inputs) has the lowest mean N-step position error (m) along the flights ``x`` (K, T, 12)."""
     import torch  # noqa: PLC0415
 
-    from fnnlib.feedback import cascade_predict, sweep_gains  # noqa: PLC0415
+    from fnnlib.feedback import Gains, cascade_predict, sweep_gains  # noqa: PLC0415
     from fnnlib.sweeps import n_step_errors  # noqa: PLC0415
 
     def cost(L: float, beta: float) -> float:
