@@ -25,7 +25,9 @@ import time
 import warnings
 from pathlib import Path
 
-import fnnlib as F
+from fnnlib.data.tanks import tanks_records
+from fnnlib.feedback import GainWarning
+from fnnlib.threads import set_num_threads
 from fnnbook import tanks_eval as TE
 from fnnlib.data.tanks import TANKS_FILE
 
@@ -45,11 +47,11 @@ def main() -> None:
     ap.add_argument("--data-dir", default="data")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
-    F.set_num_threads(args.threads)
-    warnings.simplefilter("ignore", F.GainWarning)
+    set_num_threads(args.threads)
+    warnings.simplefilter("ignore", GainWarning)
     p = paper_parameters()
     real = (Path(args.data_dir) / "cascaded_tanks" / TANKS_FILE).is_file()
-    rec = F.tanks_records("real" if real else "synthetic", data_dir=args.data_dir, n_samples=p["synthetic_samples"],
+    rec = tanks_records("real" if real else "synthetic", data_dir=args.data_dir, n_samples=p["synthetic_samples"],
                           seed=p["seed"], noise_std=p["synthetic_noise"])
     t0 = time.perf_counter()
     runs, seconds, _ = TE.run_seeds(rec, p["seeds"], p)

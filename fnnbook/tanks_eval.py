@@ -19,6 +19,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from fnnlib.data.tanks import simulation_rmse
+
 __all__ = ["DIVERGED", "LEVEL", "capped", "judged_again", "load_trained", "one_member", "outside_overflow",
            "save_trained", "depths", "episode_errors", "free_run", "kalman_n_step", "n_step_output_rmse",
            "no_feedback", "overflow_episodes", "overflow_table", "run_seeds"]
@@ -280,7 +282,7 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
         out[e]["free_run"]["no_feedback"] = b["free_run"]
         out[e]["no_feedback"] = {k: v for k, v in b.items() if k not in ("model", "free_run", "series")}
         for N in out[e]["n_step"]:
-            out[e]["n_step"][N]["no_feedback_free_run"] = capped(F.simulation_rmse, b["series"][N:], rec.y_val[N:],
+            out[e]["n_step"][N]["no_feedback_free_run"] = capped(simulation_rmse, b["series"][N:], rec.y_val[N:],
                                                                  skip=skip)
         out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]]}
     trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L,
@@ -380,12 +382,12 @@ def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor,
                 burn=1 if start == "free" else skip, horizon=H), Ts=rec.Ts, u=rec.u_est, seed=seed,
                 progress=False).encoder
         est = _simulate(F, m, encoder, rec.y_est, rec.u_est, rec.Ts, skip, C, s)
-        tried[start] = (m, encoder, capped(F.simulation_rmse, est, rec.y_est, skip=skip))
+        tried[start] = (m, encoder, capped(simulation_rmse, est, rec.y_est, skip=skip))
     best = min(tried, key=lambda k: tried[k][2])
     m, encoder, _ = tried[best]
     val = _simulate(F, m, encoder, rec.y_val, rec.u_val, rec.Ts, skip, C, s)
     return {"model": m, "start": best, "estimation_free_run": {k: v[2] for k, v in tried.items()},
-            "free_run": capped(F.simulation_rmse, val, rec.y_val, skip=skip), "series": val}
+            "free_run": capped(simulation_rmse, val, rec.y_val, skip=skip), "series": val}
 
 
 def _simulate(F: Any, m: Any, encoder: Any, y: Tensor, u: Tensor, Ts: float, skip: int, C: Tensor,
@@ -435,7 +437,7 @@ def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: An
         free = {"observer_trained": free_obs[:, e]}
         L_h, b_h = grid[int(hand[e])]
         out.append({
-            "free_run": {"observer_trained": capped(F.simulation_rmse, free_obs[:, e], y_e, skip=skip)},
+            "free_run": {"observer_trained": capped(simulation_rmse, free_obs[:, e], y_e, skip=skip)},
             "n_step": table, "overflow": _overflow(rec, free, p, C1, s),
             "gains": {"tuned": {"L": tuned.L[2 * e:2 * e + 2], "beta": float(beta_t[2 * e])},
                       "hand": {"L": L_h, "beta": b_h},

@@ -42,7 +42,7 @@ def pytest_configure(config):
     """The tests compute with one torch thread, as the notebooks do (importing fnnlib does not set it), and
     hypothesis draws its examples from a fixed seed: the same command runs the same examples (a property test
     that fails fails every time, not one run in many)."""
-    fnnlib.set_num_threads(1)
+    fnnlib.threads.set_num_threads(1)
     settings.register_profile("fixed", derandomize=True)
     settings.load_profile("fixed")
 

@@ -1,6 +1,6 @@
 r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out.
 
-Each rule returns a :class:`~fnnlib.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
+Each rule returns a :class:`~fnnbook.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
 plausible run;
 ``guarantees`` hold by construction or by a theorem whose constants are measured on the same run, and never
 count. Comparisons over trained networks (and disturbances) are paired over independent units and decided by
@@ -19,7 +19,7 @@ import numpy as np
 from torch import Tensor
 
 from fnnlib.mpc.experiment import SIX
-from fnnlib.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
+from fnnbook.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 

@@ -17,7 +17,7 @@ import numpy as np
 from fnnbook import why as W
 from fnnbook.feedback_eval import CentredFeedback, EvaluationSetup, d4_result, field_errors, judge
 from fnnbook.rules import sec4
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 __all__ = ["AXES", "D3_READ", "FIRST", "METRIC", "READING_D3", "TITLES", "UNIT", "WINDOW", "WORDS", "Thresholds",
            "authors_checks", "counted", "curves_grid", "d2_settled", "d4_at_usage", "decay_axis", "levels_won", "measured",

@@ -16,7 +16,7 @@ import numpy as np
 from fnnbook.quadrotor_eval import at_gains
 from fnnbook.rules.quadrotor import SIX, joined_verdict, rules_at_setting
 from fnnbook.why import Axis
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 __all__ = ["CLAIMS", "failing_checks", "gain_axis", "holds_along_gains", "joined_at", "mean_rmse", "setting"]
 

@@ -25,7 +25,7 @@ from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
 from fnnlib.mpc.tuning import GainSelection, select_gain_on_validation
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor, QuadrotorParams
 
 __all__ = [
@@ -409,7 +409,7 @@ def hand_gains_on_flights(model: PredictionModel, x: Tensor, u: Tensor, Ts: floa
     import torch  # noqa: PLC0415
 
     from fnnlib.feedback import cascade_predict, sweep_gains  # noqa: PLC0415
-    from fnnlib.sweeps import n_step_errors  # noqa: PLC0415
+    from fnnlib.metrics import n_step_errors  # noqa: PLC0415
 
     def cost(L: float, beta: float) -> float:
         with torch.no_grad():

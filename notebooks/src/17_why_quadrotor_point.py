@@ -35,12 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.training import load_seed_checkpoints
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
 from fnnbook.quadrotor_eval import at_gains, fly_record
-from fnnlib.data import release
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
+from fnnlib import release
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 t_start = time.perf_counter()
@@ -55,7 +56,7 @@ out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
 ran = upstream_parameters(up["quadrotor_mpc"])  # the flight test's settings, as it flew them
-q_mpc = F.read_results(up["quadrotor_mpc"] / F.RESULTS_FILENAME).metrics
+q_mpc = read_results(up["quadrotor_mpc"] / RESULTS_FILENAME).metrics
 costs = list(ran["costs"])
 chosen = {c: q_mpc["adapnn_gamma"][c]["chosen"] for c in costs}  # AdapNN's gain chosen on validation there
 
@@ -67,7 +68,7 @@ chosen = {c: q_mpc["adapnn_gamma"][c]["chosen"] for c in costs}  # AdapNN's gain
 
 # %% tags=["hide-input", "nbval-check-output"]
 members, mlps = ([(seed, net.double()) for seed, net, _ in
-                  F.load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
+                  load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
                                           run=upstream_parameters(up["quadrotor_learning"]))]
                  for stem in ("residual", "mlp"))
 setup = M.flight_tests_from_settings(ran)

@@ -31,7 +31,8 @@ b5_starts = ["free", "encoder"]
 b5_horizons = [25, 100]
 
 # %%
-import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.data.tanks import tanks_records
 
 from fnnbook.tasks.why_tanks import WhyTanksSettings
 settings = WhyTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -51,8 +52,8 @@ from fnnbook.rules import tanks as rules
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = Path(upstream_dirs["cascaded_tanks"])
-result, ran = F.read_results(up / F.RESULTS_FILENAME), upstream_parameters(up)
-rec = F.tanks_records(ran["data"], data_dir=data_dir, n_samples=ran["synthetic_samples"], seed=ran["seed"],
+result, ran = read_results(up / RESULTS_FILENAME), upstream_parameters(up)
+rec = tanks_records(ran["data"], data_dir=data_dir, n_samples=ran["synthetic_samples"], seed=ran["seed"],
                       noise_std=ran["synthetic_noise"])  # the chapter's records, made as it made them
 trained = TE.load_trained(up / "tanks_models.pt", ran)
 Ns = [int(N) for N in ran["horizons"]]

@@ -19,7 +19,7 @@ from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
 from fnnlib.mpc.models import paper_models
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.tuning import randomized_vehicles
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
 
 
@@ -225,7 +225,7 @@ def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> N
 
 def _settings(**changes) -> dict:
     """quadrotor_mpc's flight settings with tiny sizes (the names of its parameters cell)."""
-    from fnnlib.quadrotor_presets import PAPER_MPC_WEIGHTS
+    from fnnlib.quadrotor.presets import PAPER_MPC_WEIGHTS
 
     s = {"steps": 3, "N": 3, "Ts": 0.02, "truth_mass": TEST_TRUTH.mass, "truth_inertia": list(TEST_TRUTH.inertia),
          "truth_drag": list(TEST_TRUTH.drag), "disturbance": list(TEST_TRUTH.force_disturbance), "disturbance_draws": 1,

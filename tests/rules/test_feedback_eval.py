@@ -7,6 +7,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.models import NeuralFeedbackEnsemble
 from fnnbook.feedback_eval import evaluation_setup, judge, nominal_errors
 from fnnbook.tasks import settings_class
 
@@ -18,7 +19,7 @@ SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_rang
 def networks(E: int):
     seeds = list(range(E))
     f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in seeds], seeds)
-    h = F.NeuralFeedbackEnsemble(2, [8], "relu", seeds)
+    h = NeuralFeedbackEnsemble(2, [8], "relu", seeds)
     return f, h
 
 
@@ -42,7 +43,7 @@ def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
 
 def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
     p = settings_class("neural_feedback").defaults() | SMALL
-    ours, theirs = evaluation_setup(p), evaluation_setup(p, F.data.release.release_spiral)
+    ours, theirs = evaluation_setup(p), evaluation_setup(p, F.release.release_spiral)
     assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
     with pytest.raises(ValueError, match="held-out"):
         evaluation_setup(p | {"heldout_min_distance": 100.0})

@@ -48,7 +48,7 @@ def test_a_record_flies_each_model_once_per_unit_and_the_adaptive_ones_per_gain(
     from fnnbook.quadrotor_eval import fly_record
     from fnnlib.models import AeroResidual
     from fnnlib.mpc.backends import Backend
-    from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
+    from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
     from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
     torch.manual_seed(0)

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.data.tanks import tanks_records
 from fnnbook.tanks_eval import episode_errors, free_run, n_step_output_rmse, overflow_episodes
 
 C = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
@@ -64,7 +65,7 @@ def test_overflow_episodes_and_their_errors() -> None:
 
 def _ensemble_setup(E: int):
     from fnnlib.models.scaled import ScaledField
-    rec = F.tanks_records("synthetic", n_samples=80, seed=0, noise_std=0.02)
+    rec = tanks_records("synthetic", n_samples=80, seed=0, noise_std=0.02)
     kw = dict(x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
     return rec, (lambda seeds: ScaledField(2, 1, [8], "tanh", seeds, **kw))
 
@@ -123,7 +124,7 @@ def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() 
     assert n_step_output_rmse(x_pred, y, 1, C) > 0
     keep[5] = False
     assert n_step_output_rmse(x_pred, y, 1, C, keep=keep) == 0.0
-    rec = F.tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
+    rec = tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
     s = {"overflow_gap": 3, "overflow_after": 7}
     eps = overflow_episodes(rec.saturated("val").numpy(), gap=3)
     out = outside_overflow(rec, s)
@@ -152,7 +153,7 @@ def test_the_baseline_start_is_chosen_on_the_estimation_record_only() -> None:
     import dataclasses
 
     from fnnbook.tanks_eval import LEVEL, no_feedback, one_member
-    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
     s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              n_init=5, baseline_horizon=10, baseline_starts=["free", "encoder"], train_iterations=3, train_lr=0.01,
              observer_gain=[0.02, 0.15])
@@ -170,7 +171,7 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
     up to its epsilon)."""
     from fnnbook.tanks_eval import LEVEL, _field, _free_starts
     from fnnlib.training.outputs import OutputRecipe, train_from_outputs
-    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
     s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              baseline_horizon=10, train_iterations=4, train_lr=0.01)
     both = _free_starts(rec, [0, 1], s, _field(s, [0, 1]), LEVEL)
