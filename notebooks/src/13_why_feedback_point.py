@@ -8,7 +8,7 @@
 # rollout refresh (`refresh_every`; Alg. 1 reruns the feedback over the cases at every iteration). The frozen
 # neural ODEs are the `spiral` task's (seeds `0 .. n_seeds-1`, as in the `neural_feedback` task); the neural
 # feedbacks are retrained from the same initialisations and mini-batch seeds, then judged by the rules of D2,
-# D3 and D4 (`fnnbook.rules.sec4`) on the `neural_feedback` task's evaluation (`fnnbook.feedback_eval`).
+# D3 and D4 (`fnnbook.rules.sec4`) on the `neural_feedback` task's evaluation (`fnnlib.paper.feedback_eval`, judged by `fnnbook.feedback_eval`).
 # D1 does not depend on the feedback and is not judged here.
 
 # %% tags=["parameters"]
@@ -62,7 +62,8 @@ from fnnlib.models import NeuralFeedbackEnsemble
 from fnnlib.paper import colon_range, paired_levels, simulate_levels
 from fnnlib.systems import Spiral
 from fnnlib.training import load_seed_checkpoints
-from fnnbook.feedback_eval import evaluation_setup, judge, release_form_loss
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import evaluation_setup, release_form_loss
 from fnnlib.io import atomic_write
 
 # %% [markdown]

@@ -71,12 +71,14 @@ import torch
 
 import fnnlib as F
 from fnnbook.results import read_results
+from fnnlib.models import NeuralFeedbackEnsemble
 from fnnlib.paper import colon_range, paired_levels, simulate_levels
 from fnnlib.plotting import new_figure, save_figure
 from fnnlib.systems import Spiral
 from fnnlib.training import load_seed_checkpoints, load_seed_ensemble
 from fnnbook import why as W
-from fnnbook.feedback_eval import evaluation_setup, feedback_ensemble, judge, rate_error_curves, release_form_loss
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import evaluation_setup, rate_error_curves, release_form_loss
 from fnnbook.rules import sec4
 from fnnbook.rules import why_feedback as WF
 from fnnlib import release
@@ -96,14 +98,14 @@ print(f"{len(points)} grid points: {[p['change'] for p in points]}")
 # %% [markdown]
 # ## The profile point: our paper-profile networks on the shared evaluation
 # The paper profile's frozen neural ODEs, neural feedbacks and domain-randomized neural ODEs, judged again
-# through `fnnbook.feedback_eval` (the evaluation every grid point and the authors' networks get). It must give
+# through `fnnlib.paper.feedback_eval` (the evaluation every grid point and the authors' networks get). It must give
 # the paper profile's checks of D1, D2 and D4 (checked below); D3 reads the paper profile's loss numbers.
 
 # %%
 f_ours = load_seed_ensemble(upstream_dirs["spiral"])
 seeds = f_ours.seeds
 h_loaded = load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")
-h_ours = feedback_ensemble([m for _, m, _ in h_loaded], [s for s, _, _ in h_loaded])
+h_ours = NeuralFeedbackEnsemble.from_members([m for _, m, _ in h_loaded], [s for s, _, _ in h_loaded])
 dr_ours = load_seed_ensemble(nf_dir, "neural_ode_dr")
 
 # %% [markdown]

@@ -1,4 +1,5 @@
-"""The Sec. 4 evaluation shared by the neural-feedback notebooks (fnnbook.feedback_eval), on tiny networks."""
+"""The Sec. 4 evaluation shared by the neural-feedback notebooks (fnnlib.paper.feedback_eval) and its judgement
+(fnnbook.feedback_eval), on tiny networks."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import torch
 
 import fnnlib as F
 from fnnlib.models import NeuralFeedbackEnsemble
-from fnnbook.feedback_eval import evaluation_setup, judge, nominal_errors
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import evaluation_setup, nominal_errors
 from fnnbook.tasks import settings_class
 
 SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_range": [-0.03, 0.0275, 0.025],
@@ -54,22 +56,23 @@ def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -
     import torch  # noqa: PLC0415
 
     import fnnlib as F  # noqa: PLC0415
-    from fnnbook.feedback_eval import feedback_ensemble  # noqa: PLC0415
+    from fnnlib.models import NeuralFeedbackEnsemble  # noqa: PLC0415
 
     members = []
     for s in (4, 9):
         torch.manual_seed(s)
         members.append(F.NeuralFeedback(2, (8,), "relu"))
-    ens = feedback_ensemble(members, [4, 9])
+    ens = NeuralFeedbackEnsemble.from_members(members, [4, 9])
     assert ens.seeds == [4, 9]
     for m, alone in enumerate(members):
         assert all(torch.equal(a, b) for a, b in zip(ens.member(m).parameters(), alone.parameters()))
     with pytest.raises(TypeError, match="NeuralFeedback"):
-        feedback_ensemble([F.NeuralODE(2, (8,), "relu")], [0])
+        NeuralFeedbackEnsemble.from_members([F.NeuralODE(2, (8,), "relu")], [0])
 
 
 def test_the_settled_window_the_centred_feedback_and_the_release_form_loss() -> None:
-    from fnnbook.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss, settled_errors
+    from fnnbook.feedback_eval import settled_errors
+    from fnnlib.paper.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss
 
     s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
     f, h = networks(2)

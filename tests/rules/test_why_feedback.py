@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from fnnbook.feedback_eval import evaluation_setup
+from fnnlib.paper.feedback_eval import evaluation_setup
 from fnnbook.rules import why_feedback as WF
 from fnnbook.tasks import settings_class
 
