@@ -1,6 +1,6 @@
 """The cascaded tanks chapter's task time, and where its seconds go.
 
-Runs the chapter's measurements (``fnnbook.tanks_eval.run_seeds``) with the notebook's paper parameters on the
+Runs the chapter's measurements (``fnnlib.tanks.evaluation.run_seeds``) with the notebook's paper parameters on the
 benchmark's records (or the synthetic twin without them) and prints the seconds of each stage: training
 through the observer (the seeds as one stacked ensemble), the no-feedback baselines, the validation
 (free runs, every horizon's cascade, the hand grid) and the Kalman filters. The whole task, notebook and
@@ -28,7 +28,7 @@ from pathlib import Path
 from fnnlib.data.tanks import tanks_records
 from fnnlib.feedback import GainWarning
 from fnnlib.threads import set_num_threads
-from fnnbook import tanks_eval as TE
+from fnnlib.tanks import evaluation as TE
 from fnnlib.data.tanks import TANKS_FILE
 
 SOURCE = Path(__file__).resolve().parents[1] / "notebooks" / "src" / "19_cascaded_tanks.py"

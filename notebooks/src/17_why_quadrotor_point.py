@@ -39,7 +39,7 @@ from fnnbook.results import RESULTS_FILENAME, read_results
 from fnnlib.training import load_seed_checkpoints
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
-from fnnbook.quadrotor_eval import at_gains, fly_record
+from fnnlib.quadrotor.evaluation import at_gains, fly_record
 from fnnlib import release
 from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor

@@ -153,7 +153,7 @@ simulation_figure = save_figure(fig, out, "tanks_free_run")
 # on the estimation record. Everything below is measured on the validation record.
 
 # %% tags=["hide-input"]
-from fnnbook import tanks_eval as TE
+from fnnlib.tanks import evaluation as TE
 from fnnbook.rules import tanks as rules
 
 settings = {k: globals()[k] for k in (

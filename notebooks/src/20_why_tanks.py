@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fnnbook import tanks_eval as TE
+from fnnlib.tanks import evaluation as TE
 from fnnbook import why as W
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import tanks as rules
