@@ -17,7 +17,7 @@ from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, Flig
                                    disturbance_realisations, fallback_note, flight_row, flight_table_json,
                                    flight_tests_from_settings, flown_gain_sweep, fnn_model, hand_gains_on_flights,
                                    make_mpc, mpc_from_settings, paired_units,
-                                   pooled_speed, speed_summary, theorem2_check, thrust_needed, unjudged_bound_note)
+                                   pooled_speed, speed_summary, theorem2_check, thrust_needed)
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearize import Linearization, StepFn, linearize
 from fnnlib.mpc.linearized import LinearizedMPC, MPCSolution, OSQPMPC, RebuildMPC, shift_plan
@@ -44,5 +44,5 @@ __all__ = [
     "hand_gains_on_flights", "lissajous_reference", "linearize",
     "make_mpc", "mpc_from_settings", "paired_units", "paper_models", "pooled_speed", "randomization_coordinates",
     "randomized_vehicles", "select_gain_on_validation", "shift_plan", "speed_summary", "theorem2_check",
-    "thrust_needed", "tracking_rmse", "unjudged_bound_note", "validation_references", "warm_up",
+    "thrust_needed", "tracking_rmse", "validation_references", "warm_up",
 ]

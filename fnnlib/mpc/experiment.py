@@ -57,7 +57,6 @@ __all__ = [
     "speed_summary",
     "theorem2_check",
     "thrust_needed",
-    "unjudged_bound_note",
 ]
 
 QP_CLASSES: dict[str, type[OSQPMPC] | type[LinearizedMPC]] = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
@@ -349,27 +348,6 @@ def thrust_needed(vehicle: QuadrotorParams, curve: Mapping[str, float], *, steps
     h = np.linalg.norm(np.array([0.0, 0.0, vehicle.g]) - a, axis=1)
     return {"hover": vehicle.mass * vehicle.g / 4, "peak": float(vehicle.mass * h.max() / 4),
             "t_peak": float(t[int(np.argmax(h))])}
-
-
-def unjudged_bound_note(rows: Mapping[str, FlightRow] | None, *, metric: str, unit: str, need: Mapping[str, float],
-                        u_max: float, setting: str, flown: str, compare: tuple[str, str]) -> str:
-    """The outcome at a thrust bound that is not judged, and why it cannot be judged there, with the number.
-
-    ``rows``: the table rows flown at ``u_max`` under ``setting`` (None when not flown in this run); ``metric``
-    a :class:`FlightRow` field; ``need`` what :func:`thrust_needed` returns; ``flown`` says which flights they
-    are; ``compare`` = (a, b) names the two models whose order is stated.
-    """
-    why = (f"not judged at {u_max:g} N: the test vehicle needs {need['peak']:.2f} N per motor at the reference's "
-           f"peak acceleration ({need['hover']:.2f} N to hover) against the {u_max:g} N bound"
-           + (", so no model can track there" if need["peak"] > u_max else ""))
-    if rows is None:
-        return f"{setting}, {u_max:g} N: not flown in this run; {why}."
-    values = {n: getattr(r, metric) for n, r in rows.items()}
-    a, b = compare
-    order = "worse than" if values[a] > values[b] else "better than or equal to"
-    listed = ", ".join(f"{n} {v:.2f}" for n, v in values.items())
-    return (f"{setting}, {u_max:g} N ({flown}): {metric} {listed} {unit}; every model "
-            f"{min(values.values()):.2f}-{max(values.values()):.2f} {unit}, {a} {order} {b}; {why}.")
 
 
 def speed_summary(timing: Mapping[str, Mapping[str, Any]], *, repeats: int, thrust_bound: float, qp: str,

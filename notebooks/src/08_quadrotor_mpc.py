@@ -364,7 +364,7 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
 # %% [markdown]
 # Each claim joins its cost variants (`rules.join_costs`), with the flights at the other bounds as context (reported,
 # never judged), and says what the paper's stated setting gives and why it is not judged there
-# (`M.unjudged_bound_note`).
+# (`rules.unjudged_bound_note`).
 
 # %%
 context_numbers = {"context_4N_mean_axis": {k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()}
@@ -372,7 +372,7 @@ context_numbers = {"context_4N_mean_axis": {k.label(u_max_judged): {n: round(v.m
 merged = partial(rules.join_costs, numbers=context_numbers)
 S = len(grid[costs[0]].units)  # the independent units of every comparison
 paper_rows = table.get(M.TableKey("as_written", PAPER_THRUST_MAX))  # the paper's stated setting: R = I, 4 N (or None)
-at_paper = partial(M.unjudged_bound_note, paper_rows, need=need, u_max=PAPER_THRUST_MAX,
+at_paper = partial(rules.unjudged_bound_note, paper_rows, need=need, u_max=PAPER_THRUST_MAX,
                    setting="the paper's setting (Eq. (28) as written, R = I)",
                    flown="kept network, the paper's force, one flight per model")
 
