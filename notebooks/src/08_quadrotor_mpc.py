@@ -88,7 +88,7 @@ if disturbance_draws != len(members) or [s for s, _ in mlps] != [s for s, _ in m
                      f"{[s for s, _ in mlps]})")
 
 # %%
-setup = M.flight_tests_from_settings(globals())  # the test vehicle: the paper's force, then one drawn per unit
+setup = M.flight_tests(M.FlightSettings.of(settings.as_dict()))  # the test vehicle: the paper's force, then one per unit
 test_params, forces, x_r, u_r, tests = setup.vehicle, setup.forces, setup.x_r, setup.u_r, setup.tests
 numerics = M.Backend(backend, linearize_method)
 models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)

@@ -211,7 +211,7 @@ members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), chec
 
 # %% tags=["hide-input"]
 plant = Quadrotor(NOMINAL)
-setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built as it builds them
+setup = M.flight_tests(M.FlightSettings.of(m))  # quadrotor_mpc's flight tests, built as it builds them
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
     raise ValueError(f"the disturbances of quadrotor_mpc's settings {setup.forces} are not those it flew "
                      f"{q_mpc['disturbances']}")
@@ -219,7 +219,7 @@ unit_tests = setup.unit_tests  # one per independent unit of quadrotor_mpc (its 
 if len(unit_tests) != len(members) or len(q_mpc["units"]) != len(members):
     raise ValueError(f"quadrotor_mpc flew {len(q_mpc['units'])} units on {len(unit_tests)} drawn disturbances; "
                      f"{len(members)} networks here")
-mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
+mpcs = {cost: M.MPCSettings.of(m).build(cost=cost, u_max=m["u_max_judged"]) for cost in costs}
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 val_vehicles = M.randomized_vehicles(TRAINING_TRUTH, m["validation_vehicles"], seed=m["validation_vehicle_seed"],
                                      **VALIDATION_RANDOMIZATION)  # quadrotor_mpc's validation set, rebuilt as it builds it
