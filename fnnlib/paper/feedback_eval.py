@@ -13,7 +13,7 @@ release's transposed spiral, in which the authors' networks were trained).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,7 @@ from fnnlib.observers import NeuralFeedbackObserver
 from fnnlib.paper.sweeps import colon_range, paired_levels, simulate_levels
 from fnnlib.systems import Spiral
 
-__all__ = ["CentredFeedback", "EvaluationSetup", "evaluation_setup", "field_errors", "nominal_errors",
+__all__ = ["CentredFeedback", "EvaluationSettings", "EvaluationSetup", "evaluation_setup", "field_errors", "nominal_errors",
            "rate_error_curves", "release_form_loss"]
 
 
@@ -74,25 +74,53 @@ def _trajectories(make: Callable[..., Any], params: Tensor, x0: Tensor, t: Tenso
     return x, f
 
 
-def evaluation_setup(p: Mapping[str, Any], make: Callable[..., Any] = Spiral) -> EvaluationSetup:
-    """The evaluation of the neural_feedback notebook from its parameters ``p`` (its settings: ``x0``, ``nominal``,
-    ``n_samples``, ``Ts``, ``N``, ``residual_base``, the residual and training ranges, ``heldout_flip``,
-    ``heldout_min_distance``), with systems made by ``make``."""
-    t = torch.arange(p["n_samples"], dtype=torch.float64) * p["Ts"]
-    x0 = torch.tensor(p["x0"], dtype=torch.float64)
-    sys_nom = make(*p["nominal"])
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """The settings of the Sec. 4 evaluation (the ``neural_feedback`` notebook's names): the spiral's start
+    ``x0`` and ``nominal`` parameters, ``n_samples`` samples of ``Ts``, the horizon ``N``; the S8 levels around
+    ``residual_base`` on the grids ``domega_range``, ``deta_range``, ``deps_range`` (``[start, step, stop]``);
+    the training cases' grids ``dr_omega_range``, ``dr_eta_range``, ``dr_eps_range``; the held-out levels: the S8
+    offsets times ``heldout_flip``, kept at least ``heldout_min_distance`` training steps from every case."""
+
+    x0: tuple[float, ...]
+    nominal: tuple[float, ...]
+    n_samples: int
+    Ts: float
+    N: int
+    residual_base: tuple[float, ...]
+    domega_range: tuple[float, ...]
+    deta_range: tuple[float, ...]
+    deps_range: tuple[float, ...]
+    dr_omega_range: tuple[float, ...]
+    dr_eta_range: tuple[float, ...]
+    dr_eps_range: tuple[float, ...]
+    heldout_flip: tuple[float, ...]
+    heldout_min_distance: float
+
+    @classmethod
+    def of(cls, parameters: Mapping[str, Any]) -> EvaluationSettings:
+        """These settings from a run's parameters (a record holding at least these names; the rest ignored)."""
+        return cls(**{f.name: parameters[f.name] for f in fields(cls)})
+
+
+def evaluation_setup(s: EvaluationSettings, make: Callable[..., Any] = Spiral) -> EvaluationSetup:
+    """The evaluation of :class:`EvaluationSettings` ``s``, with systems made by ``make``."""
+    t = torch.arange(s.n_samples, dtype=torch.float64) * s.Ts
+    x0 = torch.tensor(s.x0, dtype=torch.float64)
+    sys_nom = make(*s.nominal)
     x_nom = sys_nom.exact_solution(x0, t).float()
-    offsets = paired_levels(*(colon_range(*p[k]) for k in ("domega_range", "deta_range", "deps_range")))
-    base = torch.tensor(p["residual_base"], dtype=torch.float64)
+    offsets = paired_levels(*(colon_range(*g) for g in (s.domega_range, s.deta_range, s.deps_range)))
+    base = torch.tensor(s.residual_base, dtype=torch.float64)
     x8, f8 = _trajectories(make, base + offsets, x0, t)
-    cases = paired_levels(*(colon_range(*p[k]) for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")))
-    steps = torch.tensor([p[k][1] for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")], dtype=torch.float64)
-    flipped = base + offsets * torch.tensor(p["heldout_flip"], dtype=torch.float64)
-    far = torch.cdist(flipped / steps, cases / steps).amin(-1) >= p["heldout_min_distance"]
+    grids = (s.dr_omega_range, s.dr_eta_range, s.dr_eps_range)
+    cases = paired_levels(*(colon_range(*g) for g in grids))
+    steps = torch.tensor([g[1] for g in grids], dtype=torch.float64)
+    flipped = base + offsets * torch.tensor(s.heldout_flip, dtype=torch.float64)
+    far = torch.cdist(flipped / steps, cases / steps).amin(-1) >= s.heldout_min_distance
     if not far.any():
-        raise ValueError(f"no held-out level is {p['heldout_min_distance']} training steps from the cases")
+        raise ValueError(f"no held-out level is {s.heldout_min_distance} training steps from the cases")
     xh, fh = _trajectories(make, flipped[far], x0, t)
-    return EvaluationSetup(x_nom, sys_nom.rate(x_nom), x8, f8, xh, fh, offsets, float(p["Ts"]), int(p["N"]))
+    return EvaluationSetup(x_nom, sys_nom.rate(x_nom), x8, f8, xh, fh, offsets, float(s.Ts), int(s.N))
 
 
 def _per_seed(z: Tensor, E: int) -> Tensor:

@@ -63,7 +63,7 @@ from fnnlib.paper import colon_range, paired_levels, simulate_levels
 from fnnlib.systems import Spiral
 from fnnlib.training import load_seed_checkpoints
 from fnnbook.feedback_eval import judge
-from fnnlib.paper.feedback_eval import evaluation_setup, release_form_loss
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, release_form_loss
 from fnnlib.io import atomic_write
 
 # %% [markdown]
@@ -76,7 +76,8 @@ recipe = F.FeedbackRecipe(iterations=round(fb_iterations * change.get("iteration
                           batch_size=fb_batch_size, lr=fb_lr * change.get("lr_times", 1.0),
                           optimizer=change.get("optimizer", fb_optimizer),
                           refresh_every=change.get("refresh_every", refresh_every))
-setup = evaluation_setup(globals())  # the neural_feedback task's nominal task, S8 and held-out levels
+# the neural_feedback task's nominal task, S8 and held-out levels
+setup = evaluation_setup(EvaluationSettings.of(settings.as_dict()))
 loaded = load_seed_checkpoints(Path(upstream_dirs["spiral"]), stem="neural_ode", expected_kind="NeuralODE")
 if len(loaded) < n_seeds:
     raise ValueError(f"n_seeds = {n_seeds}, but the spiral task has {len(loaded)} seeds")

@@ -78,7 +78,7 @@ from fnnlib.systems import Spiral
 from fnnlib.training import load_seed_checkpoints, load_seed_ensemble
 from fnnbook import why as W
 from fnnbook.feedback_eval import judge
-from fnnlib.paper.feedback_eval import evaluation_setup, rate_error_curves, release_form_loss
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, rate_error_curves, release_form_loss
 from fnnbook.rules import sec4
 from fnnbook.rules import why_feedback as WF
 from fnnlib import release
@@ -114,7 +114,7 @@ dr_ours = load_seed_ensemble(nf_dir, "neural_ode_dr")
 
 # %%
 th = WF.Thresholds(d2_factor=d2_factor, d3_ratio=d3_ratio, d3_flat=d3_flat, d1_factor=d1_factor)
-setup = evaluation_setup(globals())
+setup = evaluation_setup(EvaluationSettings.of(settings.as_dict()))
 ours, ours_numbers = judge(f_ours, h_ours, setup, len(seeds), loss=None, factor=d2_factor, ratio_max=d3_ratio,
                            flat=d3_flat, f_dr=dr_ours, d1_factor=d1_factor)
 d3n = paper.claim("D3").numbers
@@ -185,7 +185,7 @@ for cid, gs in grids.items():
 nets = release.load_release_spiral_networks(data_dir, authors_ode, authors_feedback, authors_dr_ode)
 NETS = {"D1": f"{authors_dr_ode} vs {authors_ode}", "D2": f"{authors_ode} + {authors_feedback}",
         "D4": f"{authors_ode} + {authors_feedback}"}
-authors, setup_theirs = None, evaluation_setup(globals(), release.release_spiral)
+authors, setup_theirs = None, evaluation_setup(EvaluationSettings.of(settings.as_dict()), release.release_spiral)
 if nets is None:
     print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
           f"all in data_dir = {data_dir!r} with their published SHA-256")

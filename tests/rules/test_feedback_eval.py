@@ -10,7 +10,7 @@ import torch
 import fnnlib as F
 from fnnlib.models import NeuralFeedbackEnsemble
 from fnnbook.feedback_eval import judge
-from fnnlib.paper.feedback_eval import evaluation_setup, nominal_errors
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, nominal_errors
 from fnnbook.tasks import settings_class
 
 SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_range": [-0.03, 0.0275, 0.025],
@@ -26,7 +26,7 @@ def networks(E: int):
 
 
 def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
-    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    s = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     assert s.x_s8.shape == (3, 60, 2) and s.x_held.shape[1:] == (60, 2) and s.offsets.shape == (3, 3)
     f, h = networks(2)
     with torch.no_grad():
@@ -45,10 +45,13 @@ def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
 
 def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
     p = settings_class("neural_feedback").defaults() | SMALL
-    ours, theirs = evaluation_setup(p), evaluation_setup(p, F.release.release_spiral)
+    s = EvaluationSettings.of(p)
+    ours, theirs = evaluation_setup(s), evaluation_setup(s, F.release.release_spiral)
     assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
     with pytest.raises(ValueError, match="held-out"):
-        evaluation_setup(p | {"heldout_min_distance": 100.0})
+        evaluation_setup(EvaluationSettings.of(p | {"heldout_min_distance": 100.0}))
+    with pytest.raises(KeyError, match="heldout_flip"):  # a record without a setting is refused, not defaulted
+        EvaluationSettings.of({k: v for k, v in p.items() if k != "heldout_flip"})
 
 
 def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -> None:
@@ -74,7 +77,7 @@ def test_the_settled_window_the_centred_feedback_and_the_release_form_loss() -> 
     from fnnbook.feedback_eval import settled_errors
     from fnnlib.paper.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss
 
-    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    s = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     f, h = networks(2)
     curves = rate_error_curves(f, h, s, 2)
     assert curves["neural_feedback"].shape == (2, 60)

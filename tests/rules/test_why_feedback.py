@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib.paper.feedback_eval import evaluation_setup
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup
 from fnnbook.rules import why_feedback as WF
 from fnnbook.tasks import settings_class
 
@@ -98,7 +98,7 @@ def test_the_usage_grid_judges_d4_at_every_metric_decay_and_first_estimate() -> 
     import fnnlib as F
     from fnnlib.models import NeuralFeedbackEnsemble
 
-    setup = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    setup = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in range(2)], [0, 1])
     h = NeuralFeedbackEnsemble(2, [8], "relu", [0, 1])
     with torch.no_grad():
