@@ -54,7 +54,7 @@ def main() -> None:
     rec = tanks_records("real" if real else "synthetic", data_dir=args.data_dir, n_samples=p["synthetic_samples"],
                           seed=p["seed"], noise_std=p["synthetic_noise"])
     t0 = time.perf_counter()
-    runs, seconds, _ = TE.run_seeds(rec, p["seeds"], p)
+    runs, seconds, _ = TE.run_seeds(rec, p["seeds"], TE.TanksSettings.of(p))
     total = time.perf_counter() - t0
     print(json.dumps({"records": rec.source, "seeds": p["seeds"], "seconds": {k: round(v, 2) for k, v in seconds.items()},
                       "total_s": round(total, 2),

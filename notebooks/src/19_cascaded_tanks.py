@@ -156,11 +156,7 @@ simulation_figure = save_figure(fig, out, "tanks_free_run")
 from fnnlib.tanks import evaluation as TE
 from fnnbook.rules import tanks as rules
 
-settings = {k: globals()[k] for k in (
-    "hidden", "activation", "rate", "x_center", "x_scale", "u_center", "u_scale", "observer_gain", "train_N",
-    "train_iterations", "train_lr", "L_start", "beta_start", "horizons", "hand_L_grid", "hand_beta_grid", "kf_q",
-    "kf_qd_grid", "kf_r", "n_init", "overflow_after", "overflow_gap", "series_N", "baseline_starts", "baseline_horizon")}
-runs, seconds, trained = TE.run_seeds(rec, seeds, settings)
+runs, seconds, trained = TE.run_seeds(rec, seeds, TE.TanksSettings.of(settings.as_dict()))
 TE.save_trained(out / "tanks_models.pt", trained)  # the pages that judge these models again load them
 print("seconds over the seeds: " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()))
 print("no-feedback baseline per seed: " + "; ".join(

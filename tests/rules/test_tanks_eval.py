@@ -9,9 +9,15 @@ import torch
 
 import fnnlib as F
 from fnnlib.data.tanks import tanks_records
-from fnnlib.tanks.evaluation import episode_errors, free_run, n_step_output_rmse, overflow_episodes
+from fnnbook.tasks import settings_class
+from fnnlib.tanks.evaluation import TanksSettings, episode_errors, free_run, n_step_output_rmse, overflow_episodes
 
 C = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
+
+
+def _tanks(**changes) -> TanksSettings:
+    """The chapter's settings (its paper values), with ``changes``."""
+    return TanksSettings.of(settings_class("cascaded_tanks").defaults() | changes)
 
 
 def test_n_step_rmse_pairs_row_k_with_sample_k_plus_n() -> None:
@@ -125,7 +131,7 @@ def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() 
     keep[5] = False
     assert n_step_output_rmse(x_pred, y, 1, C, keep=keep) == 0.0
     rec = tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
-    s = {"overflow_gap": 3, "overflow_after": 7}
+    s = _tanks(overflow_gap=3, overflow_after=7)
     eps = overflow_episodes(rec.saturated("val").numpy(), gap=3)
     out = outside_overflow(rec, s)
     for a, b in eps:
@@ -135,7 +141,7 @@ def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() 
 
 def test_trained_ensembles_load_as_saved(tmp_path) -> None:
     from fnnlib.tanks.evaluation import load_trained, one_member, save_trained
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
     from fnnlib.tanks.evaluation import _field
     m = _field(s, [3, 4])
     save_trained(tmp_path / "m.pt", {"seeds": [3, 4], "observer_trained": m, "no_feedback": _field(s, [3, 4]),
@@ -154,7 +160,7 @@ def test_the_baseline_start_is_chosen_on_the_estimation_record_only() -> None:
 
     from fnnlib.tanks.evaluation import LEVEL, no_feedback, one_member
     rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              n_init=5, baseline_horizon=10, baseline_starts=["free", "encoder"], train_iterations=3, train_lr=0.01,
              observer_gain=[0.02, 0.15])
     a = no_feedback(rec, 0, s, one_member(s, 0), LEVEL)
@@ -172,7 +178,7 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
     from fnnlib.tanks.evaluation import LEVEL, _field, _free_starts
     from fnnlib.training.outputs import OutputRecipe, train_from_outputs
     rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              baseline_horizon=10, train_iterations=4, train_lr=0.01)
     both = _free_starts(rec, [0, 1], s, _field(s, [0, 1]), LEVEL)
     for e, seed in enumerate((0, 1)):
