@@ -18,6 +18,7 @@ import warnings
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import GainWarning
 
 F64 = torch.float64
 
@@ -36,7 +37,7 @@ def monte_carlo(L, Ts: float, N: int, beta: float, A: torch.Tensor, *, T: int = 
     n = A.shape[0]
     v = torch.randn(draws, T, n, generator=torch.Generator().manual_seed(0), dtype=F64)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", F.GainWarning)
+        warnings.simplefilter("ignore", GainWarning)
         z = F.cascade_predict(lambda t, x: x @ A.T, v, Ts, N, L, beta)
     return float(z[:, 2000:].pow(2).mean().sqrt())
 

@@ -8,7 +8,9 @@ import math
 import pytest
 import torch
 
-from fnnlib import LinearFeedback, Spiral, mlp
+from fnnlib import LinearFeedback
+from fnnlib.models import mlp
+from fnnlib.systems import Spiral
 from fnnlib.stability import (
     discrete_residual,
     divergence_transition,

@@ -21,7 +21,7 @@ B6 (gains learned from data): the gains tuned by gradient descent on the estimat
 gains (the best of a small sweep on the estimation record) at N-step prediction. One check per horizon
 ``N > 1``; at ``N = 1`` both are the observer alone (a guarantee, as in B4).
 
-All checks true: *reproduced*; some: *partly*; none: *not reproduced* (:class:`fnnlib.ClaimResult`).
+All checks true: *reproduced*; some: *partly*; none: *not reproduced* (:class:`fnnbook.results.ClaimResult`).
 No guarantees: each check can fail on a plausible run.
 """
 
@@ -31,7 +31,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from fnnlib.results import ClaimResult, headline_number
+from fnnbook.results import ClaimResult, headline_number
 from fnnlib.stats import paired_win
 
 __all__ = ["SAME", "b4", "b4_at", "b5", "b6", "b6_at"]

@@ -38,6 +38,8 @@ class _BatchedUKF(UnscentedKalmanFilter):
 class UnscentedKalmanObserver(_KalmanBase):
     r"""Unscented Kalman filter on the learned model with a constant-disturbance state (filterpy).
 
+    A classical baseline for the feedback observer of Eqs. (7)-(8), on the same learned model (Eq. (3)).
+
     Parameters are those of :class:`~fnnlib.observers.ExtendedKalmanObserver` (``Q``, ``R``, ``P0``, ``C``,
     ``disturbance``, ``A``), and ``alpha``, ``beta``, ``kappa`` of the scaled sigma points.
     :meth:`estimate` takes inputs ``u`` (..., T, m) and gaps (NaN or ``mask``) like the EKF.

@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
+from fnnlib import KalmanObserver, LinearFeedback, NeuralODE, cascade_predict
+from fnnlib.feedback import eval_field
+from fnnlib.systems import LinearSystem, Pendulum
 from fnnlib.feedback.layer import shift_inputs
 
 F64 = torch.float64

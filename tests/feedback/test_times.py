@@ -7,13 +7,15 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import DEFAULT_TUNE_RECIPE, cascade_sweep
+from fnnlib.systems import LinearSystem
 from fnnlib.feedback.sampling import check_times
 
 from tests.feedback.test_inputs import A, B, F64, TS
 
 T = 80
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 
 
 def _gain():
@@ -45,8 +47,8 @@ def test_uniform_times_equal_the_step_path():
     torch.testing.assert_close(F.cascade_predict(PLANT, y, TS, 5, 2.0, 0.1, u=u, observer=obs_ts),
                                F.cascade_predict(PLANT, y, None, 5, 2.0, 0.1, u=u, t=t, observer=obs_t),
                                rtol=0, atol=1e-12)
-    torch.testing.assert_close(F.cascade_sweep(PLANT, x, TS, 4, torch.tensor([1.0, 2.0]), 0.1, u=u),
-                               F.cascade_sweep(PLANT, x, None, 4, torch.tensor([1.0, 2.0]), 0.1, u=u, t=t),
+    torch.testing.assert_close(cascade_sweep(PLANT, x, TS, 4, torch.tensor([1.0, 2.0]), 0.1, u=u),
+                               cascade_sweep(PLANT, x, None, 4, torch.tensor([1.0, 2.0]), 0.1, u=u, t=t),
                                rtol=0, atol=1e-12)
     for method in ("euler", "rk4"):
         torch.testing.assert_close(F.rollout_predict(PLANT, x, TS, 4, u=u, method=method),
@@ -110,7 +112,7 @@ def test_bad_times_are_refused_before_any_work(bad, match):
     for call in (lambda: F.cascade_predict(counting, x[0], None, 3, 1.0, t=bad(t), u=u[0]),
                  lambda: obs.observe(x[0] @ C.T, u[0], t=bad(t)),
                  lambda: F.rollout_predict(counting, x[0], None, 3, t=bad(t), u=u[0]),
-                 lambda: F.tune_gains(counting, x[0], None, 3, t=bad(t), u=u[0], recipe=F.DEFAULT_TUNE_RECIPE)):
+                 lambda: F.tune_gains(counting, x[0], None, 3, t=bad(t), u=u[0], recipe=DEFAULT_TUNE_RECIPE)):
         with pytest.raises((ValueError, TypeError), match=match):
             call()
     assert not calls

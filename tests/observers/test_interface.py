@@ -7,7 +7,9 @@ import math
 import pytest
 import torch
 
-from fnnlib import LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
+from fnnlib import LinearFeedback, add_measurement_noise, cascade_predict, rollout_predict
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
 from fnnlib.feedback import Estimate
 from fnnlib.observers import (
     ExtendedKalmanObserver,

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib import Spiral, add_measurement_noise, make_generator
+from fnnlib import add_measurement_noise
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
 from fnnlib.observers import ExtendedKalmanObserver, KalmanObserver, augmented_matrices, steady_state_gain
 
 F64 = torch.float64
