@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-import fnnlib as F
+from fnnlib.training import load_checkpoint
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
 from fnnlib.mpc.linearized import COSTS
 from fnnlib.mpc import Backend, FlightTest, fly, lissajous_reference, paper_models, warm_up
-from fnnlib.quadrotor_presets import (
+from fnnlib.quadrotor.presets import (
     PAPER_BETA,
     PAPER_GAMMA,
     PAPER_HORIZON,
@@ -63,8 +63,8 @@ CONFIGS = {  # name: (QP class, linearization method, truth RK4 sub-steps, backe
 
 def residuals(learning_dir: Path | None) -> tuple[torch.nn.Module, torch.nn.Module, str]:
     if learning_dir is not None and (learning_dir / "residual.pt").is_file():
-        res, _ = F.load_checkpoint(learning_dir / "residual.pt", expected_kind="AeroResidual")
-        mlp, _ = F.load_checkpoint(learning_dir / "mlp.pt", expected_kind="AeroResidual")
+        res, _ = load_checkpoint(learning_dir / "residual.pt", expected_kind="AeroResidual")
+        mlp, _ = load_checkpoint(learning_dir / "mlp.pt", expected_kind="AeroResidual")
         return res.double(), mlp.double(), f"trained, from {learning_dir}"
     torch.manual_seed(0)
     shape = (PAPER_RESIDUAL_RECIPE["hidden"], PAPER_RESIDUAL_RECIPE["activation"])

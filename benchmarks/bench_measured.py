@@ -18,6 +18,8 @@ import time
 import torch
 
 import fnnlib as F
+from fnnlib.models.neural_ode import init_parameters
+from fnnlib.seeding import make_generator
 from fnnlib.feedback import gaps
 from bench_cascade import best_of
 
@@ -34,8 +36,8 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     Ts, T, N = 0.02, args.T, args.N
-    gen = F.make_generator(0)
-    model = F.init_parameters(F.NeuralODE(2, (50, 50), "tanh", n_input=1).double(), gen)
+    gen = make_generator(0)
+    model = init_parameters(F.NeuralODE(2, (50, 50), "tanh", n_input=1).double(), gen)
     A = F.model_jacobian(model, torch.zeros(2, dtype=F64), torch.zeros(1, dtype=F64))
     C = torch.tensor([[1.0, 0.0]], dtype=F64)
     L_y = F.place_observer_gain(torch.eye(2, dtype=F64) + Ts * A, Ts * C, [0.8, 0.85])

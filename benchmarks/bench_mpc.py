@@ -30,7 +30,7 @@ from torch import nn
 
 from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC, linearize
 from fnnlib.mpc.linearized import COSTS
-from fnnlib.quadrotor_presets import PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
+from fnnlib.quadrotor.presets import PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
 
 N, NX, NU, DT = 10, 12, 4, 0.05
 Q = np.array(PAPER_MPC_WEIGHTS["Q"])

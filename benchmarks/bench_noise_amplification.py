@@ -18,6 +18,7 @@ import warnings
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import GainWarning, noise_amplification_exact
 
 F64 = torch.float64
 
@@ -36,7 +37,7 @@ def monte_carlo(L, Ts: float, N: int, beta: float, A: torch.Tensor, *, T: int = 
     n = A.shape[0]
     v = torch.randn(draws, T, n, generator=torch.Generator().manual_seed(0), dtype=F64)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", F.GainWarning)
+        warnings.simplefilter("ignore", GainWarning)
         z = F.cascade_predict(lambda t, x: x @ A.T, v, Ts, N, F.Gains(L, beta))
     return float(z[:, 2000:].pow(2).mean().sqrt())
 
@@ -58,10 +59,10 @@ def main() -> None:
         n = A.shape[0]
         with_A = bool(A.abs().sum() > 0)
         kw = {"n": n, **({"A": A} if with_A else {})}
-        exact = F.noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw)
-        ms = best_ms(lambda: F.noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw), args.repeats)
+        exact = noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw)
+        ms = best_ms(lambda: noise_amplification_exact(F.Gains(L, beta), Ts, N, **kw), args.repeats)
         bound = F.noise_amplification(F.Gains(L, beta), Ts, N, n=n)
-        worst = F.noise_amplification_exact(F.Gains(L, beta), Ts, N, n=n, reduce="max")
+        worst = noise_amplification_exact(F.Gains(L, beta), Ts, N, n=n, reduce="max")
         mc = monte_carlo(L, Ts, N, beta, A)
         rows.append({"case": name, "exact_rms": exact, "monte_carlo_rms": mc, "rel_diff": exact / mc - 1,
                      "ms": ms, "product_bound": bound, "worst_direction": worst})

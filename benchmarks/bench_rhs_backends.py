@@ -23,7 +23,7 @@ import torch
 
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.compiled import CompiledQuadrotor, warm_up
-from fnnlib.quadrotor_presets import PAPER_RESIDUAL_RECIPE, PAPER_TS
+from fnnlib.quadrotor.presets import PAPER_RESIDUAL_RECIPE, PAPER_TS
 from fnnlib.systems.allocation import allocation_matrix
 from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor
 from fnnlib.systems.rotations import rotation_matrix

@@ -1,6 +1,6 @@
 """The cascaded tanks chapter's task time, and where its seconds go.
 
-Runs the chapter's measurements (``fnnbook.tanks_eval.run_seeds``) with the notebook's paper parameters on the
+Runs the chapter's measurements (``fnnlib.tanks.evaluation.run_seeds``) with the notebook's paper parameters on the
 benchmark's records (or the synthetic twin without them) and prints the seconds of each stage: training
 through the observer (the seeds as one stacked ensemble), the no-feedback baselines, the validation
 (free runs, every horizon's cascade, the hand grid) and the Kalman filters. The whole task, notebook and
@@ -25,8 +25,10 @@ import time
 import warnings
 from pathlib import Path
 
-import fnnlib as F
-from fnnbook import tanks_eval as TE
+from fnnlib.data.tanks import tanks_records
+from fnnlib.feedback import GainWarning
+from fnnlib.threads import set_num_threads
+from fnnlib.tanks import evaluation as TE
 from fnnlib.data.tanks import TANKS_FILE
 
 SOURCE = Path(__file__).resolve().parents[1] / "notebooks" / "src" / "19_cascaded_tanks.py"
@@ -45,14 +47,14 @@ def main() -> None:
     ap.add_argument("--data-dir", default="data")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
-    F.set_num_threads(args.threads)
-    warnings.simplefilter("ignore", F.GainWarning)
+    set_num_threads(args.threads)
+    warnings.simplefilter("ignore", GainWarning)
     p = paper_parameters()
     real = (Path(args.data_dir) / "cascaded_tanks" / TANKS_FILE).is_file()
-    rec = F.tanks_records("real" if real else "synthetic", data_dir=args.data_dir, n_samples=p["synthetic_samples"],
+    rec = tanks_records("real" if real else "synthetic", data_dir=args.data_dir, n_samples=p["synthetic_samples"],
                           seed=p["seed"], noise_std=p["synthetic_noise"])
     t0 = time.perf_counter()
-    runs, seconds, _ = TE.run_seeds(rec, p["seeds"], p)
+    runs, seconds, _ = TE.run_seeds(rec, p["seeds"], TE.TanksSettings.of(p))
     total = time.perf_counter() - t0
     print(json.dumps({"records": rec.source, "seeds": p["seeds"], "seconds": {k: round(v, 2) for k, v in seconds.items()},
                       "total_s": round(total, 2),

@@ -14,6 +14,9 @@ import json
 import torch
 
 import fnnlib as F
+from fnnlib.seeding import seed_everything
+from fnnlib.systems import Spiral
+from fnnlib.training import PAPER_SPIRAL_RECIPE
 
 CHOICES = [
     # (solver, adjoint, seminorm, rtol, atol)
@@ -34,10 +37,10 @@ def main() -> None:
                     "timed model is as far along as in the middle of the paper's run")
     args = ap.parse_args()
     t = torch.arange(1000, dtype=torch.float64) * 0.01
-    x = F.Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0]), t).float()
-    F.seed_everything(0)
+    x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0]), t).float()
+    seed_everything(0)
     base = F.NeuralODE(2, (50, 50), "relu")
-    recipe = F.PAPER_SPIRAL_RECIPE.replace(rtol=1e-7, atol=1e-9)
+    recipe = PAPER_SPIRAL_RECIPE.replace(rtol=1e-7, atol=1e-9)
     F.train_neural_ode(base, t.float(), x, recipe.replace(iterations=args.warmup, adjoint=False), seed=0, progress=False)
     rows = []
     for method, adjoint, semi, rtol, atol in CHOICES:

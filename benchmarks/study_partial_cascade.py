@@ -32,6 +32,11 @@ import json
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import cascade_sweep, Gains
+from fnnlib.metrics import n_step_errors
+from fnnlib.models.neural_ode import init_parameters
+from fnnlib.seeding import make_generator
+from fnnlib.training import QUICK_RECIPE
 
 F64 = torch.float64
 TS = 0.05
@@ -63,12 +68,12 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=300)
     args = ap.parse_args()
     torch.set_num_threads(1)
-    gen = F.make_generator(0)
+    gen = make_generator(0)
     T_train = 200
     u_tr = forcing(8, T_train, gen)
     x_tr = simulate(torch.randn(8, 2, generator=gen, dtype=F64), u_tr)
-    model = F.init_parameters(F.NeuralODE(2, (50, 50), "tanh", n_input=1).double(), gen)
-    recipe = F.QUICK_RECIPE.replace(iterations=args.iterations, batch_size=32, batch_time=10)
+    model = init_parameters(F.NeuralODE(2, (50, 50), "tanh", n_input=1).double(), gen)
+    recipe = QUICK_RECIPE.replace(iterations=args.iterations, batch_size=32, batch_time=10)
     F.train_neural_ode(model, torch.arange(T_train, dtype=F64) * TS, x_tr, recipe, seed=0, u=u_tr, progress=False)
     A = F.model_jacobian(model, torch.zeros(2, dtype=F64), torch.zeros(1, dtype=F64))
     L_y = F.place_observer_gain(torch.eye(2, dtype=F64) + TS * A, TS * C, [0.85, 0.9])
@@ -77,15 +82,15 @@ def main() -> None:
     u = forcing(2, T, gen)
     x = simulate(0.5 * torch.randn(2, 2, generator=gen, dtype=F64), u)  # [0] calibration, [1] test
     lost = torch.rand(2, T, generator=gen) < 0.2
-    gen2 = F.make_generator(1)  # a second calibration record, drawn apart so that the others stay as they were
+    gen2 = make_generator(1)  # a second calibration record, drawn apart so that the others stay as they were
     u2 = forcing(1, T, gen2)
     x2 = simulate(0.5 * torch.randn(1, 2, generator=gen2, dtype=F64), u2)
     lost2 = torch.rand(1, T, generator=gen2) < 0.2
-    gen3 = F.make_generator(2)  # eight more test records, drawn apart
+    gen3 = make_generator(2)  # eight more test records, drawn apart
     u8 = forcing(8, T, gen3)
     x8 = simulate(0.5 * torch.randn(8, 2, generator=gen3, dtype=F64), u8)
     lost8 = torch.rand(8, T, generator=gen3) < 0.2
-    gen4, gen5 = F.make_generator(3), F.make_generator(4)  # four calibration records; eight fresh test records
+    gen4, gen5 = make_generator(3), make_generator(4)  # four calibration records; eight fresh test records
     u4 = forcing(4, T, gen4)
     x4 = simulate(0.5 * torch.randn(4, 2, generator=gen4, dtype=F64), u4)
     lost4 = torch.rand(4, T, generator=gen4) < 0.2
@@ -103,10 +108,10 @@ def main() -> None:
             y_cal, u_cal = torch.cat([y[:1], y2]), torch.cat([u[:1], u2])
 
             def score(z, k=1):
-                return float(F.n_step_errors(z, x[k], N)[settle:].mean())
+                return float(n_step_errors(z, x[k], N)[settle:].mean())
 
             def position(z, k=1):  # the measured component only
-                return float(F.n_step_errors(z[..., :1], x[k, :, :1], N)[settle:].mean())
+                return float(n_step_errors(z[..., :1], x[k, :, :1], N)[settle:].mean())
 
             def measured_score(z, target=y[0]):  # calibration: the measured position N samples later, present ones
                 e = (z[..., : T - N, :1] - target[..., N:, :]).pow(2)[..., settle:, :]
@@ -116,12 +121,12 @@ def main() -> None:
                 return (z[..., : T - N, :1] - target[..., N:, :]).pow(2).sum(-1)[..., settle:]
 
             grid = torch.tensor([0.0, 0.25, 0.5, 1.0, 2.0, 4.0], dtype=F64)  # 0: the feedback switched off
-            sweep = F.cascade_sweep(model, y[0], TS, N, F.Gains.sweep(grid, 0.05), u=u[0], observer=obs)
+            sweep = cascade_sweep(model, y[0], TS, N, Gains.sweep(grid, 0.05), u=u[0], observer=obs)
             L_hand = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep[g]))])
             tuned = F.tune_gains(model, y[0], TS, N,
                                  recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
                                  u=u[0], observer=obs)
-            sweep2 = F.cascade_sweep(model, y_cal, TS, N, F.Gains.sweep(grid, 0.05), u=u_cal, observer=obs)
+            sweep2 = cascade_sweep(model, y_cal, TS, N, Gains.sweep(grid, 0.05), u=u_cal, observer=obs)
             L_hand2 = float(grid[min(range(len(grid)), key=lambda g: measured_score(sweep2[g], y_cal))])
             tuned2 = F.tune_gains(model, y_cal, TS, N,
                                   recipe=F.TuneRecipe(L0=1.0, beta0=0.05, iterations=60, lr=0.1, settle=settle),
@@ -156,7 +161,7 @@ def main() -> None:
             y8[lost8] = float("nan")
 
             def per_record(z):
-                return F.n_step_errors(z, x8, N)[..., settle:].mean(-1)
+                return n_step_errors(z, x8, N)[..., settle:].mean(-1)
 
             ol8 = per_record(obs.predict(y8, N, u8))
             eight = {"open loop": ol8,
@@ -166,12 +171,12 @@ def main() -> None:
                      "EKF": per_record(ekf.predict(y8, N, u8))}
             y4 = x4 @ C.T + noise * torch.randn(4, T, 1, generator=gen4, dtype=F64)
             y4[lost4] = float("nan")
-            sweep4 = F.cascade_sweep(model, y4, TS, N, F.Gains.sweep(grid, 0.05), u=u4, observer=obs)  # (K, 4, T, n)
+            sweep4 = cascade_sweep(model, y4, TS, N, Gains.sweep(grid, 0.05), u=u4, observer=obs)  # (K, 4, T, n)
             L_four = float(grid[F.choose_gain(per_start(sweep4, y4)).index])
             y8b = x8b @ C.T + noise * torch.randn(8, T, 1, generator=gen5, dtype=F64)
             y8b[lost8b] = float("nan")
-            fresh_ol = F.n_step_errors(obs.predict(y8b, N, u8b), x8b, N)[..., settle:].mean(-1)
-            fresh = F.n_step_errors(F.cascade_predict(model, y8b, TS, N, F.Gains(L_four, 0.05), u=u8b, observer=obs), x8b,
+            fresh_ol = n_step_errors(obs.predict(y8b, N, u8b), x8b, N)[..., settle:].mean(-1)
+            fresh = n_step_errors(F.cascade_predict(model, y8b, TS, N, F.Gains(L_four, 0.05), u=u8b, observer=obs), x8b,
                                     N)[..., settle:].mean(-1)
             four = per_record(F.cascade_predict(model, y8, TS, N, F.Gains(L_four, 0.05), u=u8, observer=obs))
             row["four calibration records, guarded: L; on the eight; on eight fresh (open loop)"] = [

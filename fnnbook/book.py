@@ -28,7 +28,7 @@ from fnnbook.scoreboard import Missing, plot_verdicts, read_claims, render_score
 from fnnbook.spec import PipelineError, PipelineSpec
 from fnnlib.io import atomic_write, file_sha256
 from fnnbook.why import WHYS_FILENAME, Why, read_whys
-from fnnlib.results import RESULTS_FILENAME, Results, read_results
+from fnnbook.results import RESULTS_FILENAME, Results, read_results
 
 __all__ = ["GENERATED", "SHOWN_FILE", "assemble_book", "book_lock", "build_book", "make_book"]
 

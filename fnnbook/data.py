@@ -10,7 +10,7 @@ pinned in :data:`fnnlib.data.bottle.BOTTLE_FILES`; a refused file leaves nothing
 [PosixPath('data/bottle/Training_dataset.mat'), PosixPath('data/bottle/Testing_dataset.mat')]
 
 The authors' trained networks (what the why profile evaluates beside ours) come the same way from the
-official release, every file pinned in :data:`fnnlib.data.release.RELEASE_FILES`, into ``<data_dir>/release/``
+official release, every file pinned in :data:`fnnlib.release.RELEASE_FILES`, into ``<data_dir>/release/``
 (:func:`fetch_release`). They are read from there and never redistributed.
 
 The cascaded tanks benchmark's data file (the "Beyond the paper" chapter on a real plant) comes from its
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from fnnlib.data.bottle import BOTTLE_FILES, DataError
-from fnnlib.data.release import RELEASE_FILES
+from fnnlib.release import RELEASE_FILES
 from fnnlib.data.tanks import TANKS_ARCHIVE_MEMBER, TANKS_FILE, TANKS_SHA256, TANKS_SOURCES
 from fnnlib.io import file_sha256
 
@@ -117,7 +117,7 @@ def fetch_bottle(
 
 
 def fetch_release(data_dir: str | os.PathLike[str], **options: Any) -> list[Path]:
-    """Download each file of :data:`~fnnlib.data.release.RELEASE_FILES` into ``<data_dir>/release/`` (same
+    """Download each file of :data:`~fnnlib.release.RELEASE_FILES` into ``<data_dir>/release/`` (same
     relative paths as in the release), as :func:`fetch_bottle` does for the throws, with its options
     (``sources`` default :data:`RELEASE_SOURCES`, ``timeout``, ``echo``); one line for the files already there.
 

@@ -1,143 +1,23 @@
-r"""The Sec. 4 evaluation of a frozen neural ODE with a neural feedback (Fig. 5b, Fig. S10), for any networks.
+r"""The Sec. 4 claims judged on the evaluation of :mod:`fnnlib.paper.feedback_eval`, for any networks.
 
-The ``neural_feedback`` notebook evaluates our trained networks; the why notebooks evaluate retrained
-feedbacks and the authors' released networks the same way, through :func:`evaluation_setup` and
-:func:`judge`: the nominal task (D1, D2), the 12 residual levels of S8 and the held-out levels (D4), and the
-feedback's training loss (D3), judged by the claims' own rules (:mod:`fnnbook.rules.sec4`).
-
-Systems are made by ``make`` (``fnnlib.Spiral`` for Eq. (26); ``fnnlib.data.release.release_spiral`` for the
-release's transposed spiral, in which the authors' networks were trained).
+D2 and D4 (and D1 with a domain-randomized neural ODE, D3 with the feedback's training loss) by the claims' own
+rules (:mod:`fnnbook.rules.sec4`): :func:`judge`; D4 alone on the evaluation's numbers (:func:`d4_result`); the
+relative RMSEs after the feedback's estimate has settled (:func:`settled_errors`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import torch
-from torch import Tensor
 
-import fnnlib as F
+from fnnbook.results import ClaimResult
 from fnnbook.rules import sec4
-from fnnlib.results import ClaimResult
+from fnnlib.paper.feedback_eval import EvaluationSetup, field_errors, nominal_errors, rate_error_curves
 
-__all__ = ["CentredFeedback", "EvaluationSetup", "d4_result", "evaluation_setup", "feedback_ensemble", "field_errors", "judge",
-           "nominal_errors", "rate_error_curves", "release_form_loss", "settled_errors"]
-
-
-class CentredFeedback(torch.nn.Module):
-    """A learned feedback with its value at zero error removed: :math:`h(e) - h(0)`.
-
-    The cascade of Sec. 3.3 starts each layer's estimate at its input (:math:`e = 0`), where a learned
-    :math:`h(0)` need not vanish; centred, the first estimate is exact at the input. A usage the paper does not
-    state, tried by the why of D4 against the learned :math:`h` as it is."""
-
-    def __init__(self, h: torch.nn.Module):
-        super().__init__()
-        self.h = h
-
-    def forward(self, e: Tensor) -> Tensor:
-        return self.h(e) - self.h(torch.zeros_like(e[:1]))
-
-
-def feedback_ensemble(members: Sequence[F.NeuralFeedback], seeds: Sequence[int]) -> F.NeuralFeedbackEnsemble:
-    """The ensemble of trained neural feedbacks (Eq. (12); weights copied), e.g. one per seed loaded by
-    :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
-
-    The ensemble's stacked MLP is a :class:`fnnlib.NeuralODEEnsemble` of input-free neural ODEs holding the
-    feedbacks' MLPs (the layout :class:`fnnlib.NeuralFeedbackEnsemble` keeps).
-    """
-    if not all(isinstance(m, F.NeuralFeedback) for m in members):
-        raise TypeError("every member must be a NeuralFeedback")
-    as_odes = []
-    for m in members:
-        ode = F.NeuralODE(m.n_state, m.hidden, m.activation).to(next(m.parameters()).dtype)
-        ode.net.load_state_dict(m.net.state_dict())
-        as_odes.append(ode)
-    ens = F.NeuralFeedbackEnsemble.__new__(F.NeuralFeedbackEnsemble)
-    torch.nn.Module.__init__(ens)
-    ens.stacked = F.NeuralODEEnsemble.from_members(as_odes, seeds)
-    return ens
-
-
-@dataclass(frozen=True)
-class EvaluationSetup:
-    """The trajectories of the Sec. 4 evaluation (float32, noise-free, closed form).
-
-    ``x_nom`` (T, 2) / ``f_nom`` (T, 2): the nominal task; ``x_s8``, ``f_s8`` (12, T, 2): the S8 levels;
-    ``x_held``, ``f_held`` (H, T, 2): the held-out levels; ``offsets`` (12, 3): the S8 offsets.
-    """
-
-    x_nom: Tensor
-    f_nom: Tensor
-    x_s8: Tensor
-    f_s8: Tensor
-    x_held: Tensor
-    f_held: Tensor
-    offsets: Tensor
-    Ts: float
-    N: int
-
-
-def _trajectories(make: Callable[..., Any], params: Tensor, x0: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
-    """Closed-form trajectories (levels, T, 2) of ``make(*p)`` per row of ``params`` (rounded to float32, as the
-    neural_feedback notebook does) and their true rates (at the unrounded parameters)."""
-    rounded = params.float().tolist()
-    x = F.simulate_levels([make(*p) for p in rounded], x0, t, exact=True).float()
-    f = torch.stack([make(*p).rate(xi) for p, xi in zip(params.tolist(), x)])
-    return x, f
-
-
-def evaluation_setup(p: Mapping[str, Any], make: Callable[..., Any] = F.Spiral) -> EvaluationSetup:
-    """The evaluation of the neural_feedback notebook from its parameters ``p`` (its settings: ``x0``, ``nominal``,
-    ``n_samples``, ``Ts``, ``N``, ``residual_base``, the residual and training ranges, ``heldout_flip``,
-    ``heldout_min_distance``), with systems made by ``make``."""
-    t = torch.arange(p["n_samples"], dtype=torch.float64) * p["Ts"]
-    x0 = torch.tensor(p["x0"], dtype=torch.float64)
-    sys_nom = make(*p["nominal"])
-    x_nom = sys_nom.exact_solution(x0, t).float()
-    offsets = F.paired_levels(*(F.colon_range(*p[k]) for k in ("domega_range", "deta_range", "deps_range")))
-    base = torch.tensor(p["residual_base"], dtype=torch.float64)
-    x8, f8 = _trajectories(make, base + offsets, x0, t)
-    cases = F.paired_levels(*(F.colon_range(*p[k]) for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")))
-    steps = torch.tensor([p[k][1] for k in ("dr_omega_range", "dr_eta_range", "dr_eps_range")], dtype=torch.float64)
-    flipped = base + offsets * torch.tensor(p["heldout_flip"], dtype=torch.float64)
-    far = torch.cdist(flipped / steps, cases / steps).amin(-1) >= p["heldout_min_distance"]
-    if not far.any():
-        raise ValueError(f"no held-out level is {p['heldout_min_distance']} training steps from the cases")
-    xh, fh = _trajectories(make, flipped[far], x0, t)
-    return EvaluationSetup(x_nom, sys_nom.rate(x_nom), x8, f8, xh, fh, offsets, float(p["Ts"]), int(p["N"]))
-
-
-def _per_seed(z: Tensor, E: int) -> Tensor:
-    return F.split_members(z, E)
-
-
-def nominal_errors(f: torch.nn.Module, h: torch.nn.Module | None, setup: EvaluationSetup, E: int) -> np.ndarray:
-    """Relative change-rate RMSE on the nominal task, per seed (E,): of ``f`` alone when ``h`` is None, else of
-    the frozen ``f`` with the feedback ``h`` (the observer's :math:`\\hat f`)."""
-    xs = F.stack_members(setup.x_nom, E)
-    if h is None:
-        with torch.no_grad():
-            fhat = _per_seed(F.eval_field(f, xs), E)
-    else:
-        fhat = _per_seed(F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E).observe(xs).f_hat, E)
-    return np.array([F.relative_rmse(fhat[e], setup.f_nom) for e in range(E)])
-
-
-def rate_error_curves(f: torch.nn.Module, h: torch.nn.Module, setup: EvaluationSetup, E: int) -> dict[str, np.ndarray]:
-    """The per-time change-rate error on the nominal task, per seed (E, T): ``||f_hat(t) - f(t)||`` over the RMS
-    norm of the true rate over the record (so the windowed RMS of a curve is the relative RMSE of
-    :func:`nominal_errors` over that window), for ``f`` alone ("neural_ode") and with ``h`` ("neural_feedback")."""
-    xs = F.stack_members(setup.x_nom, E)
-    with torch.no_grad():
-        alone = _per_seed(F.eval_field(f, xs), E)
-    fb = _per_seed(F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E).observe(xs).f_hat, E)
-    scale = float(torch.linalg.vector_norm(setup.f_nom, dim=-1).pow(2).mean().sqrt())
-    return {k: (torch.linalg.vector_norm(v - setup.f_nom, dim=-1) / scale).numpy()
-            for k, v in (("neural_ode", alone), ("neural_feedback", fb))}
+__all__ = ["d4_result", "judge", "settled_errors"]
 
 
 def settled_errors(curves: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -147,36 +27,6 @@ def settled_errors(curves: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     out = {f"rel_rmse_settled_{k}": np.array([float(np.sqrt(np.mean(c[e, s:] ** 2))) for e, s in enumerate(start)])
            for k, c in curves.items()}
     return out | {"settle_index": start}
-
-
-def release_form_loss(f: torch.nn.Module, h: torch.nn.Module, x_cases: Tensor, Ts: float, E: int, *,
-                      skip_seconds: float = 0.5) -> np.ndarray:
-    r"""The feedback's training loss in the release's form, per seed (E,): the mean absolute difference, over the
-    randomized cases ``x_cases`` (C, T, 2), their samples and both components, between the finite-difference rate
-    :math:`(x_{k+1} - x_k) / T_s` and the observer's :math:`\hat f_k = f(x_k) + h(x_k - \hat x_k)`. This is the
-    loss the release logs and stops on (its ``Total_loss``, read in ``spiral_curve/d_FeedbackNN_converge.py``,
-    not copied); the first ``skip_seconds``, which the release fades in, are left out."""
-    xs = F.stack_members(x_cases, E)
-    f_hat = _per_seed(F.NeuralFeedbackObserver(f, Ts, h=h, n=2 * E).observe(xs).f_hat, E)  # (E, C, T, 2)
-    fd = (x_cases[:, 1:] - x_cases[:, :-1]) / Ts
-    k0 = int(round(skip_seconds / Ts))
-    return (f_hat[:, :, k0:-1] - fd[None, :, k0:]).abs().mean(dim=(1, 2, 3)).numpy()
-
-
-def field_errors(f: torch.nn.Module, h: torch.nn.Module, x: Tensor, f_true: Tensor, setup: EvaluationSetup,
-                 E: int, *, beta: float = 0.0) -> dict[str, np.ndarray]:
-    """Per seed and level (E, levels): change-rate RMSE and mean ``N``-step error of the neural ODE ``f`` (Euler
-    rollout) and of ``f`` with the neural feedback ``h`` (its cascade, decayed by ``beta`` along its layers), on
-    the levels ``x`` (levels, T, 2)."""
-    xs = F.stack_members(x, E)
-    nf = F.NeuralFeedbackObserver(f, setup.Ts, h=h, n=2 * E, beta=beta)
-    with torch.no_grad():
-        f_nn = _per_seed(F.eval_field(f, xs), E)
-    z = {"neural_ode": _per_seed(F.rollout_predict(f, xs, setup.Ts, setup.N), E),
-         "neural_feedback": _per_seed(nf.predict(xs, setup.N), E)}
-    rate = {"neural_ode": f_nn, "neural_feedback": _per_seed(nf.observe(xs).f_hat, E)}
-    out = {f"rate_{k}": F.rmse_over_time(v, f_true.expand_as(v)).numpy() for k, v in rate.items()}
-    return out | {f"err_N_{k}": F.n_step_errors(v, x, setup.N).mean(-1).numpy() for k, v in z.items()}
 
 
 def d4_result(s8: Mapping[str, np.ndarray], held: Mapping[str, np.ndarray], setup: EvaluationSetup,

@@ -25,7 +25,7 @@ from fnnbook.plan import Plan, run_name
 from fnnbook.preflight import check_grid_upstream, check_task_values
 from fnnbook.scoreboard import read_claims
 from fnnbook.spec import PipelineError, PipelineSpec, Task
-from fnnlib.data.release import release_files
+from fnnlib.release import release_files
 
 __all__ = ["FINGERPRINT_FILE", "KERNEL", "STATUS_FILE", "TASK_THREADS", "Action", "Decision", "Plan",
            "RunReport", "Status", "TaskOutcome", "check", "cpu_count", "decide", "execute", "execute_task",

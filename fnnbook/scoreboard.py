@@ -2,7 +2,7 @@
 
 The registry lists the claims by group, each with the paper's statement (paraphrased), where the paper makes
 it, its settings and the task that judges it (:func:`read_claims`).  Each task's ``results.json``
-(:mod:`fnnlib.results`) reports verdicts for some IDs; the rest are shown as "not run".
+(:mod:`fnnbook.results`) reports verdicts for some IDs; the rest are shown as "not run".
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import yaml
 
 from fnnbook.rules import beyond
 from fnnbook.why import Why
-from fnnlib.results import BETTER, BY_CONSTRUCTION, STATUSES, ClaimResult, Results
+from fnnbook.results import BETTER, BY_CONSTRUCTION, STATUSES, ClaimResult, Results
 
 __all__ = ["NOT_RUN", "SCOREBOARD_TASK", "SEEDS_CHECK_ID", "SELF_CHECK_ID", "Claim", "ScoreRow", "headline_of",
            "plot_verdicts", "read_claims", "render_scoreboard", "score_rows", "seeds_check", "self_check",
@@ -210,7 +210,7 @@ def score_rows(
     ----------
     claims : sequence of Claim
     results : mapping of str to Results
-        Task name -> its ``results.json`` (:func:`fnnlib.results.read_results`; tasks without outputs left out).
+        Task name -> its ``results.json`` (:func:`fnnbook.results.read_results`; tasks without outputs left out).
     declared : mapping of str to sequence of str, optional
         Task name -> claim IDs it declares; names the task of claims that
         have no result yet.
@@ -281,7 +281,7 @@ def short_title(text: str, words: int = 9) -> str:
 def headline_of(result: ClaimResult | None, shared: str = "") -> tuple[str, str]:
     """The headline number of a result as ``(name, "value ± spread unit (n = k seeds)")``.
 
-    Uses the result's ``headline`` (see :func:`fnnlib.results.headline_number`).
+    Uses the result's ``headline`` (see :func:`fnnbook.results.headline_number`).
     A result without one (written before the field existed) shows how many
     of its checks hold instead of guessing a number from ``numbers``;
     ``("", "")`` when there is no result. ``shared`` (the claim's :attr:`Claim.shared`) marks units that
@@ -516,7 +516,7 @@ def self_check(claims: Sequence[Claim], results: Mapping[str, Results],
 
     The claims expected are every claim a task declares (or, without ``declared``, every claim of the claims
     file but B3 itself).  A reported ID the claims file does not list stops the book
-    (:class:`~fnnlib.results.GuaranteeFailed`).
+    (:class:`~fnnbook.results.GuaranteeFailed`).
     """
     ids = {c.id for c in claims}
     expected = ({cid for task_ids in declared.values() for cid in task_ids} if declared is not None

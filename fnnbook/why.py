@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from fnnlib.io import atomic_write
-from fnnlib.results import BETTER, VERDICTS
+from fnnbook.results import BETTER, VERDICTS
 
 __all__ = ["AXIS_KINDS", "CAUSES", "WHYS_FILENAME", "Axis", "AuthorsCheck", "Cause", "Why", "WhyGrid", "causes", "read_whys",
            "reproduced", "summary", "write_whys"]
@@ -564,6 +564,6 @@ def read_whys(path: str | os.PathLike[str]) -> dict[str, Why]:
 
 
 def reproduced(results: Any) -> np.ndarray:
-    """Where each claim result of a grid (nested lists of :class:`~fnnlib.results.ClaimResult`) reads
+    """Where each claim result of a grid (nested lists of :class:`~fnnbook.results.ClaimResult`) reads
     *reproduced*: the ``holds`` of a :class:`WhyGrid` whose points are judged by the claim's own rule."""
     return np.array([[r.verdict == "reproduced" for r in row] for row in results], dtype=bool)

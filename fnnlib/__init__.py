@@ -1,8 +1,9 @@
 """fnnlib: feedback neural ODEs (Jia et al., "Feedback Favors the Generalization of Neural ODEs", ICLR 2025).
 
-The public face is flat: everything a notebook needs is importable from here.
-Importing fnnlib changes no global state; :func:`set_num_threads` sets torch's
-intra-op threads (the pipeline runner calls it in each notebook's kernel).
+The public face is the method (see :mod:`fnnlib._api`: at most about 30 names); the paper's own systems,
+settings, sweeps, the quadrotor stack and the released networks live in named subpackages.
+Importing fnnlib changes no global state; :func:`fnnlib.threads.set_num_threads` sets torch's
+intra-op threads.
 
 Names are loaded on first use (PEP 562, see :mod:`fnnlib._api`): ``import fnnlib`` is cheap, and a submodule
 such as :mod:`fnnlib.io` can be imported without torch.

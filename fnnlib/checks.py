@@ -122,8 +122,8 @@ def distinct_seeds(name: str, value: Any, *, at_least: int = 1) -> list[int]:
 
 
 def colon_grid(name: str, value: Any) -> list[float]:
-    """A non-empty grid ``[start, step, stop]`` (MATLAB's ``start:step:stop``, :func:`fnnlib.sweeps.colon_range`)."""
-    from fnnlib.sweeps import colon_range  # noqa: PLC0415 (loads torch)
+    """A non-empty grid ``[start, step, stop]`` (MATLAB's ``start:step:stop``, :func:`fnnlib.paper.sweeps.colon_range`)."""
+    from fnnlib.paper.sweeps import colon_range  # noqa: PLC0415 (loads torch)
 
     numbers(name, value, 3)
     try:

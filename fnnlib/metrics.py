@@ -50,3 +50,23 @@ def ahead_position_loss(x: Tensor, z: Tensor, N: int) -> Tensor:
     number: the objective that tunes the gains on O1's error. ``z`` (..., K, T', n) holds predictions from at least
     the first T - N starts of ``x`` (..., K, T, n)."""
     return error_norm(z[..., : x.shape[-2] - N, :3], x[..., N:, :3]).mean()
+
+
+def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
+    """2-norm errors of N-step predictions from every start that has a truth sample N steps later.
+
+    ``pred`` (..., T, n): row ``k`` predicts ``truth[..., k + N, :]`` (the
+    layout of :func:`fnnlib.feedback.cascade_sweep` and :func:`fnnlib.cascade_predict`);
+    ``truth`` (T, n) or broadcastable. Returns shape (..., T - N).
+    """
+    N = int(N)
+    T = truth.shape[-2]
+    if not 1 <= N < T or pred.shape[-2] != T:
+        raise ValueError(f"need 1 <= N < T and predictions of length T; got N={N}, T={T}, "
+                         f"prediction length {pred.shape[-2]}")
+    for name, v in (("truth", truth[..., N:, :]), ("pred", pred[..., : T - N, :])):
+        if not bool(torch.isfinite(v).all()):
+            idx = tuple(int(i) for i in (~torch.isfinite(v)).nonzero()[0])
+            raise ValueError(f"{name} holds a NaN or infinite value among the scored samples (first at index {idx} "
+                             "of the scored part); score only samples that were measured")
+    return torch.linalg.vector_norm(pred[..., : T - N, :] - truth[..., N:, :], dim=-1)

@@ -5,7 +5,7 @@ Two settings, each run once per seed: a damped pendulum driven by a known torque
 (:class:`fnnlib.systems.Pendulum`), learned by a neural ODE :math:`f_{neural}(x, u)` on the nominal pendulum and
 tested on another one under noisy measurements; and the paper's noisy spiral (the S3 setting) with the spiral
 task's networks. In each, the cascade of Sec. 3.3 predicts N steps ahead with the hand-picked gains
-(:func:`fnnlib.sweeps.n_step_gain_sweep`), the paper's gains and gains tuned by descending the N-step error
+(:func:`fnnlib.paper.sweeps.n_step_gain_sweep`), the paper's gains and gains tuned by descending the N-step error
 (:func:`fnnlib.feedback.tune_gains`); the open loop and a steady-state Kalman filter on the same model are the
 baselines.
 
@@ -27,7 +27,8 @@ from fnnlib.feedback.tuning import GainSweep, TunedGains
 from fnnlib.models import NeuralODE
 from fnnlib.observers import Covariances, KalmanObserver
 from fnnlib.seeding import make_generator, seed_everything
-from fnnlib.sweeps import n_step_errors, n_step_gain_sweep
+from fnnlib.metrics import n_step_errors
+from fnnlib.paper.sweeps import n_step_gain_sweep
 from fnnlib.systems import Pendulum, add_measurement_noise
 from fnnlib.training import QUICK_RECIPE, train_neural_ode
 

@@ -11,10 +11,12 @@ from matplotlib.figure import Figure
 
 #: width, height in inches per panel; figures are panels * this size
 PANEL_SIZE = (4.0, 3.2)
+#: pixels per inch of a saved figure
 DPI = 150
 #: pixels per inch at which a notebook shows a saved figure (the inline backend's size)
 SHOW_DPI = 100
 
+#: one colour per model or observer, the same in every figure
 COLORS = {
     "truth": "0.35",
     "neural_ode": "#1f77b4",

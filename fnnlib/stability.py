@@ -234,6 +234,7 @@ def reconvergence(t: Tensor, err: Tensor, t_switch: float, *, window: float,
 
 def reconvergence_rows(t: Tensor, err: Tensor, t_switch: float, *, window: float,
                        band_factor: float) -> dict[str, list[float]]:
-    """:func:`reconvergence` of each row of ``err`` (rows, T) (one seed a row), as one list per key."""
+    """:func:`reconvergence` of each row of ``err`` (rows, T) (one seed a row), as one list per key: how fast each
+    seed's error returns after the step change of S10 (Fig. S12)."""
     rows = [reconvergence(t, e, t_switch, window=window, band_factor=band_factor) for e in err]
     return {k: [r[k] for r in rows] for k in rows[0]}

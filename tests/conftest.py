@@ -42,7 +42,7 @@ def pytest_configure(config):
     """The tests compute with one torch thread, as the notebooks do (importing fnnlib does not set it), and
     hypothesis draws its examples from a fixed seed: the same command runs the same examples (a property test
     that fails fails every time, not one run in many)."""
-    fnnlib.set_num_threads(1)
+    fnnlib.threads.set_num_threads(1)
     settings.register_profile("fixed", derandomize=True)
     settings.load_profile("fixed")
 
@@ -152,27 +152,33 @@ def _depth(task: str, upstream: dict[str, list[str]]) -> int:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Run the tests that need the smoke pipeline first, the heads of the longest chains of tasks first.
+    """Run the tests that need the smoke pipeline first, upstream tasks first, and keep the book's tests together.
 
-    The task tests (test_notebooks.py) come first, then nbval, then the book in the browser (it needs every
-    task; its tests form one xdist group, so one worker builds the book while the other goes on), then every
-    other test. With ``--dist loadgroup`` (pyproject.toml) xdist hands each worker a test as it runs low, in
-    this order, so the workers run independent tasks side by side; a worker that needs a task another one is
-    running waits for its lock. Tasks are ordered by their longest chain of dependants (the executor's own
-    rule, each task counted as one), then upstream first.
+    The task tests (test_notebooks.py) come first, then nbval and the other tests of the smoke outputs, then the
+    book in the browser (it needs every task; its tests form one xdist group, so one worker builds the book
+    while the other goes on), then every other test. With ``--dist loadgroup --no-loadscope-reorder``
+    (pyproject.toml) xdist hands each worker the next test in this order as it runs low (two ahead). Tasks are
+    ordered upstream first (by depth), the head of the longest chain of dependants first within a depth (the
+    executor's rule, each task counted as one), and a grid's points by their grid: so the two workers start
+    on independent roots, and a worker seldom waits for the lock of a task the other one is running (before,
+    a grid's points sorted first, and both workers began with points of one grid: one ran its upstream chain
+    while the other waited 32 s).
     """
     import yaml  # noqa: PLC0415
 
     from fnnbook.executor import longest_remaining  # noqa: PLC0415
 
+    _group_the_marked(config, items)
     upstream = {name: list(t.get("upstream", [])) for name, t in
                 yaml.safe_load(PIPELINE.read_text(encoding="utf-8"))["tasks"].items()}
     height = longest_remaining(upstream, dict.fromkeys(upstream, 1.0))
-    order = sorted(upstream, key=lambda t: (-height[t], _depth(t, upstream)))
+    order = sorted(upstream, key=lambda t: (_depth(t, upstream), -height[t]))
+    grid_of = {point: grid for grid, points in load_spec(PIPELINE).grids.items() for point in points}
 
     def key(item: pytest.Item) -> tuple[int, int]:
         path = item.path.as_posix()
         task = getattr(item, "callspec", None) and item.callspec.params.get("task")
+        task = grid_of.get(task, task)
         rank = order.index(task) if task in upstream else 0
         if path.endswith("tests/test_notebooks.py"):
             return 0, rank
@@ -181,3 +187,23 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return (2, 0) if "test_browser" in path else (1, rank)
 
     items.sort(key=key)  # stable: the order within a stage is kept
+
+
+def _group_the_marked(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Give each test marked ``xdist_group(name)`` the ``@name`` suffix that xdist's loadgroup scheduler groups by.
+
+    pytest-xdist 3.8 writes the suffix into ``item._nodeid``, which pytest 9.2 no longer reads (a node's id is
+    ``item._id``, a ``NodeId``): the marks were silently ignored and the book's tests split over both workers,
+    one of them waiting for the other's build (pytest-dev/pytest-xdist#1386, open). Where the suffix is already
+    there (a fixed xdist), nothing changes.
+    """
+    from _pytest.nodeid import NodeId  # noqa: PLC0415 (private: the only way to set an item's id on pytest 9.2)
+
+    if not getattr(config.option, "loadgroup", False):
+        return
+    for item in items:
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                        for m in item.iter_markers("xdist_group")})
+        suffix = "@" + "_".join(names)
+        if names and not item.nodeid.endswith(suffix):
+            item._id = NodeId.parse(item.nodeid + suffix)

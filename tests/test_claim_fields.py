@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number, read_results, write_results
+from fnnbook.results import ClaimResult, GuaranteeFailed, Headline, headline_number, read_results, write_results
 
 
 def test_a_result_without_the_new_fields_is_unchanged() -> None:

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.training import load_checkpoint, save_checkpoint
 from fnnlib.io import atomic_write
 
 
@@ -37,9 +38,9 @@ def test_atomic_write_refuses_other_modes(tmp_path):
 def test_checkpoint_same_model_same_bytes(tmp_path):
     torch.manual_seed(0)
     model = F.NeuralODE(2, hidden=[4], activation="tanh")
-    a = F.save_checkpoint(tmp_path / "a.pt", model, {"seed": 0})
-    b = F.save_checkpoint(tmp_path / "other" / "b.pt", model, {"seed": 0})
+    a = save_checkpoint(tmp_path / "a.pt", model, {"seed": 0})
+    b = save_checkpoint(tmp_path / "other" / "b.pt", model, {"seed": 0})
     assert a.read_bytes() == b.read_bytes()
-    loaded, meta = F.load_checkpoint(b)
+    loaded, meta = load_checkpoint(b)
     assert meta == {"seed": 0}
     assert all(torch.equal(loaded.state_dict()[k], v) for k, v in model.state_dict().items())

@@ -9,6 +9,9 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.models import stack_members
+from fnnlib.seeding import seed_everything
+from fnnlib.training import load_seed_checkpoints, load_seed_ensemble, save_checkpoint, seed_checkpoint_name
 from fnnlib.models import AeroResidual
 from fnnlib.training import CheckpointError
 
@@ -18,13 +21,13 @@ RUN = {"seeds": [1, 0], "epochs": 3, "lr": None}  # the run record's parameters 
 def _members(folder: Path) -> Path:
     torch.manual_seed(0)
     for seed in RUN["seeds"]:
-        F.save_checkpoint(folder / f"residual_seed{seed}.pt", AeroResidual((4,), "tanh").double(),
+        save_checkpoint(folder / f"residual_seed{seed}.pt", AeroResidual((4,), "tanh").double(),
                           {"seed": seed, "epochs": 3, "lr": 0.01})
     return folder
 
 
 def _load(folder: Path, run: dict = RUN) -> list:
-    return F.load_seed_checkpoints(folder, "residual", expected_kind="AeroResidual", run=run)
+    return load_seed_checkpoints(folder, "residual", expected_kind="AeroResidual", run=run)
 
 
 def test_members_load_with_int_seeds_in_the_run_order(tmp_path: Path) -> None:
@@ -64,16 +67,16 @@ def test_the_run_must_name_distinct_seeds(tmp_path: Path) -> None:
 def test_the_seed_ensemble_holds_each_seeds_network_in_the_checkpoints_order(tmp_path: Path) -> None:
     """``load_seed_ensemble``: member e of the ensemble is seed ``seeds[e]``'s network, in the dtype asked for."""
     for seed in (3, 1):
-        F.seed_everything(seed)
-        F.save_checkpoint(tmp_path / F.seed_checkpoint_name(seed), F.NeuralODE(2, [8], "tanh"), {"seed": seed})
-    ens = F.load_seed_ensemble(tmp_path, dtype=torch.float64)
-    loaded = F.load_seed_checkpoints(tmp_path)
+        seed_everything(seed)
+        save_checkpoint(tmp_path / seed_checkpoint_name(seed), F.NeuralODE(2, [8], "tanh"), {"seed": seed})
+    ens = load_seed_ensemble(tmp_path, dtype=torch.float64)
+    loaded = load_seed_checkpoints(tmp_path)
     assert list(ens.seeds) == [s for s, _, _ in loaded] == [1, 3]
     x = torch.randn(5, 2, dtype=torch.float64)
-    out = ens.split(ens(0.0, F.stack_members(x, 2)))
+    out = ens.split(ens(0.0, stack_members(x, 2)))
     assert out.dtype == torch.float64
     for e, (_, net, _) in enumerate(loaded):
         torch.testing.assert_close(out[e], net.double()(0.0, x))
     (tmp_path / "res").mkdir()
     with pytest.raises(CheckpointError, match="NeuralODE"):  # the members must be neural ODEs
-        F.load_seed_ensemble(_members(tmp_path / "res"), "residual")
+        load_seed_ensemble(_members(tmp_path / "res"), "residual")

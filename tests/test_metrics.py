@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from fnnlib import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
+from fnnlib.metrics import error_norm, mean_error_norm, relative_rmse, rmse, rmse_over_time
 
 
 def test_error_norm_per_step():
@@ -52,7 +52,7 @@ def test_rmse_over_time_per_series():
 def test_ahead_position_errors_read_the_position_n_samples_ahead():
     """Row k predicts x[:, k + N]: an exact prediction scores 0; one off by (3, 4, 0) in position, and anything in
     the velocity, scores 5 at every start; the loss is their mean over starts and trajectories."""
-    from fnnlib import ahead_position_errors, ahead_position_loss
+    from fnnlib.metrics import ahead_position_errors, ahead_position_loss
 
     x = torch.arange(2 * 7 * 6, dtype=torch.float64).reshape(2, 7, 6)
     N = 2

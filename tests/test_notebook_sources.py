@@ -48,9 +48,9 @@ MAX_FIGURE_CELL_LINES = 30
 
 
 def is_one_figure(source: str) -> bool:
-    """A cell that draws one figure (one ``F.new_figure(`` and one ``F.save_figure(``) or defines one plotting
+    """A cell that draws one figure (one ``new_figure(`` and one ``save_figure(``, from fnnlib.plotting) or defines one plotting
     helper (its only ``def`` is named ``plot_*``/``draw_*``, nothing else at its top level but that)."""
-    figure = source.count("F.new_figure(") == 1 and source.count("F.save_figure(") == 1
+    figure = source.count("new_figure(") == 1 and source.count("save_figure(") == 1
     try:
         body = ast.parse(source).body
     except SyntaxError:  # a cell with IPython syntax is no helper
@@ -80,7 +80,7 @@ def long_cells(nb) -> list[tuple[int, int]]:
 
 def test_the_cell_length_rule_gives_a_figure_room_and_nothing_else() -> None:
     code = "\n".join(f"v{i} = {i}" for i in range(16))
-    figure = "fig, ax = F.new_figure()\n" + "\n".join(f"ax.plot({i})" for i in range(20)) + "\nF.save_figure(fig, out, 'a')"
+    figure = "fig, ax = new_figure()\n" + "\n".join(f"ax.plot({i})" for i in range(20)) + "\nsave_figure(fig, out, 'a')"
     helper = "def plot_a(ax):\n" + "\n".join(f"    ax.plot({i})" for i in range(20))
     two = helper + "\n\n\ndef plot_b(ax):\n    pass"
     logic = helper + "\nv = 1"
@@ -101,7 +101,7 @@ def test_no_code_cell_is_over_15_lines(src: Path) -> None:
 
 def test_the_quick_start_is_a_short_program_of_public_calls():
     """The quick start's program (its code cells from the imports to the printed result): at most 25 lines
-    besides its two imports, visible (not folded), and every ``F.`` name it calls is in fnnlib's public API."""
+    besides its imports, visible (not folded), and every ``F.`` name it calls is on fnnlib's face."""
     import re
 
     import fnnlib
@@ -117,5 +117,5 @@ def test_the_quick_start_is_a_short_program_of_public_calls():
     code = [ln for ln in lines if not ln.startswith(("import ", "from "))]
     assert len(code) <= 25, len(code)
     for name in set(re.findall(r"\bF\.([A-Za-z_]\w*)", program)):
-        assert name in fnnlib.__all__, name
+        assert name in fnnlib.__all__, name  # the face
     assert "train_from_outputs" in program and "cascade_predict" in program

@@ -4,7 +4,7 @@ Two rules over ``notebooks/src/*.py`` (jupytext's percent format, so markdown ce
 
 * **No logic defined in a notebook.** A ``def`` or ``class`` anywhere in a notebook is allowed only when it is a
   plotting helper: a function whose name starts ``plot_`` or ``draw_`` and which calls nothing of torch, of
-  fnnbook, or of fnnlib beyond its figure functions (``F.new_figure``, ``F.save_figure``, ``F.plotting.*``). Science
+  fnnbook, or of fnnlib beyond its figure functions (``new_figure``, ``save_figure``, ``F.plotting.*``). Science
   goes to fnnlib, verdict and why machinery to fnnbook, each with its tests. A ``class`` is never allowed.
 * **No block repeats across notebooks.** No run of :data:`MIN_BLOCK` or more consecutive code lines (white space
   folded; blank lines, comment-only lines, import lines and the ``parameters`` cells left out: papermill needs

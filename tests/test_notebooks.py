@@ -17,7 +17,7 @@ from conftest import SMOKE, SmokeOutputs
 from fnnbook import load_spec
 from fnnbook.runner import product_files
 from fnnbook.why import WHYS_FILENAME, read_whys
-from fnnlib.results import RESULTS_FILENAME, STATUSES, read_results
+from fnnbook.results import RESULTS_FILENAME, STATUSES, read_results
 
 PIPELINE = Path(__file__).resolve().parents[1] / "pipeline.yaml"
 PROFILE = SMOKE

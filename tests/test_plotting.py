@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from fnnlib import new_figure, save_figure  # noqa: E402
+from fnnlib.plotting import new_figure, save_figure  # noqa: E402
 from fnnlib.plotting import PANEL_SIZE  # noqa: E402
 
 

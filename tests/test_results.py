@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from fnnlib.results import BY_CONSTRUCTION, STATUSES, VERDICTS, ClaimResult, Reading, verdict_from_checks
+from fnnbook.results import BY_CONSTRUCTION, STATUSES, VERDICTS, ClaimResult, Reading, verdict_from_checks
 
 
 @pytest.mark.parametrize(("checks", "verdict"), [

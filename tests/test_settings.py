@@ -277,7 +277,7 @@ def test_a_settings_class_checks_itself_when_made() -> None:
 
 def test_shared_values_are_plain_and_one_source() -> None:
     """Tuples become lists; the same paper value reaches every notebook that shares it."""
-    from fnnlib import spiral_presets as SP
+    from fnnlib.paper import spiral_presets as SP
     for name in NOTEBOOKS:
         for value in settings_class(name).defaults().values():
             assert not isinstance(value, tuple)

@@ -8,7 +8,10 @@ import math
 import pytest
 import torch
 
-from fnnlib import Gains, LinearFeedback, Spiral, mlp
+from fnnlib import LinearFeedback
+from fnnlib.feedback import Gains
+from fnnlib.models import mlp
+from fnnlib.systems import Spiral
 from fnnlib.stability import (
     discrete_residual,
     divergence_transition,

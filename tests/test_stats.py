@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fnnlib import paired_win
+from fnnlib.stats import paired_win
 
 
 def test_clear_win():

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib import Gains, GainError, LinearFeedback, Spiral, cascade_predict
+from fnnlib import GainError, LinearFeedback, cascade_predict
+from fnnlib.systems import Spiral
 from fnnlib._scan import linear_recurrence
-from fnnlib.feedback import cascade_sweep, observe_gains
-from fnnlib.sweeps import (
+from fnnlib.feedback import cascade_sweep, observe_gains, Gains
+from fnnlib.paper.sweeps import (
     colon_range,
     n_step_errors,
     n_step_rmse,
@@ -203,7 +204,8 @@ def test_n_step_rmse_is_the_root_mean_square_over_the_pooled_axes():
 def test_sweep_errors_are_each_members_mean_error_at_each_gain():
     """Cell (e, g): member e's cascade at gain L_g (decay beta), its mean N-step error; the gain 0 cell is the
     member's open-loop Euler rollout."""
-    from fnnlib import NeuralODEEnsemble, rollout_predict, stack_members
+    from fnnlib import NeuralODEEnsemble, rollout_predict
+    from fnnlib.models import stack_members
 
     ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
     x = Spiral(2.0, 0.1, 0.0).simulate(torch.tensor([9.0, 0.0], dtype=F64), torch.arange(60, dtype=F64) * 0.01).float()
@@ -229,7 +231,8 @@ def _throws(K: int = 2, T: int = 40) -> torch.Tensor:
 
 def test_cascade_position_errors_of_an_ensemble_are_each_members_own():
     """An ensemble's row e is member e's O1 error alone; L = 0 is the open-loop Euler rollout's."""
-    from fnnlib import NeuralODEEnsemble, ahead_position_errors, rollout_predict
+    from fnnlib import NeuralODEEnsemble, rollout_predict
+    from fnnlib.metrics import ahead_position_errors
 
     x = _throws()
     ens = NeuralODEEnsemble(6, [8], "tanh", [0, 1])
@@ -244,7 +247,9 @@ def test_cascade_position_errors_of_an_ensemble_are_each_members_own():
 
 
 def test_the_hand_sweep_keeps_the_grid_pair_of_lowest_o1_loss_and_the_tuner_lowers_it():
-    from fnnlib import NeuralODE, ahead_position_loss, seed_everything
+    from fnnlib import NeuralODE
+    from fnnlib.metrics import ahead_position_loss
+    from fnnlib.seeding import seed_everything
 
     x = _throws()
     seed_everything(0)
@@ -263,7 +268,8 @@ def test_the_hand_sweep_keeps_the_grid_pair_of_lowest_o1_loss_and_the_tuner_lowe
 def test_level_errors_of_a_zero_neural_feedback_are_the_neural_odes():
     """h = 0 adds nothing: the neural feedback's rates and N-step errors are the neural ODE's; the linear
     feedback's are each member's own LinearFeedback and cascade."""
-    from fnnlib import LinearFeedback, NeuralFeedbackEnsemble, NeuralFeedbackObserver, NeuralODEEnsemble
+    from fnnlib import LinearFeedback, NeuralFeedbackObserver, NeuralODEEnsemble
+    from fnnlib.models import NeuralFeedbackEnsemble
 
     ens = NeuralODEEnsemble(2, [8], "tanh", [0, 1])
     h = NeuralFeedbackEnsemble(2, [8], "tanh", [0, 1])

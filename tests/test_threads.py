@@ -6,7 +6,7 @@ import sys
 import pytest
 import torch
 
-import fnnlib as F
+from fnnlib.threads import set_num_threads
 
 
 def test_import_leaves_threads_alone():
@@ -18,9 +18,9 @@ def test_import_leaves_threads_alone():
 def test_set_num_threads():
     n = torch.get_num_threads()
     try:
-        F.set_num_threads(2)
+        set_num_threads(2)
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(n)
     with pytest.raises(ValueError, match=">= 1"):
-        F.set_num_threads(0)
+        set_num_threads(0)

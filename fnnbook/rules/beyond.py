@@ -17,7 +17,7 @@ Per setting, with ``errors[setting][predictor]`` one error per unit (lower is be
 
 A *win* of A over B is :func:`fnnlib.stats.paired_win`: A is lower in at least S - 1 of S units **and**
 the 90 % t-interval of the mean paired difference lies below 0. All checks true: *reproduced*; some:
-*partly*; none: *not reproduced* (:class:`fnnlib.ClaimResult`). B1 has no guarantee.
+*partly*; none: *not reproduced* (:class:`fnnbook.results.ClaimResult`). B1 has no guarantee.
 
 A fair comparison (the premises, enforced or shown, never checks): per setting the tuned and the hand gains
 get the same *budget* -- the same number of evaluations of their cost on the same training data, one
@@ -36,7 +36,7 @@ from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
-from fnnlib.results import ClaimResult, GuaranteeFailed, Headline, headline_number
+from fnnbook.results import ClaimResult, GuaranteeFailed, Headline, headline_number
 from fnnlib.stats import paired_win
 
 __all__ = ["KALMAN_FACTOR", "MIN_SEEDS", "PREDICTORS", "b1", "b1_budget", "b1_coverage", "b1_paired", "b1_summary",
@@ -187,7 +187,7 @@ def b2(headlines: Mapping[str, Headline | None], *, min_seeds: int = MIN_SEEDS) 
     """B2 (every comparison over several seeds, with spread shown), computed by the scoreboard from the runs.
 
     ``headlines`` maps each judged claim ID (B2 and B3 aside) to its headline
-    (:func:`fnnlib.headline_number`: ``n`` values when it is per seed, with their ``spread``), or None.
+    (:func:`fnnbook.results.headline_number`: ``n`` values when it is per seed, with their ``spread``), or None.
 
     Checks, each of which a plausible run fails (a profile with fewer seeds, a claim judged on one run):
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, beats, per_seed
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 
 

@@ -1,6 +1,6 @@
 r"""The rules of Sec. 5 (claims Q1-Q6): measured numbers in, checks and guarantees out.
 
-Each rule returns a :class:`~fnnlib.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
+Each rule returns a :class:`~fnnbook.results.ClaimResult`: ``checks`` decide the verdict and each can fail on a
 plausible run;
 ``guarantees`` hold by construction or by a theorem whose constants are measured on the same run, and never
 count. Comparisons over trained networks (and disturbances) are paired over independent units and decided by
@@ -19,11 +19,11 @@ import numpy as np
 from torch import Tensor
 
 from fnnlib.mpc.experiment import SIX
-from fnnlib.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
+from fnnbook.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
 from fnnlib.stats import paired_win
 from fnnlib.training.residual import convergence_checks
 
-__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "GROUPS", "SIX", "count_trainable", "join_costs", "join_readings", "joined_verdict",
+__all__ = ["AUTHORS_SECONDS_50_EPOCHS", "unjudged_bound_note", "GROUPS", "SIX", "count_trainable", "join_costs", "join_readings", "joined_verdict",
            "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction", "q5_adaptive", "q6_training_cost",
            "rules_at_setting"]
 
@@ -297,3 +297,24 @@ def q6_training_cost(n_trainable_feedback: int, seconds_per_model: float, *,
              f"{minutes:g} min on a 14-core laptop CPU, a factor {around:g} either way; different hardware); below "
              "the band reads better than claimed; no trainable parameter on the feedback object is a guarantee "
              "(construction)")
+
+
+def unjudged_bound_note(rows: Mapping[str, Any] | None, *, metric: str, unit: str, need: Mapping[str, float],
+                        u_max: float, setting: str, flown: str, compare: tuple[str, str]) -> str:
+    """The outcome at a thrust bound that is not judged, and why it cannot be judged there, with the number.
+
+    ``rows``: the table rows flown at ``u_max`` under ``setting`` (None when not flown in this run); ``metric``
+    a :class:`FlightRow` field; ``need`` what :func:`thrust_needed` returns; ``flown`` says which flights they
+    are; ``compare`` = (a, b) names the two models whose order is stated.
+    """
+    why = (f"not judged at {u_max:g} N: the test vehicle needs {need['peak']:.2f} N per motor at the reference's "
+           f"peak acceleration ({need['hover']:.2f} N to hover) against the {u_max:g} N bound"
+           + (", so no model can track there" if need["peak"] > u_max else ""))
+    if rows is None:
+        return f"{setting}, {u_max:g} N: not flown in this run; {why}."
+    values = {n: getattr(r, metric) for n, r in rows.items()}
+    a, b = compare
+    order = "worse than" if values[a] > values[b] else "better than or equal to"
+    listed = ", ".join(f"{n} {v:.2f}" for n, v in values.items())
+    return (f"{setting}, {u_max:g} N ({flown}): {metric} {listed} {unit}; every model "
+            f"{min(values.values()):.2f}-{max(values.values()):.2f} {unit}, {a} {order} {b}; {why}.")

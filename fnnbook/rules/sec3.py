@@ -1,7 +1,7 @@
 """Rules of the Sec. 3 claims S1-S11 (the linear feedback, Eqs. (7)-(8), (11), Theorem 1, App. A.2-A.7).
 
 Every function takes measured numbers (one value, or one value per seed where the section runs seeds) and
-returns the claim's :class:`~fnnlib.results.ClaimResult` (checks, guarantees, rule); the notebook adds its
+returns the claim's :class:`~fnnbook.results.ClaimResult` (checks, guarantees, rule); the notebook adds its
 numbers.
 
 Over S seeds (the spiral task's networks, claim B2) two kinds of checks are judged:
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules._compare import Value, at_most, beats, every_seed, most_seeds, per_seed, seeds_note
-from fnnlib.results import ClaimResult, Reading
+from fnnbook.results import ClaimResult, Reading
 
 
 

@@ -1,7 +1,7 @@
 """Rules of the Sec. 4 claims D1-D4 (the neural feedback of Eq. (12), Alg. 1, Fig. 5, S10).
 
 Every function takes measured numbers (one value, or one value per seed) and returns the claim's
-:class:`~fnnlib.results.ClaimResult` (checks, guarantees, rule); the notebook adds its numbers.
+:class:`~fnnbook.results.ClaimResult` (checks, guarantees, rule); the notebook adds its numbers.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 
 from fnnbook.rules._compare import Value, beats, most_seeds, per_seed, seeds_note
 from fnnbook.rules.sec3 import AS_WORDED_LEVELS, residual_levels
-from fnnlib.results import ClaimResult, Reading
+from fnnbook.results import ClaimResult, Reading
 
 
 

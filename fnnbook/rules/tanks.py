@@ -21,7 +21,7 @@ B6 (gains learned from data): the gains tuned by gradient descent on the estimat
 gains (the best of a small sweep on the estimation record) at N-step prediction. One check per horizon
 ``N > 1``; at ``N = 1`` both are the observer alone (a guarantee, as in B4).
 
-All checks true: *reproduced*; some: *partly*; none: *not reproduced* (:class:`fnnlib.ClaimResult`).
+All checks true: *reproduced*; some: *partly*; none: *not reproduced* (:class:`fnnbook.results.ClaimResult`).
 No guarantees: each check can fail on a plausible run.
 """
 
@@ -31,7 +31,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from fnnlib.results import ClaimResult, headline_number
+from fnnbook.results import ClaimResult, headline_number
 from fnnlib.stats import paired_win
 
 __all__ = ["SAME", "b4", "b4_at", "b5", "b6", "b6_at"]
@@ -144,13 +144,13 @@ def b6(errors: Mapping[int, Mapping[str, PerSeed]]) -> ClaimResult:
 
 
 def b4_at(errors: Mapping[str, Mapping[int, PerSeed]], horizons: Sequence[int], feedback: str = "tuned") -> ClaimResult:
-    """:func:`b4` at one point of a why grid: ``errors`` holds each model's N-step errors by horizon (the cascade's
+    """B4 (:func:`b4`) at one point of a why grid: ``errors`` holds each model's N-step errors by horizon (the cascade's
     columns ``"tuned"``, ``"hand"`` or a fixed gain's, and ``"open_loop"``); the cascade ``feedback`` against the open
     loop at every horizon of ``horizons``."""
     return b4({N: {"feedback": errors[feedback][N], "open_loop": errors["open_loop"][N]} for N in horizons})
 
 
 def b6_at(errors: Mapping[str, Mapping[int, PerSeed]], horizons: Sequence[int]) -> ClaimResult:
-    """:func:`b6` at one point of a why grid: the tuned gains against the hand gains at every horizon of
+    """B6 (:func:`b6`) at one point of a why grid: the tuned gains against the hand gains at every horizon of
     ``horizons`` (``errors`` as :func:`b4_at` reads them)."""
     return b6({N: {"tuned": errors["tuned"][N], "hand": errors["hand"][N]} for N in horizons})

@@ -2,7 +2,7 @@
 readings the paper leaves open, and the authors' networks (:mod:`fnnbook.why`).
 
 Each function applies a rule of :mod:`fnnbook.rules.sec4` unchanged to the numbers of one grid point (the
-evaluation of :mod:`fnnbook.feedback_eval`) and says whether the claim holds there; none adds a criterion of its
+evaluation of :mod:`fnnlib.paper.feedback_eval`, judged by :mod:`fnnbook.feedback_eval`) and says whether the claim holds there; none adds a criterion of its
 own. The thresholds are the claims' (``d2_factor`` of D2, ``d3_ratio`` and ``d3_flat`` of D3).
 """
 
@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from fnnbook import why as W
-from fnnbook.feedback_eval import CentredFeedback, EvaluationSetup, d4_result, field_errors, judge
+from fnnbook.feedback_eval import d4_result, judge
+from fnnlib.paper.feedback_eval import CentredFeedback, EvaluationSetup, field_errors
 from fnnbook.rules import sec4
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 __all__ = ["AXES", "D3_READ", "FIRST", "METRIC", "READING_D3", "TITLES", "UNIT", "WINDOW", "WORDS", "Thresholds",
            "authors_checks", "counted", "curves_grid", "d2_settled", "d4_at_usage", "decay_axis", "levels_won", "measured",

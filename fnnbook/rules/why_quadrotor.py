@@ -1,7 +1,7 @@
 r"""The flight test's claims Q3-Q5 at every point of their why grid (Sec. 5.2.2, App. A.5.4; Eqs. (28)-(30)).
 
 A point is a thrust bound :math:`u_{max}` of Eq. (28), a cost variant, AdapNN's gain (App. A.5.4) and AdapFNN's
-:math:`\Gamma` (Eq. (30)). Each function reads the point's flight record (:func:`fnnbook.quadrotor_eval.at_gains`)
+:math:`\Gamma` (Eq. (30)). Each function reads the point's flight record (:func:`fnnlib.quadrotor.evaluation.at_gains`)
 and applies the flight test's own rules (:func:`fnnbook.rules.quadrotor.rules_at_setting`) unchanged; none adds a
 criterion of its own.
 """
@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from fnnbook.quadrotor_eval import at_gains
+from fnnlib.quadrotor.evaluation import at_gains
 from fnnbook.rules.quadrotor import SIX, joined_verdict, rules_at_setting
 from fnnbook.why import Axis
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 __all__ = ["CLAIMS", "failing_checks", "gain_axis", "holds_along_gains", "joined_at", "mean_rmse", "setting"]
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from fnnbook.rules import sec3
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 from fnnlib.stability import reconvergence_rows, theorem1_balls
 
 __all__ = ["holds", "s3_point", "s5_point", "s8_levels", "s10_point"]

@@ -2,7 +2,7 @@
 
 ``fnnbook.tasks.spiral`` holds :class:`~fnnbook.tasks.spiral.SpiralSettings`, the settings of
 ``notebooks/01_spiral``: one field per setting with its paper value (a value several notebooks share refers to
-:mod:`fnnlib.spiral_presets`, :mod:`fnnlib.quadrotor_presets` or a training recipe, where it is written once) and
+:mod:`fnnlib.paper.spiral_presets`, :mod:`fnnlib.quadrotor.presets` or a training recipe, where it is written once) and
 its check, and the checks between values in its ``check_relations``; groups of settings the spiral notebooks
 share are classes of :mod:`fnnbook.tasks._spiral`. Making one checks it (:class:`~fnnbook.tasks._base.TaskSettings`).
 

@@ -1,5 +1,5 @@
 """The groups of settings the spiral notebooks (Sec. 3-4) share, each written once: a notebook's settings class
-derives from the groups it uses. Shared paper values come from :mod:`fnnlib.spiral_presets`."""
+derives from the groups it uses. Shared paper values come from :mod:`fnnlib.paper.spiral_presets`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from fnnbook.tasks._base import TaskSettings, setting
 from fnnbook.tasks._checks import ACT, GAIN, GAINS, GRID, N1, N2, NONNEG, OPTIMIZER, POS, SPIRAL3, WIDTHS, X0, need
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 #: Alg. 1's randomized spirals: ``[start, step, stop]`` of ``(omega, eta, eps)``, the neural feedback's training
 #: cases (the Kalman baseline of S11 tunes its disturbance noise on spirals from the same range)

@@ -9,7 +9,7 @@ from fnnbook.tasks._checks import GRID, POS, SEED, SPIRAL3, SWEEP0, gain, horizo
 from fnnbook.tasks._spiral import (MeasurementNoise, NoiseDraws, ResidualGrid, SpiralFeedback, SpiralTrajectory,
                                    SwitchTest)
 from fnnlib import checks as C
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["AblationsSettings"]
 
@@ -36,7 +36,7 @@ class AblationsSettings(SwitchTest, NoiseDraws, ResidualGrid, MeasurementNoise, 
     def check_relations(self) -> None:
         """A gain stable at ``Ts`` (Theorem 1, Eq. (25)) and over ``N`` layers (Eq. (11)), every gain of
         ``gain_range`` stable at ``Ts``, ``N < n_samples``, and a switch with a steady window on both sides."""
-        from fnnlib.sweeps import colon_range  # noqa: PLC0415 (loads torch)
+        from fnnlib.paper.sweeps import colon_range  # noqa: PLC0415 (loads torch)
 
         gain(self, 2, self.Ts, self.N)
         for g in colon_range(*self.gain_range).tolist():

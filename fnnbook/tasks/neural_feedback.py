@@ -8,7 +8,7 @@ from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import SEED, SPIRAL3, gain, horizon
 from fnnbook.tasks._spiral import (D1Rule, DomainRandomization, FeedbackNetwork, FeedbackRules, FeedbackTraining,
                                    ResidualGrid, SpiralFeedback, SpiralTrajectory)
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["NeuralFeedbackSettings"]
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import N0, N1, N2, NONNEG, SEED, SPIRAL3, gain, horizon, need, vec
 from fnnbook.tasks._spiral import DR_RANGES, MeasurementNoise, SpiralFeedback, SpiralTrajectory
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["ObserversSettings"]
 

@@ -9,7 +9,7 @@ from fnnbook.tasks._base import TaskSettings, setting
 from fnnbook.tasks._checks import (ACT, GAIN, GRID0, N1, N2, NONNEG, POS, SEEDS2, SPIRAL3, WIDTHS, X0, gain, need,
                                    vec)
 from fnnlib import checks as C
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 from fnnlib.feedback import GainWarning
 
 __all__ = ["OwnSystemSettings"]

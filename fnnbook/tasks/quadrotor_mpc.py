@@ -8,7 +8,7 @@ from fnnbook.tasks._base import TaskSettings, setting
 from fnnbook.tasks._checks import (GAIN, N0, N1, N2, NONNEG, POS, SEED, cvxpy_solvers, from_mpc, lazy_choice, need,
                                    some, vec)
 from fnnlib import checks as C
-from fnnlib import quadrotor_presets as QP
+from fnnlib.quadrotor import presets as QP
 from fnnlib.systems.quadrotor import TEST_TRUTH
 
 __all__ = ["QuadrotorMPCSettings"]

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import ACT, BOOL, METHOD, N1, N2, POS, SEEDS2, SPIRAL3, SWEEP0, WIDTHS, gain, need
 from fnnbook.tasks._spiral import MeasurementNoise, SpiralFeedback, SpiralTrajectory
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 from fnnlib.training import PAPER_SPIRAL_RECIPE as RECIPE
 
 __all__ = ["SpiralSettings"]

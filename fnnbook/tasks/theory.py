@@ -8,7 +8,7 @@ from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import GAIN, POS, SEED, SPIRAL3, SWEEP0
 from fnnbook.tasks._spiral import GainSweep, SpiralTrajectory
 from fnnlib import checks as C
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["TheorySettings"]
 

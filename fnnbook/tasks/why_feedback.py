@@ -8,8 +8,8 @@ from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import N1, SPIRAL3, SWEEP0, choice, horizon
 from fnnbook.tasks._spiral import (D1Rule, DomainRandomization, FeedbackRules, FeedbackTraining, ResidualGrid,
                                    SpiralTrajectory)
-from fnnlib import spiral_presets as SP
-from fnnlib.data.release import SPIRAL_FEEDBACK_NAMES, SPIRAL_ODE_NAMES
+from fnnlib.paper import spiral_presets as SP
+from fnnlib.release import SPIRAL_FEEDBACK_NAMES, SPIRAL_ODE_NAMES
 
 __all__ = ["WhyFeedbackSettings"]
 

@@ -9,7 +9,7 @@ from fnnbook.tasks._base import setting
 from fnnbook.tasks._checks import N1, N2, OPTIMIZER, POS, SPIRAL3, changes, horizon, need
 from fnnbook.tasks._spiral import (DomainRandomization, FeedbackNetwork, FeedbackRules, FeedbackTraining,
                                    ResidualGrid, SpiralTrajectory)
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["WHY_FEEDBACK_CHANGES", "WhyFeedbackPointSettings"]
 

@@ -10,7 +10,7 @@ from fnnbook.tasks._checks import POS, SEED, SPIRAL3, WHY_AXIS, WHY_AXIS_POS, ga
 from fnnbook.tasks._spiral import (GainSweep, MeasurementNoise, NoiseDraws, ResidualGrid, SpiralFeedback,
                                    SpiralTrajectory, SwitchTest)
 from fnnlib import checks as C
-from fnnlib import spiral_presets as SP
+from fnnlib.paper import spiral_presets as SP
 
 __all__ = ["WhySec3Settings"]
 

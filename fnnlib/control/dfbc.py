@@ -25,7 +25,7 @@ Attitude loop
 
 ``z = [z_I (3), z_F (3)]``. The controller uses its own model parameters
 (the paper's: :data:`~fnnlib.systems.quadrotor.NOMINAL`), never the plant's.
-The gains of the authors' release are :data:`~fnnlib.quadrotor_presets.PAPER_DFBC_GAINS`.
+The gains of the authors' release are :data:`~fnnlib.quadrotor.presets.PAPER_DFBC_GAINS`.
 
 Notes
 -----

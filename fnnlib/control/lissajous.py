@@ -44,7 +44,7 @@ def lissajous(
               h + r_z \cos(2\pi t / T_z) \,]
 
     The paper's ``[r_x, r_y, r_z, T_x, T_y, T_z, h]`` are
-    :data:`~fnnlib.quadrotor_presets.PAPER_LISSAJOUS` (keyword-only, all required). The authors' release uses
+    :data:`~fnnlib.quadrotor.presets.PAPER_LISSAJOUS` (keyword-only, all required). The authors' release uses
     ``h = -0.5`` in its z-down frame; this library is z-down too, and the
     height offset has no effect on the dynamics since gravity is uniform.
 

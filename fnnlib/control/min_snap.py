@@ -480,7 +480,7 @@ def random_waypoints(
         Source of randomness, e.g. ``numpy.random.default_rng(seed)``.
     box : sequence, shape (3, 2), keyword-only
         ``((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi))`` [m]; the release's is
-        :data:`~fnnlib.quadrotor_presets.PAPER_WAYPOINT_BOX`.
+        :data:`~fnnlib.quadrotor.presets.PAPER_WAYPOINT_BOX`.
 
     Returns
     -------
@@ -547,11 +547,11 @@ def random_min_snap_flights(
     n_waypoints : int
         Waypoints per flight, >= 2 (the release uses 3).
     box : sequence, shape (3, 2)
-        Waypoint box (the release's: :data:`~fnnlib.quadrotor_presets.PAPER_WAYPOINT_BOX`).
+        Waypoint box (the release's: :data:`~fnnlib.quadrotor.presets.PAPER_WAYPOINT_BOX`).
     max_speed : float
         Largest accepted speed [m/s], > 0 (the release's: 10).
 
-    ``Ts`` and everything after it are keyword-only (:data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`
+    ``Ts`` and everything after it are keyword-only (:data:`~fnnlib.quadrotor.presets.PAPER_FLIGHT_DATA`
     holds the release's ``n_waypoints``, ``box`` and ``max_speed``).
     allocation : {"equal", "distance"}, keyword-only
         Time allocation, see :func:`allocate_times`.

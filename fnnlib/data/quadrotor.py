@@ -81,7 +81,7 @@ def make_flights(n_flights: int, n_nodes: int, *, Ts: float, seed: int, truth: Q
     The waypoints (``n_waypoints``, ``box``, ``max_speed``) are drawn by
     :func:`~fnnlib.control.min_snap.random_min_snap_flights`; the release's
     ``n_waypoints``, ``box``, ``max_speed`` and ``substeps`` are
-    :data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`, its training vehicle
+    :data:`~fnnlib.quadrotor.presets.PAPER_FLIGHT_DATA`, its training vehicle
     :data:`~fnnlib.systems.quadrotor.TRAINING_TRUTH`.
     """
     if int(n_flights) < 1 or int(n_nodes) < 2:

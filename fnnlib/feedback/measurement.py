@@ -93,6 +93,8 @@ def check_measurements(y: Tensor, n: int, *, C: Tensor | OutputMap | None = None
                        mask: Tensor | None = None, f=None, missing: bool = True, name: str = "y") -> Measurements:
     """The one check of measurements ``y`` (..., T, p) before any work; see the module docstring.
 
+    What the feedback of Eq. (7) compares its estimate with: ``y = C x`` or ``h(x)``, with inputs and gaps.
+
     ``n`` is the state dimension; ``C`` (p, n), a callable ``h`` or ``None`` (every state measured, p = n);
     ``f`` the model, whose parameters must share ``y``'s dtype. With ``missing`` a NaN means "no
     measurement"; without it, NaN is refused. Raises ``TypeError`` / ``ValueError`` naming what is wrong.
@@ -160,6 +162,8 @@ def _batched_jacobian(fn: Callable[[Tensor], Tensor], x: Tensor, q: int) -> Tens
 
 def model_jacobian(f, x: Tensor, u: Tensor | None = None, *, t: float = 0.0) -> Tensor:
     r"""The model's Jacobian :math:`A = \partial f/\partial x` at the states ``x`` (..., n): shape (..., n, n).
+
+    The linearisation of :math:`f_{neural}` (Eq. (3)) that a gain of Eq. (7) is checked or placed against.
 
     ``f(t, x)`` or, with inputs ``u`` (..., m), ``f(t, x, u)``; one batched autograd call
     (:func:`_batched_jacobian`). E.g. ``A = model_jacobian(f, x_op)`` at an operating point, for

@@ -165,6 +165,8 @@ Objective = Callable[["CascadeGains", Tensor, "Tensor | None", "Tensor | None"],
 class TuneRecipe:
     """The settings of :func:`tune_gains` in one checked, immutable object.
 
+    The gain ``L`` of Eq. (7) and the decay rate ``beta`` of Eq. (11) are learned through the cascade of Sec. 3.3.
+
     ``L0`` (scalar or a list of n) and ``beta0``: the initial gain and decay rate (:class:`CascadeGains`);
     ``iterations`` and ``lr``: Adam steps and learning rate; ``full``, ``L_max``: the gain's form and bound;
     ``train_model``: also descend on the model; ``tune_observer``: also descend on the output gain of the
@@ -221,10 +223,10 @@ DEFAULT_TUNE_RECIPE = TuneRecipe()
 
 @dataclass
 class TunedGains:
-    """What :func:`tune_gains` found: the gains module, the tuned base gain ``L`` (a float64 tensor, (n,) diagonal
-    or (n, n)), the decay rate ``beta`` (a float; a list of one per member with ``members > 1``), the loss per
-    iteration, the seconds taken and the first layer's observer (with one). :meth:`schedule` is the
-    :class:`~fnnlib.feedback.options.Gains` the cascade takes."""
+    """What :func:`tune_gains` found: the gains module, the tuned base gain ``L`` (the gain of Eq. (7); a float64
+    tensor, (n,) diagonal or (n, n)), the decay rate ``beta`` of Eq. (11) (a float; a list of one per member with
+    ``members > 1``), the loss per iteration, the seconds taken and the first layer's observer (with one).
+    :meth:`schedule` is the :class:`~fnnlib.feedback.options.Gains` the cascade takes."""
 
     gains: CascadeGains
     L: Tensor
@@ -454,6 +456,9 @@ class GainChoice:
 
 def choose_gain(errors: Tensor, *, reference: int = 0, windows: int = 8, z: float = 2.0) -> GainChoice:
     r"""Keep a feedback gain only where it earns its place on the tuning record, else the reference.
+
+    The errors are N-step errors of the cascade of Sec. 3.3, one row per gain of Eq. (7) (with the decay of
+    Eq. (11)); the reference row is typically the feedback switched off, the rollout of Eq. (2).
 
     A gain chosen by the lowest error on a noisy tuning record can lose to the feedback switched off on the
     next record: its gain on the tuning record was the noise's. The rule: cut the start times into ``windows``

@@ -57,7 +57,7 @@ class NeuralODEEnsemble(nn.Module):
     @classmethod
     def from_members(cls, members: Sequence[NeuralODE], seeds: Sequence[int]) -> NeuralODEEnsemble:
         """The ensemble of trained networks (weights copied), e.g. one per seed loaded by
-        :func:`fnnlib.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
+        :func:`fnnlib.training.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
 
         Every member must be an autonomous :class:`NeuralODE` of one architecture and dtype.
         """

@@ -9,7 +9,7 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.models.ensemble import NeuralODEEnsemble
-from fnnlib.models.neural_ode import mlp
+from fnnlib.models.neural_ode import NeuralODE, mlp
 
 
 class NeuralFeedback(nn.Module):
@@ -81,6 +81,26 @@ class NeuralFeedbackEnsemble(nn.Module):
         # NeuralFeedback and an input-free NeuralODE build the same MLP (`mlp(n, n, hidden, activation)`), so the
         # stacked MLP of a NeuralODEEnsemble starts every member from its seed's NeuralFeedback weights
         self.stacked = NeuralODEEnsemble(n_state, hidden, activation, seeds)
+
+    @classmethod
+    def from_members(cls, members: Sequence[NeuralFeedback], seeds: Sequence[int]) -> NeuralFeedbackEnsemble:
+        """The ensemble of trained neural feedbacks (Eq. (12); weights copied), e.g. one per seed loaded by
+        :func:`fnnlib.training.load_seed_checkpoints`: member ``e`` is ``members[e]``, trained from ``seeds[e]``.
+
+        Its stacked MLP is a :meth:`NeuralODEEnsemble.from_members` of input-free neural ODEs holding the
+        feedbacks' MLPs (the layout of the constructor).
+        """
+        if not all(isinstance(m, NeuralFeedback) for m in members):
+            raise TypeError("every member must be a NeuralFeedback")
+        as_odes = []
+        for m in members:
+            ode = NeuralODE(m.n_state, m.hidden, m.activation).to(next(m.parameters()).dtype)
+            ode.net.load_state_dict(m.net.state_dict())
+            as_odes.append(ode)
+        ens = cls.__new__(cls)
+        nn.Module.__init__(ens)
+        ens.stacked = NeuralODEEnsemble.from_members(as_odes, seeds)
+        return ens
 
     @property
     def size(self) -> int:

@@ -42,7 +42,7 @@ class AeroResidual(nn.Module):
     ----------
     hidden : sequence of int
         Hidden widths (the paper's: ``(36, 36)``, in
-        :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`).
+        :data:`~fnnlib.quadrotor.presets.PAPER_RESIDUAL_RECIPE`).
     activation : str
         One of :data:`fnnlib.models.ACTIVATIONS` (the paper's: ``"tanh"``).
     """
@@ -103,7 +103,7 @@ class AdaptiveResidual(nn.Module):
         The offline-trained network; copied, never modified.
     Gamma : float
         Adaptation gain (a positive multiple of the identity); the authors'
-        release uses :data:`~fnnlib.quadrotor_presets.PAPER_GAMMA` = 8.0.
+        release uses :data:`~fnnlib.quadrotor.presets.PAPER_GAMMA` = 8.0.
     """
 
     def __init__(self, base: AeroResidual, Gamma: float) -> None:

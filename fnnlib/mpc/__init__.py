@@ -1,7 +1,7 @@
 """MPC of Eq. (28) (App. A.5.3) and the flight test of Sec. 5.2.2.
 
 The public face, what a notebook needs: the prediction models (:func:`paper_models`), a flight test
-(:class:`FlightTest` on a :class:`Backend`, or :func:`flight_tests_from_settings`), one closed-loop flight
+(:class:`FlightTest` on a :class:`Backend`, or :func:`flight_tests`), one closed-loop flight
 (:func:`fly`), the QP (:func:`make_mpc`), the flight table (:func:`flight_row`, :class:`TableKey`), the paired
 flights over independent units (:func:`paired_units`), the thrust a vehicle needs (:func:`thrust_needed`), AdapNN's gain chosen on validation flights, the speed summary and Theorem 2.
 Below them: the affine models of a torch step along a plan and the linear time-varying QP.
@@ -15,9 +15,9 @@ from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, FlightSetup, PairedFlights, TableKey,
                                    acc_pred_rmse, adapnn_flights, adapnn_gain_on_validation, adapnn_model,
                                    disturbance_realisations, fallback_note, flight_row, flight_table_json,
-                                   flight_tests_from_settings, flown_gain_sweep, fnn_model, hand_gains_on_flights,
-                                   make_mpc, mpc_from_settings, paired_units,
-                                   pooled_speed, speed_summary, theorem2_check, thrust_needed, unjudged_bound_note)
+                                   FlightSettings, MPCSettings, flight_tests, flown_gain_sweep, fnn_model, hand_gains_on_flights,
+                                   make_mpc, paired_units,
+                                   pooled_speed, speed_summary, theorem2_check, thrust_needed)
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.linearize import Linearization, StepFn, linearize
 from fnnlib.mpc.linearized import LinearizedMPC, MPCSolution, OSQPMPC, RebuildMPC, shift_plan
@@ -40,9 +40,9 @@ __all__ = [
     "FlightRow", "FlightSetup", "FlightTest", "GainSelection", "Linearization", "LinearizedMPC", "MPCSolution",
     "OSQPMPC", "PairedFlights", "PredictionModel", "RebuildMPC", "StepFn", "TableKey", "acc_pred_rmse",
     "adapnn_flights", "adapnn_gain_on_validation", "adapnn_model", "disturbance_realisations", "fallback_note",
-    "flight_row", "flight_table_json", "flight_tests_from_settings", "flown_gain_sweep", "fly", "fnn_model",
+    "flight_row", "flight_table_json", "FlightSettings", "MPCSettings", "flight_tests", "flown_gain_sweep", "fly", "fnn_model",
     "hand_gains_on_flights", "lissajous_reference", "linearize",
-    "make_mpc", "mpc_from_settings", "paired_units", "paper_models", "pooled_speed", "randomization_coordinates",
+    "make_mpc", "paired_units", "paper_models", "pooled_speed", "randomization_coordinates",
     "randomized_vehicles", "select_gain_on_validation", "shift_plan", "speed_summary", "theorem2_check",
-    "thrust_needed", "tracking_rmse", "unjudged_bound_note", "validation_references", "warm_up",
+    "thrust_needed", "tracking_rmse", "validation_references", "warm_up",
 ]

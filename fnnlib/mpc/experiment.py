@@ -1,7 +1,7 @@
 r"""The flight test of Sec. 5.2.2 (App. A.5.3-A.5.4, A.9): seven prediction models in the MPC of Eq. (28).
 
 What the ``quadrotor_mpc`` notebook computes, as functions: the QP with the paper's boxes, the flight
-tests of Sec. 5.2.2 built from a run's settings (:func:`flight_tests_from_settings`), the per-model table
+tests of Sec. 5.2.2 built from their settings (:func:`flight_tests` of :class:`FlightSettings`), the per-model table
 (:class:`FlightRow`, keyed by :class:`TableKey`), the AdapNN gain sweep, the speed summary, the Theorem 2 check on the AdapFNN flight (Eq. (25) and Theorems 1-2), AdapNN's gain chosen
 on validation flights, the disturbance realisations, the flights paired over independent units (a trained network,
 its MLP and one drawn disturbance each, :func:`paired_units`), the thrust the test vehicle needs against a bound
@@ -11,13 +11,14 @@ its MLP and one drawn disturbance each, :func:`paired_units`), the thrust the te
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any, NamedTuple
 
 import numpy as np
 from torch import Tensor, nn
 
 from fnnlib.stability import theorem1_balls
+from fnnlib.feedback import Gains
 from fnnlib.models.residual import AdaptiveResidual
 from fnnlib.mpc.backends import Backend
 from fnnlib.control.lissajous import lissajous
@@ -25,7 +26,7 @@ from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearized import COSTS, LinearizedMPC, OSQPMPC
 from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
 from fnnlib.mpc.tuning import GainSelection, select_gain_on_validation
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor, QuadrotorParams
 
 __all__ = [
@@ -46,18 +47,18 @@ __all__ = [
     "fallback_note",
     "flight_row",
     "flight_table_json",
-    "flight_tests_from_settings",
+    "FlightSettings",
+    "flight_tests",
     "flown_gain_sweep",
     "fnn_model",
     "hand_gains_on_flights",
     "make_mpc",
-    "mpc_from_settings",
+    "MPCSettings",
     "paired_units",
     "pooled_speed",
     "speed_summary",
     "theorem2_check",
     "thrust_needed",
-    "unjudged_bound_note",
 ]
 
 QP_CLASSES: dict[str, type[OSQPMPC] | type[LinearizedMPC]] = {"osqp": OSQPMPC, "cvxpy": LinearizedMPC}
@@ -107,11 +108,28 @@ def disturbance_realisations(paper: Sequence[float], n_drawn: int, *, seed: int,
     return [tuple(float(f) for f in F0)] + [tuple(float(f) for f in row) for row in drawn]
 
 
-def mpc_from_settings(settings: Mapping[str, Any], *, cost: str, u_max: float) -> MPC:
-    """:func:`make_mpc` with a run's ``qp``, ``N``, ``Q``, ``R``, ``theta_max`` and ``solver`` (the notebook's names)."""
-    s = settings
-    return make_mpc(s["qp"], s["N"], s["Q"], s["R"], cost=cost, u_max=u_max, theta_max=s["theta_max"],
-                    solver=s["solver"])
+@dataclass(frozen=True)
+class MPCSettings:
+    """The settings of Eq. (28) that a run fixes once: the QP's implementation ``qp`` (a key of
+    :data:`QP_CLASSES`), the horizon ``N``, the diagonal weights ``Q`` (12) and ``R`` (4), the attitude bound
+    ``theta_max`` and the QP ``solver``. A cost variant and a thrust bound then make one MPC (:meth:`build`)."""
+
+    qp: str
+    N: int
+    Q: tuple[float, ...]
+    R: tuple[float, ...]
+    theta_max: float
+    solver: str
+
+    @classmethod
+    def of(cls, parameters: Mapping[str, Any]) -> MPCSettings:
+        """These settings from a run's parameters (a record holding at least these names; the rest ignored)."""
+        return cls(**{f.name: parameters[f.name] for f in fields(cls)})
+
+    def build(self, *, cost: str, u_max: float) -> MPC:
+        """:func:`make_mpc` with these settings, cost variant ``cost`` and thrust box ``[0, u_max]``."""
+        return make_mpc(self.qp, self.N, self.Q, self.R, cost=cost, u_max=u_max, theta_max=self.theta_max,
+                        solver=self.solver)
 
 
 @dataclass(frozen=True)
@@ -139,24 +157,48 @@ class FlightSetup:
         return self.tests[1:]
 
 
-def flight_tests_from_settings(settings: Mapping[str, Any]) -> FlightSetup:
-    """The Sec. 5.2.2 flight tests (App. A.5.4) from a run's settings, under the ``quadrotor_mpc`` notebook's names.
+@dataclass(frozen=True)
+class FlightSettings:
+    """The settings of the Sec. 5.2.2 flight tests (App. A.5.4), read by :func:`flight_tests`.
 
     The test vehicle is :data:`~fnnlib.systems.quadrotor.TEST_TRUTH` with ``truth_mass``, ``truth_inertia``,
     ``truth_drag``; the forces are :func:`disturbance_realisations` of ``disturbance`` (``disturbance_draws``,
     ``disturbance_seed``, ``disturbance_spread``); the reference is the paper's Lissajous curve over ``steps``
-    steps of ``Ts`` (horizon ``N``) by flatness on the nominal vehicle; the loop runs ``truth_substeps`` RK4
-    sub-steps on ``backend`` (with ``linearize_method`` for the torch reference).
+    steps of ``Ts`` (horizon ``N``); the loop runs ``truth_substeps`` RK4 sub-steps on ``backend`` (with
+    ``linearize_method`` for the torch reference).
     """
-    s = settings
-    vehicle = TEST_TRUTH.replace(mass=s["truth_mass"], inertia=tuple(s["truth_inertia"]), drag=tuple(s["truth_drag"]),
-                                 force_disturbance=tuple(s["disturbance"]))
-    forces = disturbance_realisations(s["disturbance"], s["disturbance_draws"], seed=s["disturbance_seed"],
-                                      spread=s["disturbance_spread"])
-    x_r, u_r = lissajous_reference(s["steps"], s["N"], Ts=s["Ts"], params=NOMINAL, curve=PAPER_LISSAJOUS)
-    backend = Backend(s["backend"], s["linearize_method"])
-    tests = [FlightTest(Quadrotor(vehicle.replace(force_disturbance=f)), x_r, u_r, steps=s["steps"], Ts=s["Ts"],
-                        substeps=s["truth_substeps"], backend=backend) for f in forces]
+
+    steps: int
+    N: int
+    Ts: float
+    truth_mass: float
+    truth_inertia: tuple[float, ...]
+    truth_drag: tuple[float, ...]
+    truth_substeps: int
+    disturbance: tuple[float, ...]
+    disturbance_draws: int
+    disturbance_seed: int
+    disturbance_spread: float
+    backend: str
+    linearize_method: str
+
+    @classmethod
+    def of(cls, parameters: Mapping[str, Any]) -> FlightSettings:
+        """These settings from a run's parameters (a record holding at least these names; the rest ignored)."""
+        return cls(**{f.name: parameters[f.name] for f in fields(cls)})
+
+
+def flight_tests(s: FlightSettings) -> FlightSetup:
+    """The Sec. 5.2.2 flight tests (App. A.5.4) of :class:`FlightSettings` ``s``: the reference by flatness on
+    the nominal vehicle, one test per force (the paper's first)."""
+    vehicle = TEST_TRUTH.replace(mass=s.truth_mass, inertia=tuple(s.truth_inertia), drag=tuple(s.truth_drag),
+                                 force_disturbance=tuple(s.disturbance))
+    forces = disturbance_realisations(s.disturbance, s.disturbance_draws, seed=s.disturbance_seed,
+                                      spread=s.disturbance_spread)
+    x_r, u_r = lissajous_reference(s.steps, s.N, Ts=s.Ts, params=NOMINAL, curve=PAPER_LISSAJOUS)
+    backend = Backend(s.backend, s.linearize_method)
+    tests = [FlightTest(Quadrotor(vehicle.replace(force_disturbance=f)), x_r, u_r, steps=s.steps, Ts=s.Ts,
+                        substeps=s.truth_substeps, backend=backend) for f in forces]
     return FlightSetup(vehicle, forces, x_r, u_r, tests)
 
 
@@ -351,27 +393,6 @@ def thrust_needed(vehicle: QuadrotorParams, curve: Mapping[str, float], *, steps
             "t_peak": float(t[int(np.argmax(h))])}
 
 
-def unjudged_bound_note(rows: Mapping[str, FlightRow] | None, *, metric: str, unit: str, need: Mapping[str, float],
-                        u_max: float, setting: str, flown: str, compare: tuple[str, str]) -> str:
-    """The outcome at a thrust bound that is not judged, and why it cannot be judged there, with the number.
-
-    ``rows``: the table rows flown at ``u_max`` under ``setting`` (None when not flown in this run); ``metric``
-    a :class:`FlightRow` field; ``need`` what :func:`thrust_needed` returns; ``flown`` says which flights they
-    are; ``compare`` = (a, b) names the two models whose order is stated.
-    """
-    why = (f"not judged at {u_max:g} N: the test vehicle needs {need['peak']:.2f} N per motor at the reference's "
-           f"peak acceleration ({need['hover']:.2f} N to hover) against the {u_max:g} N bound"
-           + (", so no model can track there" if need["peak"] > u_max else ""))
-    if rows is None:
-        return f"{setting}, {u_max:g} N: not flown in this run; {why}."
-    values = {n: getattr(r, metric) for n, r in rows.items()}
-    a, b = compare
-    order = "worse than" if values[a] > values[b] else "better than or equal to"
-    listed = ", ".join(f"{n} {v:.2f}" for n, v in values.items())
-    return (f"{setting}, {u_max:g} N ({flown}): {metric} {listed} {unit}; every model "
-            f"{min(values.values()):.2f}-{max(values.values()):.2f} {unit}, {a} {order} {b}; {why}.")
-
-
 def speed_summary(timing: Mapping[str, Mapping[str, Any]], *, repeats: int, thrust_bound: float, qp: str,
                   backend: Backend, compile_s: float) -> dict[str, Any]:
     """Worst and best model against :data:`SPEED_TARGETS`; ``met`` when the worst model meets both."""
@@ -408,8 +429,8 @@ def hand_gains_on_flights(model: PredictionModel, x: Tensor, u: Tensor, Ts: floa
     ``u`` (K, T, 4) as inputs) has the lowest mean N-step position error (m) along the flights ``x`` (K, T, 12)."""
     import torch  # noqa: PLC0415
 
-    from fnnlib.feedback import Gains, cascade_predict, sweep_gains  # noqa: PLC0415
-    from fnnlib.sweeps import n_step_errors  # noqa: PLC0415
+    from fnnlib.feedback import cascade_predict, sweep_gains  # noqa: PLC0415
+    from fnnlib.metrics import n_step_errors  # noqa: PLC0415
 
     def cost(L: float, beta: float) -> float:
         with torch.no_grad():

@@ -30,7 +30,7 @@ def lissajous_reference(steps: int, N: int, *, Ts: float, params: QuadrotorParam
 
     ``params`` is the vehicle the reference is computed for (the paper's: the nominal model), ``curve``
     the parameters of :func:`~fnnlib.control.lissajous.lissajous` (the paper's:
-    :data:`~fnnlib.quadrotor_presets.PAPER_LISSAJOUS`). Returns ``x_r`` (steps + N + 1, 12) and
+    :data:`~fnnlib.quadrotor.presets.PAPER_LISSAJOUS`). Returns ``x_r`` (steps + N + 1, 12) and
     ``u_r`` (steps + N, 4), float64, for ``t = 0, Ts, ...``; the extra ``N`` rows feed the last horizons.
     """
     t = np.arange(int(steps) + int(N) + 1) * check_positive(Ts, name="Ts")

@@ -285,7 +285,7 @@ def paper_models(residual: nn.Module, mlp: nn.Module, *, plant: Quadrotor, L: fl
     ``mlp`` the single-step one. AdapNN and AdapFNN adapt the last layer of a copy of ``residual``
     (the same network as Neural and FNN, so the comparison isolates the online part). ``plant`` is the
     models' own vehicle (the paper's: ``Quadrotor(NOMINAL)``); the paper's ``L``, ``beta``, ``N``, ``Gamma``
-    and ``Ts`` are in :mod:`fnnlib.quadrotor_presets`. AdapNN adapts at ``adapnn_gamma`` where given (its gain
+    and ``Ts`` are in :mod:`fnnlib.quadrotor.presets`. AdapNN adapts at ``adapnn_gamma`` where given (its gain
     chosen on validation flights, :func:`~fnnlib.mpc.experiment.adapnn_gain_on_validation`), else at ``Gamma``.
     """
     kw = {"Ts": Ts, "substeps": substeps}

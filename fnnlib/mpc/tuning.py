@@ -9,7 +9,7 @@ placed with the test vehicle in mind. Here a gain is chosen on *validation* flig
   own (:func:`validation_references`);
 * vehicles drawn by domain randomisation around the *training* vehicle, in the spirit of Alg. 1 / Eq. (12),
   with ranges fixed a priori (:func:`randomized_vehicles`,
-  :data:`~fnnlib.quadrotor_presets.VALIDATION_RANDOMIZATION`);
+  :data:`~fnnlib.quadrotor.presets.VALIDATION_RANDOMIZATION`);
 * every vehicle flies every reference at every gain, and a stated rule picks the gain
   (:func:`select_gain_on_validation`: lowest median validation RMSE, a diverged flight counting as worst, ties
   within a tolerance broken toward the smaller gain).
@@ -63,7 +63,7 @@ def randomized_vehicles(train: QuadrotorParams, n: int, *, seed: int, mass: floa
     relative half-width ``mass``, ``inertia``, ``drag``); the constant force has each axis uniform in
     +- ``force_per_weight`` x ``train.mass * train.g``, added to ``train``'s force. Draws come from
     ``numpy.random.default_rng(seed)``, per vehicle in the order mass, inertia (3), drag (3), force (3). The
-    paper-run ranges are :data:`~fnnlib.quadrotor_presets.VALIDATION_RANDOMIZATION`, justified there.
+    paper-run ranges are :data:`~fnnlib.quadrotor.presets.VALIDATION_RANDOMIZATION`, justified there.
 
     Only the training vehicle and the ranges enter: a test vehicle cannot.
     """
@@ -115,7 +115,7 @@ def validation_references(n_flights: int, steps: int, N: int, *, seed: int, Ts: 
     (zero yaw) like :func:`~fnnlib.mpc.flight.lissajous_reference`, from
     ``random_min_snap_flights(n_flights, steps + N + 1, Ts=Ts, seed=seed, n_waypoints=..., box=...,
     max_speed=...)``: the training box and speed limit of App. A.5.4
-    (:data:`~fnnlib.quadrotor_presets.PAPER_FLIGHT_DATA`). Pass a ``seed`` that neither the training nor
+    (:data:`~fnnlib.quadrotor.presets.PAPER_FLIGHT_DATA`). Pass a ``seed`` that neither the training nor
     the validation set of the learning task used. The training flights have about 100 nodes (2 s) per
     segment; ``n_waypoints`` = 1 + (steps + N) / 100 keeps that pace (4 for the paper's 300 steps).
     ``params`` is the vehicle the references are computed for by flatness (the paper's: the nominal

@@ -24,7 +24,10 @@ from fnnlib.feedback.types import Estimate
 
 @runtime_checkable
 class Observer(Protocol):
-    """What the comparison needs from an observer.
+    r"""What the comparison needs from an observer.
+
+    Each one gives an estimate :math:`\hat x` of the state, as Eq. (8) does: the linear feedback of Eqs. (7)-(8),
+    the neural feedback of Eq. (12), the Luenberger and Kalman baselines.
 
     Attributes
     ----------

@@ -353,6 +353,8 @@ def disturbance_matrix(E, n: int) -> Tensor:
 class KalmanObserver(_KalmanBase):
     r"""Kalman filter on the augmented learned model (filterpy ``KalmanFilter``).
 
+    A classical baseline for the feedback observer of Eqs. (7)-(8), on the same learned model (Eq. (3)).
+
     Every observer is built as ``(f, Ts, *, ...)``: the model and the nominal sample step by position, the rest
     by name.
 
@@ -475,6 +477,8 @@ class _LearnedModelEKF(ExtendedKalmanFilter):
 
 class ExtendedKalmanObserver(_KalmanBase):
     r"""Extended Kalman filter on the learned model with a constant-disturbance state (filterpy).
+
+    A classical baseline for the feedback observer of Eqs. (7)-(8), on the same learned model (Eq. (3)).
 
     Prediction :math:`\hat z_{k+1|k} = \Phi(\hat z_{k|k})` with
     :math:`\Phi(x, d) = (x + T_s(f_{neural}(x) + d),\; d)` and Jacobian

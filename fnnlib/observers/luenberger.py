@@ -44,6 +44,9 @@ def place_observer_gain(A: Tensor | np.ndarray, C: Tensor | np.ndarray, poles: S
                         allow_unstable: bool = False) -> Tensor:
     r"""Observer gain :math:`L` with :math:`\operatorname{eig}(A - LC)` = ``poles`` (discrete time).
 
+    The gain ``L`` of Eq. (7) for a linear(ised) model: the error dynamics of Eq. (9), discretised at ``Ts``,
+    decay at ``poles``.
+
     By duality, :math:`L^T` is the state-feedback gain that places ``poles``
     for :math:`(A^T, C^T)`: ``L = control.place(A.T, C.T, poles).T``.
 

@@ -39,6 +39,8 @@ class _BatchedUKF(UnscentedKalmanFilter):
 class UnscentedKalmanObserver(_KalmanBase):
     r"""Unscented Kalman filter on the learned model with a constant-disturbance state (filterpy).
 
+    A classical baseline for the feedback observer of Eqs. (7)-(8), on the same learned model (Eq. (3)).
+
     Parameters are those of :class:`~fnnlib.observers.ExtendedKalmanObserver` (``f``, ``Ts``, then by name ``n``,
     ``cov``, ``C``, ``disturbance``, ``A``), and ``sigma``, the :class:`~fnnlib.observers.options.SigmaPoints`
     (``alpha``, ``beta``, ``kappa`` of the scaled sigma points).

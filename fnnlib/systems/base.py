@@ -12,6 +12,9 @@ from fnnlib._validation import as_trajectory, check_finite
 class DynamicalSystem:
     r"""Base class of the true systems: a vector field ``f(t, x)`` or, controlled, ``f(t, x, u)``.
 
+    The true system of Eq. (1), :math:`\dot x = f(x, I, t)`: what a neural ODE (Eq. (2)) learns and the feedback
+    of Eq. (7) corrects.
+
     How to write your own
     ---------------------
     Subclass it, set the class attributes ``n`` (state dimension) and, for a controlled system,
@@ -124,7 +127,7 @@ class DynamicalSystem:
 class StackedSystem(DynamicalSystem):
     """``E`` copies of an autonomous system on the stacked state (..., E n), the layout of
     :class:`fnnlib.NeuralODEEnsemble`: one integration runs a true system beside every member of an ensemble
-    (e.g. Theorem 1's continuous observer for every seed's network, :func:`fnnlib.observe_continuous`)."""
+    (e.g. Theorem 1's continuous observer for every seed's network, :func:`fnnlib.stability.observe_continuous`)."""
 
     def __init__(self, system: DynamicalSystem, E: int) -> None:
         if getattr(system, "m", 0):

@@ -10,6 +10,8 @@ def add_measurement_noise(x: Tensor, std: float, generator: torch.Generator | No
                           draws: int | None = None) -> Tensor:
     """Return ``x + std * w`` with ``w`` standard normal, same shape and dtype as ``x``.
 
+    The noisy measurements :math:`x(t_k)` that the feedback of Eq. (7) compares its estimate with.
+
     With ``draws``, that many noisy copies stacked on a new leading axis, shape (draws, ..., T, n).
 
     Parameters

@@ -77,7 +77,7 @@ class Spiral(DynamicalSystem):
 class BatchedSpirals(DynamicalSystem):
     """Several spirals of Eq. (26) in one integration: batch row ``p`` of the state runs ``systems[p]``, on the
     stacked state (P, E 2) of ``E`` copies (the layout of :class:`fnnlib.NeuralODEEnsemble`), so one dopri5 run
-    of Theorem 1's continuous observer (:func:`fnnlib.observe_continuous`) covers every spiral and every member.
+    of Theorem 1's continuous observer (:func:`fnnlib.stability.observe_continuous`) covers every spiral and every member.
     """
 
     def __init__(self, systems: Sequence[Spiral], E: int) -> None:

@@ -61,7 +61,7 @@ def save_checkpoint(path: str | os.PathLike[str], model: nn.Module, meta: Mappin
     kind = type(model).__name__
     if MODELS.get(kind) is not type(model):
         raise TypeError(f"cannot checkpoint a {kind}: register its class first with "
-                        f"fnnlib.register_model({kind}) (it needs a `config` property); known models: {sorted(MODELS)}")
+                        f"fnnlib.training.register_model({kind}) (it needs a `config` property); known models: {sorted(MODELS)}")
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     payload = {"format": FORMAT, "version": VERSION, "kind": kind, "config": model.config,
                "state_dict": state, "sha256": _digest(state), "meta": dict(meta or {})}

@@ -59,7 +59,7 @@ def randomized_cases(make_system, low: Sequence[float], high: Sequence[float], n
     Parameters
     ----------
     make_system : callable
-        ``make_system(*params)`` -> a :class:`~fnnlib.systems.DynamicalSystem`, e.g. ``fnnlib.Spiral``.
+        ``make_system(*params)`` -> a :class:`~fnnlib.systems.DynamicalSystem`, e.g. ``fnnlib.systems.Spiral``.
     low, high : sequence of float
         The parameter range, one entry per parameter.
     n_case : int

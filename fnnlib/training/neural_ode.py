@@ -220,6 +220,8 @@ def train_neural_ode(
 ) -> TrainHistory:
     """Fit ``model`` (a vector field ``f(t, x)``, or ``f(t, x, u)`` with inputs) to trajectories by ODE rollouts.
 
+    Learns :math:`f_{neural}` of Eq. (3) so that the integral of Eq. (2) follows the data.
+
     For a first try use :data:`QUICK_RECIPE` (RK4, no adjoint, 200 iterations: seconds);
     the paper's recipes (:data:`PAPER_SPIRAL_RECIPE`, dopri5 with the adjoint, 400 iterations)
     take about a minute and a half.

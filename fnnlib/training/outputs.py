@@ -46,6 +46,9 @@ STARTS = ("feedback", "free", "encoder")
 class OutputRecipe(Recipe):
     """The settings of :func:`train_from_outputs`, checked when made.
 
+    Its output gain is the ``L`` of Eq. (7) on ``y = C x`` or ``h(x)``, the feedback that starts each segment
+    (Eqs. (7)-(8)).
+
     Attributes
     ----------
     start : str
@@ -145,6 +148,9 @@ def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, 
                        t: Tensor | None = None, u: Tensor | None = None, mask: Tensor | None = None, seed: int = 0,
                        progress: bool = True) -> OutputFit:
     r"""Train ``model`` (``f(t, x)`` or ``f(t, x, u)``) from outputs ``y`` (B, T, p) or (T, p) alone (module docstring).
+
+    Each segment starts at the estimate of the feedback of Eqs. (7)-(8) on the measured outputs;
+    :math:`f_{neural}` of Eq. (3) is fitted through it.
 
     ``C`` (p, n) or ``h(x)``; ``Ts`` or the times ``t`` ((T,) or (B, T)); ``u`` (B, T, m) or (T, m);
     a NaN in ``y`` or ``False`` in ``mask`` is a missing sample. Checked before any work; every record needs a

@@ -16,7 +16,7 @@ from fnnlib.data.quadrotor import Flights
 from fnnlib.metrics import relative_rmse
 from fnnlib.models import ACTIVATIONS
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
-from fnnlib.quadrotor_presets import PAPER_RESIDUAL_RECIPE
+from fnnlib.quadrotor.presets import PAPER_RESIDUAL_RECIPE
 from fnnlib.seeding import seeded
 from fnnlib.systems.quadrotor import STATE_GROUPS, Quadrotor
 from fnnlib.training.external import InputRecipe, InputTrainHistory, make_segments, rollout, train_with_inputs
@@ -55,7 +55,7 @@ class ResidualRecipe(InputRecipe):
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
 
 
-#: The paper's residual and training (App. A.5.2; :data:`~fnnlib.quadrotor_presets.PAPER_RESIDUAL_RECIPE`):
+#: The paper's residual and training (App. A.5.2; :data:`~fnnlib.quadrotor.presets.PAPER_RESIDUAL_RECIPE`):
 #: 36 x 36 tanh, segments of 20 steps, 80 segments per Adam update at 5e-3, 50 epochs.
 PAPER_RESIDUAL = ResidualRecipe(**PAPER_RESIDUAL_RECIPE)
 
@@ -184,7 +184,7 @@ def train_single_step(net: nn.Module, x: Tensor, labels: Tensor, *, epochs: int,
     """Fit a feed-forward residual to single-step labels by mean squared error (the MLP baseline).
 
     ``x`` (M, 12) states, ``labels`` (M, 3) accelerations; Adam, shuffled mini-batches. Returns the
-    per-epoch mean loss. The recipe of the paper run is :data:`~fnnlib.quadrotor_presets.PAPER_MLP_RECIPE`.
+    per-epoch mean loss. The recipe of the paper run is :data:`~fnnlib.quadrotor.presets.PAPER_MLP_RECIPE`.
     """
     if x.shape[0] != labels.shape[0] or labels.shape[-1] != 3 or x.shape[-1] != 12:
         raise ValueError(f"need x (M, 12) and labels (M, 3), got {tuple(x.shape)} and {tuple(labels.shape)}")

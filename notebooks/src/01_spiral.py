@@ -53,19 +53,27 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.feedback import eval_field, cascade_depths, rollout_depths
+from fnnlib.metrics import n_step_errors, relative_rmse, rmse
+from fnnlib.models import stack_members
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.systems import Spiral
+from fnnlib.training import PAPER_SPIRAL_RECIPE, save_checkpoint, seed_checkpoint_name
 from fnnbook.rules import sec3
 
 # %% tags=["hide-input"]
-recipe = F.PAPER_SPIRAL_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
+recipe = PAPER_SPIRAL_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
                                        method=method, adjoint=adjoint, rtol=rtol, atol=atol)
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 E = len(seeds)
-F.seed_everything(seeds[0])
+seed_everything(seeds[0])
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
-sys_nom, sys_test = F.Spiral(*nominal), F.Spiral(*test)
+sys_nom, sys_test = Spiral(*nominal), Spiral(*test)
 x_nom = sys_nom.simulate(torch.tensor(x0), t).float()  # (T, 2)
 x_test = sys_test.simulate(torch.tensor(x0), t).float()
 f_nom, f_test = sys_nom.rate(x_nom), sys_test.rate(x_test)  # true change rates along each trajectory
@@ -77,13 +85,13 @@ tn = t.numpy()
 # and the test spiral $(3, 0.05, 10)$, the values of the authors' release (the paper gives none).
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 for ax, xx, name in zip(axes[0], [x_nom, x_test], ["(a) training set", "(b) test set"]):
     ax.plot(xx[:, 0], xx[:, 1], "k-", lw=1.2)
     ax.plot(*xx[0], "r*", ms=10)
     ax.set_title(name)
     ax.set_aspect("equal", adjustable="datalim")
-fig_ab = F.save_figure(fig, out, "fig4ab_spirals")
+fig_ab = save_figure(fig, out, "fig4ab_spirals")
 
 # %% [markdown]
 # ## The neural ODE on the nominal task (Fig. 4c, claim S1)
@@ -95,32 +103,32 @@ fig_ab = F.save_figure(fig, out, "fig4ab_spirals")
 
 # %%
 ens = F.NeuralODEEnsemble(2, hidden, activation, seeds)
-history = F.train_neural_ode(ens, t.float(), F.stack_members(x_nom, E), recipe, seed=seeds[0])
+history = F.train_neural_ode(ens, t.float(), stack_members(x_nom, E), recipe, seed=seeds[0])
 train_meta = {"seeds": seeds, "iterations": iterations, "method": method, "adjoint": adjoint,
               "final_loss": history.loss[-1], "recipe": recipe.as_dict()}
 for e, s in enumerate(seeds):  # one checkpoint per seed: the Sec. 3 tasks downstream compare over every seed
-    F.save_checkpoint(out / F.seed_checkpoint_name(s), ens.member(e), {"seed": s} | train_meta)
+    save_checkpoint(out / seed_checkpoint_name(s), ens.member(e), {"seed": s} | train_meta)
 model = ens.member(0)  # the first seed's network, also saved alone for the tasks that use one network
-F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)
+save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)
 
 
 # %%
-xs_nom, xs_test = F.stack_members(x_nom, E), F.stack_members(x_test, E)
+xs_nom, xs_test = stack_members(x_nom, E), stack_members(x_test, E)
 with torch.no_grad():
-    f_nn_nom, f_nn_test = ens.split(F.eval_field(ens, xs_nom)), ens.split(F.eval_field(ens, xs_test))
-s1_rel = [F.relative_rmse(f_nn_nom[e], f_nom) for e in range(E)]
+    f_nn_nom, f_nn_test = ens.split(eval_field(ens, xs_nom)), ens.split(eval_field(ens, xs_test))
+s1_rel = [relative_rmse(f_nn_nom[e], f_nom) for e in range(E)]
 print(f"{E} networks trained in {history.seconds:.1f} s ({history.ms_per_iteration:.0f} ms/iteration); "
       f"final loss {history.loss[-1]:.4f}; nominal change-rate relative RMSE per seed "
       f"{[f'{v:.3%}' for v in s1_rel]}")
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 axes[0, 0].semilogy(history.loss)
 axes[0, 0].set(xlabel="iteration", ylabel="L1 loss (mean over seeds)", title="training loss")
 lc = F.plotting.plot_rate_curve(axes[0, 1], f_nom, f_nn_nom[0], title="(c) trained performance (first seed)",
                                 label="neural ODE")
 fig.colorbar(lc, ax=axes[0, 1], label="change-rate error")
-fig_c = F.save_figure(fig, out, "fig4c_nominal_rate")
+fig_c = save_figure(fig, out, "fig4c_nominal_rate")
 
 # %% [markdown]
 # ## The test spiral: change rate and $N$-step prediction (Fig. 4d-f, claim S2)
@@ -133,25 +141,25 @@ fig_c = F.save_figure(fig, out, "fig4c_nominal_rate")
 # %%
 est = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * E).observe(xs_test)
 f_hat = ens.split(est.f_hat)
-rate_nn = [F.rmse(f_nn_test[e], f_test) for e in range(E)]
-rate_fb = [F.rmse(f_hat[e], f_test) for e in range(E)]
+rate_nn = [rmse(f_nn_test[e], f_test) for e in range(E)]
+rate_fb = [rmse(f_hat[e], f_test) for e in range(E)]
 t0 = time.perf_counter()
-z_fb = ens.split(F.cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
+z_fb = ens.split(cascade_depths(ens, xs_test, Ts, N_max, F.Gains(L, beta)))  # (E, N_max+1, T, 2)
 cascade_s = time.perf_counter() - t0
-z_nn = ens.split(F.rollout_depths(ens, xs_test, Ts, N_max))
+z_nn = ens.split(rollout_depths(ens, xs_test, Ts, N_max))
 z_nn_dp = ens.split(F.rollout_predict(ens, xs_test, Ts, N, solver=F.Solver("dopri5", rtol=rtol, atol=atol)))
-e_nn, e_fb = F.n_step_errors(z_nn[:, N], x_test, N), F.n_step_errors(z_fb[:, N], x_test, N)  # (E, T - N)
-e_dp = F.n_step_errors(z_nn_dp, x_test, N)
+e_nn, e_fb = n_step_errors(z_nn[:, N], x_test, N), n_step_errors(z_fb[:, N], x_test, N)  # (E, T - N)
+e_dp = n_step_errors(z_nn_dp, x_test, N)
 
 # %%
 s2 = {"seeds": seeds, "rate_rmse_neural_ode": rate_nn, "rate_rmse_feedback": rate_fb, "nominal_rate_rel_rmse": s1_rel,
-      "test_rate_rel_rmse_neural_ode": [F.relative_rmse(f_nn_test[e], f_test) for e in range(E)],
+      "test_rate_rel_rmse_neural_ode": [relative_rmse(f_nn_test[e], f_test) for e in range(E)],
       f"mean_err_N{N}_neural_ode_euler": e_nn.mean(-1).tolist(), f"mean_err_N{N}_feedback": e_fb.mean(-1).tolist(),
       f"mean_err_N{N}_neural_ode_dopri5": e_dp.mean(-1).tolist()}
 s2
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 vmax = float(torch.linalg.vector_norm(f_nn_test[0] - f_test, dim=-1).max())
 F.plotting.plot_rate_curve(axes[0, 0], f_test, f_nn_test[0], title="(d) neural ODE on the test set", vmax=vmax)
 lc = F.plotting.plot_rate_curve(axes[0, 1], f_test, f_hat[0], title="(e) feedback on the test set",
@@ -164,7 +172,7 @@ for key, e in [("neural_ode", e_nn), ("feedback", e_fb)]:
     ax.fill_between(tn[N:], e.min(0).values, e.max(0).values, color=c, alpha=0.25, lw=0)
 ax.set(xlabel="t [s]", ylabel="prediction error", title=f"(f) {N}-step prediction error (band: min-max)")
 ax.legend(fontsize=8)
-fig_def = F.save_figure(fig, out, "fig4def_test")
+fig_def = save_figure(fig, out, "fig4def_test")
 
 # %% [markdown]
 # ## Gain decay under measurement noise (Fig. 4g, claim S3)
@@ -179,16 +187,16 @@ fig_def = F.save_figure(fig, out, "fig4def_test")
 # neural ODE's own $N$-step error without noise.
 
 # %%
-noise = torch.cat([torch.randn(x_test.shape, generator=F.make_generator(s + 1), dtype=x_test.dtype) for s in seeds],
+noise = torch.cat([torch.randn(x_test.shape, generator=make_generator(s + 1), dtype=x_test.dtype) for s in seeds],
                   dim=-1)  # one draw per seed, on the stacked state; scaled per level
 sweep = {"noise_std": [], "neural_ode": [], "feedback_decay": [], "feedback_no_decay": []}  # per level: per seed
 for std in noise_sweep:
     xm = xs_test + std * noise
     sweep["noise_std"].append(std)
-    sweep["neural_ode"].append(F.n_step_errors(ens.split(F.rollout_predict(ens, xm, Ts, N)), x_test, N).mean(-1).tolist())
+    sweep["neural_ode"].append(n_step_errors(ens.split(F.rollout_predict(ens, xm, Ts, N)), x_test, N).mean(-1).tolist())
     for key, b in [("feedback_decay", beta), ("feedback_no_decay", 0.0)]:
         z = ens.split(F.cascade_predict(ens, xm, Ts, N, F.Gains(L, b)))
-        sweep[key].append(F.n_step_errors(z, x_test, N).mean(-1).tolist())
+        sweep[key].append(n_step_errors(z, x_test, N).mean(-1).tolist())
 state_rms = float(x_test.pow(2).sum(-1).mean().sqrt())
 judged = {"judged_std": noise_std, "state_rms": state_rms, "noise_to_state_rms": noise_std / state_rms,
           "noise_free_neural_ode_err": float(np.mean(sweep["neural_ode"][noise_sweep.index(0.0)]))}
@@ -196,7 +204,7 @@ print(f"judged noise std {noise_std:g} = {judged['noise_to_state_rms']:.3%} of t
       f"the noise-free neural ODE's mean {N}-step error is {judged['noise_free_neural_ode_err']:.3g}")
 
 # %%
-fig, axes = F.new_figure(1, 3)  # (g): two prediction panels (first seed), then the sweep
+fig, axes = new_figure(1, 3)  # (g): two prediction panels (first seed), then the sweep
 lim = float(x_test[:, 0].abs().max()) * 1.5
 for ax, std in zip(axes[0, :2], [0.0, noise_std]):
     xm = x_test + std * noise[:, :2]
@@ -218,7 +226,7 @@ ax.set(xscale="log", yscale="log", xlabel="noise std (0 drawn at 1e-4)", ylabel=
        title=f"noise sweep (mean ± std over {E} seeds)")
 ax.axvline(noise_std, color="0.6", ls=":", lw=1)
 ax.legend(fontsize=8)
-fig_g = F.save_figure(fig, out, "fig4g_decay_noise")
+fig_g = save_figure(fig, out, "fig4g_decay_noise")
 
 # %%
 beats = [s for s, d, n in zip(sweep["noise_std"], sweep["feedback_decay"], sweep["neural_ode"]) if np.mean(d) < np.mean(n)]
@@ -231,16 +239,16 @@ print(f"On the mean over seeds, the decayed cascade beats the open-loop neural O
 
 # %%
 Ns = np.arange(1, N_max + 1)
-err_N_nn = np.array([F.n_step_errors(z_nn[:, n], x_test, n).mean(-1).numpy() for n in Ns])  # (N_max, E)
-err_N_fb = np.array([F.n_step_errors(z_fb[:, n], x_test, n).mean(-1).numpy() for n in Ns])
-fig, ax = F.new_figure()
+err_N_nn = np.array([n_step_errors(z_nn[:, n], x_test, n).mean(-1).numpy() for n in Ns])  # (N_max, E)
+err_N_fb = np.array([n_step_errors(z_fb[:, n], x_test, n).mean(-1).numpy() for n in Ns])
+fig, ax = new_figure()
 for key, v in [("neural_ode", err_N_nn), ("feedback", err_N_fb)]:
     c = F.plotting.COLORS[key]
     ax.plot(Ns, v.mean(1), color=c, label=key.replace("_", " "))
     ax.fill_between(Ns, v.min(1), v.max(1), color=c, alpha=0.25, lw=0)
 ax.set(xlabel="N", ylabel="mean prediction error", title=f"(h) error against N ({E} seeds, band: min-max)")
 ax.legend()
-fig_h = F.save_figure(fig, out, "fig4h_error_vs_N")
+fig_h = save_figure(fig, out, "fig4h_error_vs_N")
 
 # %% [markdown]
 # ## Verdicts
@@ -262,12 +270,12 @@ e_nn_m, e_fb_m = e_nn.mean(-1).tolist(), e_fb.mean(-1).tolist()
 claims = [
     sec3.s1(s1_rel).replace(
         numbers={"nominal_rate_rel_rmse": s1_rel, "final_loss": history.loss[-1]},
-        figure=fig_c, headline=F.headline_number("nominal change-rate relative RMSE", s1_rel)),
+        figure=fig_c, headline=headline_number("nominal change-rate relative RMSE", s1_rel)),
     (r2 := sec3.s2(nominal_rel=s1_rel, test_rel_neural_ode=s2["test_rate_rel_rmse_neural_ode"],
                    rate_neural_ode=rate_nn, rate_feedback=rate_fb, err_N_neural_ode=e_nn_m,
                    err_N_feedback=e_fb_m, N=N)).replace(
         numbers=s2 | dict(r2.numbers), figure=fig_def,
-        headline=F.headline_number(f"N={N} error, feedback / neural ODE",
+        headline=headline_number(f"N={N} error, feedback / neural ODE",
                                    [f / n for f, n in zip(e_fb_m, e_nn_m)]))]
 
 # %%
@@ -282,19 +290,19 @@ claims += [
             no_decay=sweep["feedback_no_decay"], neural_ode=sweep["neural_ode"],
             judged_std=noise_std).replace(
         numbers=sweep | judged, figure=fig_g,
-        headline=F.headline_number(f"N={N} error at noise std {noise_std:g}, decay / no decay",
+        headline=headline_number(f"N={N} error at noise std {noise_std:g}, decay / no decay",
                                    [d / n for d, n in zip(sweep["feedback_decay"][i_j],
                                                           sweep["feedback_no_decay"][i_j])])),
     sec3.s4(err_neural_ode=err_N_nn, err_feedback=err_N_fb, N=N).replace(
         numbers={"N": Ns[::every], "neural_ode": err_N_nn[::every], "feedback": err_N_fb[::every],
                  "first_N_feedback_not_better_on_the_mean": first_not_better},
         figure=fig_h,
-        headline=F.headline_number(f"N={N_max} error, feedback / neural ODE",
+        headline=headline_number(f"N={N_max} error, feedback / neural ODE",
                                    (err_N_fb[-1] / err_N_nn[-1]).tolist())),
 ]
 
 # %%
-F.write_results(out, task="spiral", profile=profile, claims=claims,
+write_results(out, task="spiral", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "ms_per_iteration": history.ms_per_iteration,
                          "cascade_seconds_N_max": cascade_s, "seeds": seeds})
 for c in claims:

@@ -44,21 +44,30 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.feedback import eval_field, observe_gains
+from fnnlib.models import split_members, stack_members
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import seed_everything
+from fnnlib.stability import (discrete_residual, divergence_transition, gain_eigen_bounds, growth_factor,
+    iss_bound, observe_continuous, scaled_error_norm, theorem1_balls)
+from fnnlib.systems import Spiral, StackedSystem
+from fnnlib.training import load_seed_ensemble
 from fnnbook.rules import sec3
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-F.seed_everything(seed)
+seed_everything(seed)
 # every seed's network of the spiral task side by side on the stacked state, in float64 throughout (the
 # diverging runs reach 1e100)
-ens64 = F.load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
+ens64 = load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
 seeds, S = ens64.seeds, ens64.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
-sys_test = F.Spiral(*test)
+sys_test = Spiral(*test)
 x = sys_test.simulate(torch.tensor(x0), t)  # (T, 2), the measured test trajectory (noise-free, as Fig. 4d-f)
-xs = F.stack_members(x, S)  # (T, 2S): the same measurements for every seed's network
+xs = stack_members(x, S)  # (T, 2S): the same measurements for every seed's network
 print(f"{S} networks (seeds {seeds}) from the spiral task")
 
 # %% [markdown]
@@ -106,14 +115,14 @@ print(f"{S} networks (seeds {seeds}) from the spiral task")
 
 # %%
 with torch.no_grad():
-    f_true, f_nn = sys_test.rate(x), F.split_members(F.eval_field(ens64, xs), S)  # (T, 2), (S, T, 2)
+    f_true, f_nn = sys_test.rate(x), split_members(eval_field(ens64, xs), S)  # (T, 2), (S, T, 2)
 gamma = (f_true - f_nn).norm(dim=-1).amax(dim=-1)  # (S,) Assumption 1, measured per seed
-lam_m, lam_M = F.gain_eigen_bounds(L, 2)
-ball1, ball2 = (torch.tensor(b, dtype=torch.float64) for b in zip(*(F.theorem1_balls(L, float(g), 2) for g in gamma)))
+lam_m, lam_M = gain_eigen_bounds(L, 2)
+ball1, ball2 = (torch.tensor(b, dtype=torch.float64) for b in zip(*(theorem1_balls(L, float(g), 2) for g in gamma)))
 t_tr = transient_time_constants / lam_m
 fb = F.LinearFeedback(ens64, Ts, gains=F.Gains(L), n=2 * S).observe(xs)
-cont = F.observe_continuous(F.StackedSystem(sys_test, S), ens64, L, F.stack_members(torch.tensor(x0), S), t)[1]
-runs = {k: (F.split_members(e.x_hat, S), F.split_members(e.f_hat, S))
+cont = observe_continuous(StackedSystem(sys_test, S), ens64, L, stack_members(torch.tensor(x0), S), t)[1]
+runs = {k: (split_members(e.x_hat, S), split_members(e.f_hat, S))
         for k, e in [("feedback network", fb), ("continuous observer", cont)]}
 
 # %%
@@ -131,15 +140,15 @@ s5["ratio_f"] = (ball2 / torch.tensor(s5["feedback_limit_f"], dtype=torch.float6
 s5
 
 # %%
-ests = F.observe_gains(ens64, xs, Ts, torch.tensor(L_sweep))  # every gain and every seed, one pass
-limits = (x - F.split_members(ests.x_hat, S)).norm(dim=-1)[..., last_half].amax(dim=-1).T  # (gains, S)
+ests = observe_gains(ens64, xs, Ts, torch.tensor(L_sweep))  # every gain and every seed, one pass
+limits = (x - split_members(ests.x_hat, S)).norm(dim=-1)[..., last_half].amax(dim=-1).T  # (gains, S)
 ball_sweep = gamma[None] / torch.tensor(L_sweep, dtype=torch.float64)[:, None]  # (gains, S)
 sweep_L = {"L": L_sweep, "ball_x": ball_sweep.tolist(), "limit_x": limits.tolist(),
            "ratio": (ball_sweep / limits).tolist()}
 sweep_L
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 styles = {"feedback network": ("-", F.plotting.COLORS["feedback"]), "continuous observer": ("--", "k")}
 for j, (ylab, ball, name) in enumerate([(r"$\|\tilde x\|$", ball1, r"$\gamma/\lambda_m$"),
                                         (r"$\|\tilde f\| = \|\dot{\tilde x}\|$", ball2,
@@ -163,7 +172,7 @@ ax.set_xticks(L_sweep, [f"{g:g}" for g in L_sweep], minor=False)
 ax.set_xticks([], minor=True)
 ax.set(xlabel="L", ylabel=r"$\|\tilde x\|$ over the last half", title=f"(c) the ball follows L (min-max of {S} seeds)")
 ax.legend(fontsize=8)
-fig_s1 = F.save_figure(fig, out, "figS1_bounds")
+fig_s1 = save_figure(fig, out, "figS1_bounds")
 
 # %% [markdown]
 # ## Discrete time: the spectral-radius boundary of Eq. (25) (App. A.2, claim S6)
@@ -175,15 +184,15 @@ fig_s1 = F.save_figure(fig, out, "figS1_bounds")
 # %%
 gains = torch.tensor(discrete_gains, dtype=torch.float64)
 rho = (1 - Ts * gains).abs()  # scalar gains: rho(I - Ts L) = |1 - Ts L|
-est_d = F.observe_gains(ens64, xs, Ts, gains, allow_unstable=True)
-err_d = F.scaled_error_norm(x, F.split_members(est_d.x_hat, S))  # (S, G, T); scaled: a 1e176 error stays finite
+est_d = observe_gains(ens64, xs, Ts, gains, allow_unstable=True)
+err_d = scaled_error_norm(x, split_members(est_d.x_hat, S))  # (S, G, T); scaled: a 1e176 error stays finite
 with torch.no_grad():
-    gamma_d = F.discrete_residual(x.expand_as(f_nn), f_nn, Ts).norm(dim=-1).amax(dim=-1)  # (S,)
-growth = F.growth_factor(err_d)  # (S, G)
+    gamma_d = discrete_residual(x.expand_as(f_nn), f_nn, Ts).norm(dim=-1).amax(dim=-1)  # (S,)
+growth = growth_factor(err_d)  # (S, G)
 diverges = growth > growth_threshold
 steps_between = n_samples - round(0.5 * n_samples)
 rate = growth ** (1 / steps_between)
-iss_unit = torch.stack([F.iss_bound(g, Ts, 1.0, n_samples).max() for g in discrete_gains])  # gamma_d = 1
+iss_unit = torch.stack([iss_bound(g, Ts, 1.0, n_samples).max() for g in discrete_gains])  # gamma_d = 1
 iss_max = gamma_d[:, None] * iss_unit[None]  # (S, G)
 
 # %%
@@ -195,13 +204,13 @@ s6 |= {k: v.T.tolist() for k, v in [("growth_factor", growth), ("diverges", dive
 
 # %%
 stable, unstable = rho < 1, rho > 1
-transitions = [F.divergence_transition(rho, diverges[e]) for e in range(S)]
+transitions = [divergence_transition(rho, diverges[e]) for e in range(S)]
 switches, rho_lo, rho_hi = (list(v) for v in zip(*transitions))
 for s, (n_sw, lo, hi) in zip(seeds, transitions):
     print(f"seed {s}: bounded up to rho = {lo:.4g}, diverging from rho = {hi:.4g}; class switches along rho: {n_sw}")
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 ax = axes[0, 0]
 for g in [100.0, 199.0, 200.0, 201.0, 210.0, 0.0]:
     if g in discrete_gains:
@@ -228,7 +237,7 @@ for e in range(S):
                 label=r"ISS bound $T_s\gamma_d\sum\rho^j$" if e == 0 else None)
 ax.set(xlabel=r"$\rho < 1$", ylabel="error", title=f"(c) bounded runs vs the ISS bound ({S} seeds)")
 ax.legend(fontsize=8)
-fig_s6 = F.save_figure(fig, out, "figA2_discrete_stability")
+fig_s6 = save_figure(fig, out, "figA2_discrete_stability")
 
 # %% [markdown]
 # ## Verdicts
@@ -252,13 +261,13 @@ claims = [
             ratio_f=s5["ratio_f"], L_sweep=L_sweep, limit_x=sweep_L["limit_x"],
             ball_x_sweep=sweep_L["ball_x"], conservative_ratio=conservative_ratio).replace(
         numbers=s5 | {"L_sweep": sweep_L}, figure=fig_s1,
-        headline=F.headline_number("ball / measured limit of |x~|", s5["ratio_x"])),
+        headline=headline_number("ball / measured limit of |x~|", s5["ratio_x"])),
     s6_rule.replace(numbers=s6_rule.numbers | s6 | {"transition": [rho_lo, rho_hi], "class_switches": switches},
                     figure=fig_s6),
 ]
 
 # %%
-F.write_results(out, task="theory", profile=profile, claims=claims,
+write_results(out, task="theory", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "gamma": gamma.tolist(), "gamma_d": gamma_d.tolist(),
                          "ratio_x": s5["ratio_x"], "ratio_f": s5["ratio_f"]})
 for c in claims:

@@ -7,7 +7,7 @@
 # mismatch (Fig. 3, claim **S7**), the feedback on or off at 12 residual levels (Fig. S9, **S8**), the decay
 # rate under measurement noise (Fig. S11, **S9**) and a step change of the true dynamics (Fig. S12,
 # **S10**). Every sweep is one batched tensor pass over its gains, decay rates, levels, noise draws and seeds
-# (`fnnlib.sweeps`; the seeds' networks side by side on the stacked state, `F.NeuralODEEnsemble`). Each seed's
+# (`fnnlib.paper.sweeps`; the seeds' networks side by side on the stacked state, `F.NeuralODEEnsemble`). Each seed's
 # network sees its own measurement noise, drawn from a generator seeded from that seed. Every number is
 # measured per seed, and the verdicts are decided over the seeds (see *Verdicts*).
 
@@ -59,23 +59,34 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.feedback import cascade_sweep, eval_field, Gains
+from fnnlib.metrics import error_norm, n_step_errors, rmse_over_time
+from fnnlib.models import stack_members
+from fnnlib.paper import (colon_range, n_step_rmse, outward_increase_fraction, paired_levels, residual_level_runs,
+    simulate_levels, sweep_errors, switched_spiral_run)
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.stability import reconvergence_rows
+from fnnlib.systems import Spiral, add_member_noise
+from fnnlib.training import load_seed_ensemble
 from fnnbook.rules import sec3
 
 # %% tags=["hide-input"]
-gains = F.colon_range(*gain_range)
-levels = F.paired_levels(F.colon_range(*omega_range), F.colon_range(*eta_range), F.colon_range(*eps_range))
-res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
-betas, betas_ext = F.colon_range(*beta_range), F.colon_range(*beta_extended)
+gains = colon_range(*gain_range)
+levels = paired_levels(colon_range(*omega_range), colon_range(*eta_range), colon_range(*eps_range))
+res_levels = paired_levels(colon_range(*domega_range), colon_range(*deta_range), colon_range(*deps_range))
+betas, betas_ext = colon_range(*beta_range), colon_range(*beta_extended)
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-F.seed_everything(seed)
-ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+seed_everything(seed)
+ens = load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
 seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 tn = t.numpy()
-gens = [F.make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S7 and S9, drawn in that order
+gens = [make_generator(seed + s + 1) for s in seeds]  # each seed's noise of S7 and S9, drawn in that order
 
 
 # %%
@@ -115,23 +126,23 @@ print(f"{S} networks (seeds {seeds}) from the spiral task")
 # %%
 centre = int((levels - torch.tensor(nominal, dtype=torch.float64)).abs().sum(-1).argmin())
 nominal_is_a_level = bool(torch.allclose(levels[centre], torch.tensor(nominal, dtype=torch.float64), atol=1e-9))
-x_lv = F.simulate_levels([F.Spiral(*row) for row in levels.tolist()], torch.tensor(x0), t).float()  # (U, T, 2)
-xs_lv = F.stack_members(x_lv, S)  # (U, T, 2S)
-x_lv_noisy = F.add_member_noise(x_lv, noise_std, gens, draws=noise_draws)  # (draws, U, T, 2S): own noise per seed
+x_lv = simulate_levels([Spiral(*row) for row in levels.tolist()], torch.tensor(x0), t).float()  # (U, T, 2)
+xs_lv = stack_members(x_lv, S)  # (U, T, 2S)
+x_lv_noisy = add_member_noise(x_lv, noise_std, gens, draws=noise_draws)  # (draws, U, T, 2S): own noise per seed
 
 
 # %%
 # every seed and gain in one cascade, one level and noise draw at a time: a (gains, T, 2S) batch stays small
 # enough for the cache (all levels and draws at once run several times slower)
-err_clean = torch.stack([F.sweep_errors(ens, xs_lv[u], x_lv[u], Ts, N, gains, beta) for u in range(len(levels))],
+err_clean = torch.stack([sweep_errors(ens, xs_lv[u], x_lv[u], Ts, N, gains, beta) for u in range(len(levels))],
                         dim=-1)  # (S, G, U)
-err_noisy = torch.stack([torch.stack([F.sweep_errors(ens, x_lv_noisy[d, u], x_lv[u], Ts, N, gains, beta)
+err_noisy = torch.stack([torch.stack([sweep_errors(ens, x_lv_noisy[d, u], x_lv[u], Ts, N, gains, beta)
                                       for d in range(noise_draws)]).mean(0)
                          for u in range(len(levels))], dim=-1)  # (S, G, U): the mean over the draws
 
 # %%
-frac_clean = F.outward_increase_fraction(err_clean, centre)  # (S, G): per seed, per gain
-frac_noisy = F.outward_increase_fraction(err_noisy, centre)
+frac_clean = outward_increase_fraction(err_clean, centre)  # (S, G): per seed, per gain
+frac_noisy = outward_increase_fraction(err_noisy, centre)
 arg_noisy, arg_clean = err_noisy.argmin(1), err_clean.argmin(1)  # (S, U): best gain index per seed and level
 interior = (arg_noisy > 0) & (arg_noisy < len(gains) - 1)
 interior_clean = (arg_clean > 0) & (arg_clean < len(gains) - 1)
@@ -151,7 +162,7 @@ print(f"error smallest at an interior gain, per seed: {interior.sum(1).tolist()}
 {k: v for k, v in s7.items() if k != "levels"}
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 labels = [f"{o:g}/{e:g}/{p:g}" for o, e, p in levels.tolist()]
 for ax, err, name in [(axes[0, 0], err_noisy, f"(a) noise std {noise_std}"), (axes[0, 1], err_clean, "(b) noise-free")]:
     im = ax.imshow(np.log10(err.mean(0).numpy()), origin="lower", aspect="auto", cmap="viridis")
@@ -165,7 +176,7 @@ for i in range(len(levels)):
     plot_band(ax, gains, err_noisy[:, :, i], plt.cm.viridis(i / max(1, len(levels) - 1)), None)
 ax.set(xlabel="gain L", ylabel=f"mean {N}-step error", yscale="log",
        title=f"(c) noisy error vs gain per level (min-max of {S} seeds)")
-fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
+fig_s7 = save_figure(fig, out, "fig3_gain_uncertainty")
 
 # %% [markdown]
 # ## Feedback on and off at 12 residual levels (Fig. S9, claim S8)
@@ -183,15 +194,15 @@ fig_s7 = F.save_figure(fig, out, "fig3_gain_uncertainty")
 # the claim holds for a metric when that happens at all 12 levels.
 
 # %%
-x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
-xs8 = F.stack_members(x8, S)
+x8, f8 = residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
+xs8 = stack_members(x8, S)
 with torch.no_grad():
-    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+    f8_nn = ens.split(eval_field(ens, xs8))  # (S, 12, T, 2)
 f8_fb = ens.split(F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs8).f_hat)
 f8s = f8.expand_as(f8_nn)  # the true rates, the same for every seed
-rate_nn, rate_fb = F.rmse_over_time(f8_nn, f8s).T, F.rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
-ms_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T
-ms_fb = F.n_step_errors(ens.split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
+rate_nn, rate_fb = rmse_over_time(f8_nn, f8s).T, rmse_over_time(f8_fb, f8s).T  # (12, S): rows levels, cols seeds
+ms_nn = n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T
+ms_fb = n_step_errors(ens.split(F.cascade_predict(ens, xs8, Ts, N, F.Gains(L, beta))), x8, N).mean(-1).T
 
 # %%
 s8 = {"seeds": seeds, "offsets": res_levels.tolist(), "rate_rmse_neural_ode": rate_nn.tolist(),
@@ -202,7 +213,7 @@ s8 = {"seeds": seeds, "offsets": res_levels.tolist(), "rate_rmse_neural_ode": ra
 {k: v for k, v in s8.items() if k.startswith("levels") or k == "n_levels"}
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 idx = np.arange(len(res_levels))
 for ax, (a, b, name) in zip(axes[0], [(rate_nn, rate_fb, "change-rate RMSE"), (ms_nn, ms_fb, f"mean {N}-step error")]):
     for off, v, key in [(-0.2, a, "neural_ode"), (0.2, b, "feedback")]:
@@ -213,7 +224,7 @@ for ax, (a, b, name) in zip(axes[0], [(rate_nn, rate_fb, "change-rate RMSE"), (m
     ax.set(xlabel="residual level j", ylabel=name, title=f"(S9) {name} (mean, min-max over {S} seeds)")
     ax.set_xticks(idx)
     ax.legend(fontsize=8)
-fig_s8 = F.save_figure(fig, out, "figS9_residual_levels")
+fig_s8 = save_figure(fig, out, "figS9_residual_levels")
 
 # %% [markdown]
 # ## Decay rate under noise (Fig. S11, claim S9)
@@ -229,14 +240,14 @@ fig_s8 = F.save_figure(fig, out, "figS9_residual_levels")
 # minimum and the noise mechanism are judged per seed and hold in at least $S-1$ of the $S$ seeds.
 
 # %%
-x9 = F.Spiral(*test).simulate(torch.tensor(x0), t).float()
-x9n = F.add_member_noise(x9, noise_std, gens, draws=noise_draws)  # (draws, T, 2S): each seed its own noise
+x9 = Spiral(*test).simulate(torch.tensor(x0), t).float()
+x9n = add_member_noise(x9, noise_std, gens, draws=noise_draws)  # (draws, T, 2S): each seed its own noise
 
 # %%
 # the N-step RMSE per seed and beta, (S, B): the noise draws pooled with the starts
-rmse9 = F.n_step_rmse(ens.split(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas))), x9, N, dim=(2, 3))
-rmse9_ext = F.n_step_rmse(ens.split(F.cascade_sweep(ens, x9n, Ts, N, F.Gains.sweep(L, betas_ext))), x9, N, dim=(2, 3))
-rmse9_clean = F.n_step_rmse(ens.split(F.cascade_sweep(ens, F.stack_members(x9, S), Ts, N, F.Gains.sweep(L, betas))), x9, N)
+rmse9 = n_step_rmse(ens.split(cascade_sweep(ens, x9n, Ts, N, Gains.sweep(L, betas))), x9, N, dim=(2, 3))
+rmse9_ext = n_step_rmse(ens.split(cascade_sweep(ens, x9n, Ts, N, Gains.sweep(L, betas_ext))), x9, N, dim=(2, 3))
+rmse9_clean = n_step_rmse(ens.split(cascade_sweep(ens, stack_members(x9, S), Ts, N, Gains.sweep(L, betas))), x9, N)
 s9 = {"seeds": seeds, "beta": betas.tolist(), "rmse_noisy": rmse9.T.tolist(), "rmse_noise_free": rmse9_clean.T.tolist(),
       "beta_extended": betas_ext.tolist(), "rmse_noisy_extended": rmse9_ext.T.tolist(),
       "best_beta": betas[rmse9.argmin(1)].tolist(), "best_beta_noise_free": betas[rmse9_clean.argmin(1)].tolist(),
@@ -244,7 +255,7 @@ s9 = {"seeds": seeds, "beta": betas.tolist(), "rmse_noisy": rmse9.T.tolist(), "r
 s9
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 ax = axes[0, 0]
 plot_band(ax, betas, rmse9, F.plotting.COLORS["feedback"], f"noise std {noise_std}")
 plot_band(ax, betas, rmse9_clean, "0.4", "noise-free", style="s--")
@@ -254,7 +265,7 @@ ax.legend(fontsize=8)
 ax = axes[0, 1]
 plot_band(ax, betas_ext, rmse9_ext, F.plotting.COLORS["feedback"], None)
 ax.set(xlabel=r"decay rate $\beta$", ylabel=f"{N}-step RMSE (noisy)", yscale="log", title="extended grid")
-fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
+fig_s9 = save_figure(fig, out, "figS11_decay_rate")
 
 # %% [markdown]
 # ## A step change of the dynamics (Fig. S12, claim S10)
@@ -277,24 +288,25 @@ fig_s9 = F.save_figure(fig, out, "figS11_decay_rate")
 # after it (the same error indexed by the predicted time is reported as well).
 
 # %%
-x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
-xs10 = F.stack_members(x10, S)
+x10, f10 = switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
+xs10 = stack_members(x10, S)
 est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 f10s, x10s = f10.expand(S, -1, -1), x10.expand(S, -1, -1)  # the truth, the same for every seed
 with torch.no_grad():
-    e_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
-e_x, e_f = F.error_norm(ens.split(est10.x_hat), x10s), F.error_norm(ens.split(est10.f_hat), f10s)
-z_fb10 = ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta)))
-z_nn10 = ens.split(F.rollout_predict(ens, xs10, Ts, N))
-e_ms = F.n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
+    e_nn = error_norm(ens.split(eval_field(ens, xs10)), f10s)  # (S, T): |Delta f| per seed
+e_x, e_f = error_norm(ens.split(est10.x_hat), x10s), error_norm(ens.split(est10.f_hat), f10s)
+z_fb10, z_nn10 = ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), ens.split(F.rollout_predict(ens,
+                                                                                                               xs10,
+                                                                                                               Ts, N))
+e_ms = n_step_errors(z_fb10, x10, N)  # (S, T - N); column k: the prediction started at t_k
 
 
 # %%
 s10 = {"seeds": seeds}
 for name, (tt, err) in {"x": (t, e_x), "f": (t, e_f), "multistep": (t[:-N], e_ms)}.items():
-    s10 |= {f"{k}_{name}": v for k, v in F.reconvergence_rows(tt, err, t_switch, window=steady_window,
+    s10 |= {f"{k}_{name}": v for k, v in reconvergence_rows(tt, err, t_switch, window=steady_window,
                                                                band_factor=band_factor).items()}
-s10["time_multistep_predicted_time"] = F.reconvergence_rows(t[N:], e_ms, t_switch, window=steady_window,
+s10["time_multistep_predicted_time"] = reconvergence_rows(t[N:], e_ms, t_switch, window=steady_window,
                                                             band_factor=band_factor)["time"]
 
 # %%
@@ -307,7 +319,7 @@ s10 |= {"rate_err_after_feedback": e_f[:, late].mean(-1).tolist(),
 s10
 
 # %%
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 ax = axes[0, 0]
 ax.plot(tn, x10[:, 0], color=F.plotting.COLORS["truth"], label="x")
 ax.plot(tn, x10[:, 1], color=F.plotting.COLORS["truth"], ls="--", label="y")
@@ -323,7 +335,7 @@ for e in range(S):  # one faint line per seed
                         label=r"feedback $\|\tilde x\|$" if first else None)
 for e in range(S):
     first = e == 0
-    axes[0, 2].semilogy(tn[N:], F.n_step_errors(z_nn10[e], x10, N), color=F.plotting.COLORS["neural_ode"], lw=0.8,
+    axes[0, 2].semilogy(tn[N:], n_step_errors(z_nn10[e], x10, N), color=F.plotting.COLORS["neural_ode"], lw=0.8,
                         alpha=0.6, label="neural ODE" if first else None)
     axes[0, 2].semilogy(tn[N:], e_ms[e], color=F.plotting.COLORS["feedback"], lw=0.8, alpha=0.6,
                         label="feedback" if first else None)
@@ -334,7 +346,7 @@ ax.set(xlabel="t [s] (predicted time)", ylabel=f"{N}-step error", title=f"(c) {N
 ax.legend(fontsize=8)
 for ax in axes[0]:
     ax.plot(t_switch, ax.get_ylim()[0], "D", color="gold", ms=9, clip_on=False)
-fig_s10 = F.save_figure(fig, out, "figS12_step_change")
+fig_s10 = save_figure(fig, out, "figS12_step_change")
 
 # %% [markdown]
 # ## Verdicts
@@ -354,7 +366,7 @@ claims = [
             best_gain_noise_free=s7["best_gain_noise_free_per_level"],
             trend_fraction=trend_fraction).replace(
         numbers=s7 | {"err_noisy": err_noisy.tolist(), "err_noise_free": err_clean.tolist()}, figure=fig_s7,
-        headline=F.headline_number("levels with an interior best gain, noisy",
+        headline=headline_number("levels with an interior best gain, noisy",
                                    s7["levels_with_interior_minimum"]))]
 
 # %%
@@ -363,10 +375,10 @@ claims += [
             err_N_neural_ode=s8[f"mean_err_N{N}_neural_ode"],
             err_N_feedback=s8[f"mean_err_N{N}_feedback"], offsets=s8["offsets"]).replace(
         numbers=s8, figure=fig_s8,
-        headline=F.headline_number("levels where the feedback wins the N-step error",
+        headline=headline_number("levels where the feedback wins the N-step error",
                                    s8["levels_multistep_better_per_seed"])),
     sec3.s9(beta=s9["beta"], rmse_noisy=s9["rmse_noisy"], rmse_noise_free=s9["rmse_noise_free"]).replace(
-        numbers=s9, figure=fig_s9, headline=F.headline_number("best beta with noise", s9["best_beta"]))]
+        numbers=s9, figure=fig_s9, headline=headline_number("best beta with noise", s9["best_beta"]))]
 
 # %%
 claims += [
@@ -378,11 +390,11 @@ claims += [
              rate_err_after_neural_ode=s10["rate_err_after_neural_ode"],
              settle_threshold=settle_threshold).replace(
         numbers=s10, figure=fig_s10,
-        headline=F.headline_number("change-rate error back in its band after", s10["time_f"], unit="s")),
+        headline=headline_number("change-rate error back in its band after", s10["time_f"], unit="s")),
 ]
 
 # %%
-F.write_results(out, task="ablations", profile=profile, claims=claims,
+write_results(out, task="ablations", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "nominal_level": centre, "best_beta": s9["best_beta"],
                          "reconverge_s_x": s10["time_x"], "reconverge_s_f": s10["time_f"]})
 for c in claims:

@@ -48,28 +48,35 @@ import torch
 from IPython.display import Markdown, display
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.feedback import eval_field
+from fnnlib.observers import disturbance_drift_variance, evaluate_observer
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
+from fnnlib.training import load_seed_checkpoints, randomized_cases
 from fnnbook.rules import sec3
 from fnnlib.observers import comparison as OC
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-nets = F.load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
+nets = load_seed_checkpoints(upstream_dirs["spiral"])  # [(seed, network, meta)], one per seed of the spiral task
 seeds = [s for s, _, _ in nets]
 S = len(seeds)
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
-system = F.Spiral(*test)
+system = Spiral(*test)
 x = system.simulate(torch.tensor(x0), t).float()  # (T, 2) clean test states
 f_true = system.rate(x)  # true change rates
-X_tune, _ = F.randomized_cases(F.Spiral, kf_tuning_low, kf_tuning_high, kf_tuning_cases, torch.tensor(x0), t)
+X_tune, _ = randomized_cases(Spiral, kf_tuning_low, kf_tuning_high, kf_tuning_cases, torch.tensor(x0), t)
 
 # %%
 y, d_true, kf_q_d = [], [], []  # per seed: what every observer sees, the residual, the Kalman q_d
 for s, model, meta in nets:
-    y.append(F.add_measurement_noise(x, noise_std, F.make_generator(seed + s + 1)))  # this seed's own noise draw
+    y.append(F.add_measurement_noise(x, noise_std, make_generator(seed + s + 1)))  # this seed's own noise draw
     with torch.no_grad():
-        d_true.append(f_true - F.eval_field(model, x))  # the residual Delta f the feedback has to supply
-    kf_q_d.append(F.disturbance_drift_variance(X_tune.float(), Ts, model))  # training distribution only
+        d_true.append(f_true - eval_field(model, x))  # the residual Delta f the feedback has to supply
+    kf_q_d.append(disturbance_drift_variance(X_tune.float(), Ts, model))  # training distribution only
     kf_q_d_oracle = float(d_true[-1].diff(dim=0).std()) ** 2  # from the test spiral's true residual: context only
     print(f"seed {s}: final loss {meta.get('final_loss', float('nan')):.4g}; |Delta f| up to "
           f"{float(d_true[-1].norm(dim=-1).max()):.3g}; Kalman q_d = {kf_q_d[-1]:.3g} from {kf_tuning_cases} training "
@@ -121,9 +128,9 @@ observers[0]
 # %%
 reports, tables = [], []  # per seed
 for e, obs_e in enumerate(observers):
-    rep = {name: F.evaluate_observer(obs, y[e], (x, f_true), N, settle=settle, repeats=repeats if e == 0 else 1)
+    rep = {name: evaluate_observer(obs, y[e], (x, f_true), N, settle=settle, repeats=repeats if e == 0 else 1)
            for name, obs in obs_e.items()}
-    clean = {name: F.evaluate_observer(obs, x, (x, f_true), N, repeats=1).metrics for name, obs in obs_e.items()}
+    clean = {name: evaluate_observer(obs, x, (x, f_true), N, repeats=1).metrics for name, obs in obs_e.items()}
     reports.append(rep)
     tables.append({name: r.metrics | {"rate_rmse_clean": clean[name]["rate_rmse"],
                                       "err_N_mean_clean": clean[name]["err_N_mean"]} for name, r in rep.items()})
@@ -177,7 +184,7 @@ names = ["neural ODE", "linear feedback", "Luenberger", "Kalman", "EKF"]
 colors = dict(zip(names, [F.plotting.COLORS[c] for c in ["neural_ode", "feedback", "luenberger", "kalman"]]))
 colors["EKF"] = "#8c564b"
 tn = t.numpy()
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 for e in range(S):
     for name in names:
         rep, label = reports[e][name], name if e == 0 else None
@@ -193,7 +200,7 @@ axes[0, 2].set(xlabel="µs per sample (observing)", ylabel="change-rate RMSE (se
                title=f"cost vs accuracy ({S} seeds)")
 for ax in axes[0, ::2]:
     ax.legend(fontsize=7)
-fig_cmp = F.save_figure(fig, out, "observers_compare")
+fig_cmp = save_figure(fig, out, "observers_compare")
 
 # %% [markdown]
 # ## The disturbance each observer estimates
@@ -201,7 +208,7 @@ fig_cmp = F.save_figure(fig, out, "observers_compare")
 # $N$-step predictions of the first state component (right).
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 axes[0, 0].plot(tn, d_true[0][:, 0], color=F.plotting.COLORS["truth"], lw=2, label=r"true $\Delta f$")
 axes[0, 0].plot(tn, d_lf[0][:, 0], color=colors["linear feedback"], lw=0.8, label="linear feedback")
 for name in ["Luenberger", "Kalman"]:
@@ -213,7 +220,7 @@ for name in ["neural ODE", "linear feedback", "Kalman"]:
 axes[0, 1].set(xlabel="t [s]", ylabel="x", title=f"{N}-step predictions (seed {seeds[0]})")
 for ax in axes[0]:
     ax.legend(fontsize=7)
-fig_d = F.save_figure(fig, out, "observers_disturbance")
+fig_d = save_figure(fig, out, "observers_disturbance")
 
 # %% [markdown]
 # ## Where the linear feedback wins and loses
@@ -293,9 +300,9 @@ numbers |= {"lf_vs_twin_rel_diff": equiv["max_rel_diff_luenberger"], "linear_fee
                                                              "rho_kalman_steady")]}
 best_rival = np.min([v for k, v in rate_settled.items() if k not in ("neural ODE", "linear feedback")], axis=0)
 claims = [s11.replace(numbers=numbers | {"seeds": seeds}, figure=fig_cmp,
-                     headline=F.headline_number("settled change-rate RMSE, linear feedback / best observer",
+                     headline=headline_number("settled change-rate RMSE, linear feedback / best observer",
                                                 (np.asarray(rate_settled["linear feedback"]) / best_rival).tolist()))]
-F.write_results(out, task="observers", profile=profile, claims=claims,
+write_results(out, task="observers", profile=profile, claims=claims,
                 metrics={"seeds": seeds, "observers": table, "observers_per_seed": tables,
                          "lf_frozen_err_N_mean": lf_frozen_err, **design, **equiv})
 print(f"S11: {claims[0].verdict}  {claims[0].checks}")

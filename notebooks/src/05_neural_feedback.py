@@ -65,17 +65,25 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.feedback import eval_field
+from fnnlib.metrics import error_norm, relative_rmse
+from fnnlib.models import NeuralFeedbackEnsemble, stack_members
+from fnnlib.paper import colon_range, level_errors, offset_spirals, paired_levels, simulate_levels
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.systems import Spiral
+from fnnlib.training import load_seed_checkpoints, save_checkpoint, seed_checkpoint_name
 from fnnbook.rules import sec4
 
 # %% tags=["hide-input"]
 task_start = time.perf_counter()
-cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
-res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
+cases = paired_levels(colon_range(*dr_omega_range), colon_range(*dr_eta_range), colon_range(*dr_eps_range))
+res_levels = paired_levels(colon_range(*domega_range), colon_range(*deta_range), colon_range(*deps_range))
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-loaded = F.load_seed_checkpoints(Path(upstream_dirs["spiral"]), stem="neural_ode", expected_kind="NeuralODE")
+loaded = load_seed_checkpoints(Path(upstream_dirs["spiral"]), stem="neural_ode", expected_kind="NeuralODE")
 seeds = [s for s, _, _ in loaded]  # the spiral task's seeds: seed s freezes its network s
 if len(seeds) < 2 or seed not in seeds:
     raise ValueError(f"need at least two spiral seeds (a paired comparison) holding `seed` = {seed} (the seed the "
@@ -96,8 +104,8 @@ fb_recipe = F.FeedbackRecipe(iterations=fb_iterations, batch_size=fb_batch_size,
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
 x0_t = torch.tensor(x0, dtype=torch.float64)
-X_dr = F.simulate_levels([F.Spiral(*row) for row in cases.tolist()], x0_t, t_dr, exact=True).float()  # (20, 1000, 2)
-sys_nom = F.Spiral(*nominal)
+X_dr = simulate_levels([Spiral(*row) for row in cases.tolist()], x0_t, t_dr, exact=True).float()  # (20, 1000, 2)
+sys_nom = Spiral(*nominal)
 x_nom = sys_nom.exact_solution(x0_t, t).float()
 f_nom = sys_nom.rate(x_nom)
 print(f"{len(cases)} randomized cases, {dr_n_samples} samples each over {float(t_dr[-1]):g} s; "
@@ -116,7 +124,7 @@ print(f"{len(cases)} randomized cases, {dr_n_samples} samples each over {float(t
 # `refresh_every` iterations (paper profile: 10; what one refresh costs, and what refreshing at every iteration
 # would cost, is measured below). Every frozen $f_{neural}$ bitwise unchanged is a guarantee of the run.
 #
-# **Seeds side by side.** The feedbacks of all seeds train as one `F.NeuralFeedbackEnsemble` on the stacked state,
+# **Seeds side by side.** The feedbacks of all seeds train as one `NeuralFeedbackEnsemble` on the stacked state,
 # against the frozen networks stacked the same way: seed $s$'s $h_{neural}$ starts from seed $s$ and draws its
 # own mini-batches from seed $s$; the seeds' losses add up and their gradients never mix, so each trains
 # bitwise as it would alone (tested in `tests/training/test_feedback_training.py`).
@@ -126,24 +134,24 @@ print(f"{len(cases)} randomized cases, {dr_n_samples} samples each over {float(t
 # way the spiral task trains its networks: they share the mini-batch draws and the solver's step sizes.
 
 # %%
-h_ens = F.NeuralFeedbackEnsemble(2, fb_hidden, fb_activation, seeds)  # seed s: NeuralFeedback after seed_everything(s)
+h_ens = NeuralFeedbackEnsemble(2, fb_hidden, fb_activation, seeds)  # seed s: NeuralFeedback after seed_everything(s)
 hist_fb = F.train_neural_feedback(f_ens, h_ens, t_dr, X_dr, fb_recipe, seed=seeds)
 frozen_unchanged = [all(torch.equal(a, b) for a, b in zip(f_ens.member(e).parameters(), m.parameters()))
                     for e, (_, m, _) in enumerate(loaded)]  # per seed: still the spiral task's network, bitwise
 for e, s in enumerate(seeds):
-    F.save_checkpoint(out / F.seed_checkpoint_name(s, "neural_feedback"), h_ens.member(e),
+    save_checkpoint(out / seed_checkpoint_name(s, "neural_feedback"), h_ens.member(e),
                       {"seed": s, "seeds": seeds, "iterations": fb_iterations, "refresh_every": refresh_every,
                        "final_loss": hist_fb.member(e)[-1]})
 
 # %%
 dr_ens = F.NeuralODEEnsemble(f_ens.n_state, f_ens.hidden, f_ens.activation, seeds)  # the nominal models' architecture
-hist_dr = F.train_neural_ode(dr_ens, t_dr, F.stack_members(X_dr, E), recipe, seed=seeds[0])
+hist_dr = F.train_neural_ode(dr_ens, t_dr, stack_members(X_dr, E), recipe, seed=seeds[0])
 for e, s in enumerate(seeds):
-    F.save_checkpoint(out / F.seed_checkpoint_name(s, "neural_ode_dr"), dr_ens.member(e),
+    save_checkpoint(out / seed_checkpoint_name(s, "neural_ode_dr"), dr_ens.member(e),
                       {"seed": s, "seeds": seeds, "iterations": recipe.iterations, "method": recipe.method,
                        "adjoint": recipe.adjoint, "final_loss_mean_over_seeds": hist_dr.loss[-1]})
 t0 = time.perf_counter()
-F.NeuralFeedbackObserver(f_ens, float(dr_Ts), h=h_ens, n=2 * E).observe(F.stack_members(X_dr, E))  # one refresh of Alg. 1
+F.NeuralFeedbackObserver(f_ens, float(dr_Ts), h=h_ens, n=2 * E).observe(stack_members(X_dr, E))  # one refresh of Alg. 1
 refresh_s = time.perf_counter() - t0
 print(f"{E} feedbacks: {hist_fb.seconds:.1f} s ({hist_fb.ms_per_iteration:.1f} ms/iteration), frozen neural ODEs "
       f"unchanged: {frozen_unchanged}; {E} domain-randomized neural ODEs: {hist_dr.seconds:.1f} s")
@@ -166,19 +174,19 @@ print(f"one refresh of the rollout ({E} seeds, all cases) costs {1000 * refresh_
 
 # %%
 nf = F.NeuralFeedbackObserver(f_ens, Ts, h=h_ens, n=2 * E)
-xs_nom = F.stack_members(x_nom, E)
+xs_nom = stack_members(x_nom, E)
 with torch.no_grad():
-    f_nn_nom, f_dr_nom = f_ens.split(F.eval_field(f_ens, xs_nom)), f_ens.split(F.eval_field(dr_ens, xs_nom))
+    f_nn_nom, f_dr_nom = f_ens.split(eval_field(f_ens, xs_nom)), f_ens.split(eval_field(dr_ens, xs_nom))
 f_fb_nom = f_ens.split(nf.observe(xs_nom).f_hat)
-d12 = {"seeds": seeds, **{f"rel_rmse_{k}": [F.relative_rmse(v[e], f_nom) for e in range(E)]
+d12 = {"seeds": seeds, **{f"rel_rmse_{k}": [relative_rmse(v[e], f_nom) for e in range(E)]
                           for k, v in [("nominal_neural_ode", f_nn_nom), ("dr_neural_ode", f_dr_nom),
                                        ("neural_feedback", f_fb_nom)]},
        "frozen_unchanged": frozen_unchanged}
 d12
 
 # %%
-fig, axes = F.new_figure(1, 4)
-vmax = float(F.error_norm(f_dr_nom[shown], f_nom).max())
+fig, axes = new_figure(1, 4)
+vmax = float(error_norm(f_dr_nom[shown], f_nom).max())
 F.plotting.plot_rate_curve(axes[0, 0], f_nom, f_nn_nom[shown], title=f"nominal neural ODE (Fig. 4c), seed {seed}",
                            vmax=vmax)
 F.plotting.plot_rate_curve(axes[0, 1], f_nom, f_dr_nom[shown], title="(a) domain-randomized neural ODE", vmax=vmax)
@@ -193,7 +201,7 @@ for j, (key, color) in enumerate([("nominal_neural_ode", "neural_ode"), ("dr_neu
     ax.plot([j - 0.25, j + 0.25], [v.mean()] * 2, color=F.plotting.COLORS[color], lw=2)
 ax.set(yscale="log", ylabel="relative change-rate RMSE", title=f"every seed ({E}; bar: mean)")
 ax.set_xticks(range(3), ["nominal", "dom.-rand.", "feedback"])
-fig_ab = F.save_figure(fig, out, "fig5ab_nominal")
+fig_ab = save_figure(fig, out, "fig5ab_nominal")
 
 # %% [markdown]
 # ## Training loss of the feedback part (Fig. 5c, claim D3)
@@ -213,13 +221,13 @@ d3 = {"seeds": seeds, "loss_first_10pct": first.tolist(), "loss_last_10pct": las
 d3
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 c = F.plotting.COLORS["feedback"]
 ax.semilogy(loss.mean(1), lw=0.8, color=c, label=f"mean over {E} seeds")
 ax.fill_between(np.arange(len(loss)), loss.min(1), loss.max(1), color=c, alpha=0.25, lw=0, label="min-max")
 ax.set(xlabel="iteration", ylabel="Eq. (12) loss", title="(c) training loss of the feedback part")
 ax.legend(fontsize=8)
-fig_c = F.save_figure(fig, out, "fig5c_feedback_loss")
+fig_c = save_figure(fig, out, "fig5c_feedback_loss")
 
 # %% [markdown]
 # ## Neural feedback at the 12 residual levels (Fig. S10, claim D4)
@@ -242,17 +250,17 @@ fig_c = F.save_figure(fig, out, "fig5c_feedback_loss")
 # below 0) both in change-rate RMSE and in mean $N$-step error. Checks: it does at every S8 level; and at every
 # held-out level.
 #
-# Per seed and level, `F.level_errors` gives the change-rate RMSE and the mean $N$-step error of the neural ODE,
+# Per seed and level, `level_errors` gives the change-rate RMSE and the mean $N$-step error of the neural ODE,
 # the neural feedback and (reported beside them) the linear feedback, on noise-free measurements.
 
 
 # %%
-systems = F.offset_spirals(residual_base, res_levels)  # the S8 levels
+systems = offset_spirals(residual_base, res_levels)  # the S8 levels
 # the trajectories use the levels' parameters rounded to float32 (as every run so far has; the rates do not)
 params32 = torch.tensor([[s.omega, s.eta, s.eps] for s in systems]).tolist()
-x8 = F.simulate_levels([F.Spiral(*p) for p in params32], x0_t, t, exact=True).float()  # (12, T, 2)
+x8 = simulate_levels([Spiral(*p) for p in params32], x0_t, t, exact=True).float()  # (12, T, 2)
 f8 = torch.stack([s.rate(x) for s, x in zip(systems, x8)])
-rate, ms, cascade_s = F.level_errors(f_ens, nf, x8, f8, Ts, N, L, beta)  # each (E, 12)
+rate, ms, cascade_s = level_errors(f_ens, nf, x8, f8, Ts, N, L, beta)  # each (E, 12)
 
 # %%
 rate_better, ms_better = rate["neural_feedback"] < rate["neural_ode"], ms["neural_feedback"] < ms["neural_ode"]
@@ -267,7 +275,7 @@ d4 = {"seeds": seeds, "offsets": res_levels.tolist(),
 {k: v for k, v in d4.items() if not k.startswith(("rate_rmse", "mean_err", "offsets"))}
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 idx = np.arange(len(res_levels))
 colors = {"neural_ode": F.plotting.COLORS["neural_ode"], "neural_feedback": F.plotting.COLORS["feedback"],
           "linear_feedback": F.plotting.COLORS["feedback_nodecay"]}
@@ -282,11 +290,11 @@ for ax, (vals, name) in zip(axes[0], [(rate, "change-rate RMSE"), (ms, f"mean {N
     ax.set_xticks(idx)
     ax.legend(fontsize=8)
 fig.suptitle(f"bars: mean over {E} seeds; whiskers: min-max", fontsize=9)
-fig_d4 = F.save_figure(fig, out, "figS10_residual_levels")
+fig_d4 = save_figure(fig, out, "figS10_residual_levels")
 
 # %%
 steps = torch.tensor([dr_omega_range[1], dr_eta_range[1], dr_eps_range[1]], dtype=torch.float64)
-flipped = F.offset_spirals(residual_base, res_levels * torch.tensor(heldout_flip, dtype=res_levels.dtype))
+flipped = offset_spirals(residual_base, res_levels * torch.tensor(heldout_flip, dtype=res_levels.dtype))
 p_flip = torch.tensor([[s.omega, s.eta, s.eps] for s in flipped], dtype=torch.float64)
 dist = torch.cdist(p_flip / steps, cases.to(torch.float64) / steps).amin(-1)  # to the nearest training case
 far = dist >= heldout_min_distance
@@ -296,10 +304,10 @@ if not held:
                      f"{dist.tolist()}")
 
 # %%
-x_h = F.simulate_levels([F.Spiral(*torch.tensor([s.omega, s.eta, s.eps]).tolist()) for s in held], x0_t, t,
+x_h = simulate_levels([Spiral(*torch.tensor([s.omega, s.eta, s.eps]).tolist()) for s in held], x0_t, t,
                         exact=True).float()
 f_h = torch.stack([s.rate(x) for s, x in zip(held, x_h)])
-rate_h, ms_h, _ = F.level_errors(f_ens, nf, x_h, f_h, Ts, N, L, beta)
+rate_h, ms_h, _ = level_errors(f_ens, nf, x_h, f_h, Ts, N, L, beta)
 held_out = {"params": p_flip[far].tolist(), "distance_steps": dist[far].tolist(),
             "all_distances_steps": dist.tolist(),
             **{f"rate_rmse_{k}": rate_h[k].tolist() for k in ("neural_ode", "neural_feedback")},  # [seed][level]
@@ -318,18 +326,18 @@ claims = [
     sec4.d1(rel_dr=d12["rel_rmse_dr_neural_ode"], rel_nominal=d12["rel_rmse_nominal_neural_ode"],
             factor=d1_factor).replace(
         numbers=d12, figure=fig_ab,
-        headline=F.headline_number("nominal rate error, domain-randomized / nominal neural ODE", ratio_dr)),
+        headline=headline_number("nominal rate error, domain-randomized / nominal neural ODE", ratio_dr)),
     sec4.d2(rel_feedback=d12["rel_rmse_neural_feedback"],
             rel_nominal=d12["rel_rmse_nominal_neural_ode"], frozen_unchanged=frozen_unchanged,
             factor=d2_factor).replace(
         numbers=d12, figure=fig_ab,
-        headline=F.headline_number("nominal rate error, neural feedback / nominal neural ODE", ratio_fb))]
+        headline=headline_number("nominal rate error, neural feedback / nominal neural ODE", ratio_fb))]
 
 # %%
 claims += [
     sec4.d3(ratio=d3["ratio"], trend=d3["last_window_trend_relative"], ratio_max=d3_ratio,
             flat=d3_flat).replace(
-        numbers=d3, figure=fig_c, headline=F.headline_number("loss, last / first 10 %", d3["ratio"])),
+        numbers=d3, figure=fig_c, headline=headline_number("loss, last / first 10 %", d3["ratio"])),
     sec4.d4(rate_neural_feedback=rate["neural_feedback"].T, rate_neural_ode=rate["neural_ode"].T,
             err_N_neural_feedback=ms["neural_feedback"].T, err_N_neural_ode=ms["neural_ode"].T,
             heldout_rate_neural_feedback=rate_h["neural_feedback"].T,
@@ -337,13 +345,13 @@ claims += [
             heldout_err_N_neural_feedback=ms_h["neural_feedback"].T,
             heldout_err_N_neural_ode=ms_h["neural_ode"].T, N=N, offsets=res_levels.tolist()).replace(
         numbers=d4 | {"held_out": held_out}, figure=fig_d4,
-        headline=F.headline_number("S8 levels won in both metrics, per seed",
+        headline=headline_number("S8 levels won in both metrics, per seed",
                                    d4["levels_both_better_per_seed"])),
 ]
 
 # %%
 task_seconds = time.perf_counter() - task_start
-F.write_results(out, task="neural_feedback", profile=profile, claims=claims,
+write_results(out, task="neural_feedback", profile=profile, claims=claims,
                 metrics={"task_seconds": task_seconds, "seeds": seeds, "feedback_train_seconds": hist_fb.seconds,
                          "feedback_ms_per_iteration": hist_fb.ms_per_iteration, "dr_train_seconds": hist_dr.seconds,
                          "refresh_every": refresh_every, "cascade_seconds": cascade_s,

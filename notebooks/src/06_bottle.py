@@ -44,10 +44,19 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import headline_number, write_results
+from fnnlib.data import bottle_throws
+from fnnlib.feedback import eval_field
+from fnnlib.metrics import error_norm, rmse
+from fnnlib.models import split_members, stack_members
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.systems.projectile import fit_drag
+from fnnlib.training import PAPER_BOTTLE_RECIPE, save_checkpoint, seed_checkpoint_name
 from fnnbook.rules import bottle as rules
 
+# %% tags=["hide-input"]
 # the real throws (SHA-256 and shapes checked before any work) or synthetic ones drawn with the first seed
-train, test = F.bottle_throws(data, data_dir=data_dir, synthetic_sizes=synthetic_sizes, seed=seeds[0])
+train, test = bottle_throws(data, data_dir=data_dir, synthetic_sizes=synthetic_sizes, seed=seeds[0])
 Ts = train.Ts
 
 # %%
@@ -67,18 +76,18 @@ print(f"{data} throws: train {tuple(train.data.shape)}, test {tuple(test.data.sh
 # side on the stacked state (`F.NeuralODEEnsemble`), sharing the mini-batch draws and the solver's steps.
 
 # %%
-drag = F.fit_drag(train.data[..., 6:9], train.acc)
-recipe = F.PAPER_BOTTLE_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
+drag = fit_drag(train.data[..., 6:9], train.acc)
+recipe = PAPER_BOTTLE_RECIPE.replace(iterations=iterations, batch_size=batch_size, batch_time=batch_time, lr=lr,
                                        method=method, adjoint=adjoint)
 E = len(seeds)
 ens = F.NeuralODEEnsemble(6, hidden, activation, seeds)
-history = F.train_neural_ode(ens, train.t.float(), F.stack_members(x_train, E), recipe, seed=seeds[0])
+history = F.train_neural_ode(ens, train.t.float(), stack_members(x_train, E), recipe, seed=seeds[0])
 model = ens.member(0)
 train_meta = {"seeds": seeds, "data": data, "final_loss": history.loss[-1], "recipe": recipe.as_dict()}
-F.save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)  # the first seed's, for one-network readers
+save_checkpoint(out / "neural_ode.pt", model, {"seed": seeds[0]} | train_meta)  # the first seed's, for one-network readers
 for e, s in enumerate(seeds):  # every seed's network, for the tasks that judge over seeds (tuned_gains)
-    F.save_checkpoint(out / F.seed_checkpoint_name(s), ens.member(e), {"seed": s} | train_meta)
-xs_test = F.stack_members(x_test, E)  # (throws, T, 6 E): every seed's network in one pass
+    save_checkpoint(out / seed_checkpoint_name(s), ens.member(e), {"seed": s} | train_meta)
+xs_test = stack_members(x_test, E)  # (throws, T, 6 E): every seed's network in one pass
 print(f"drag k = {drag.k.numpy().round(4)}; {E} neural ODEs trained in {history.seconds:.1f} s, "
       f"final loss (mean over seeds) {history.loss[-1]:.4f}")
 
@@ -91,10 +100,10 @@ print(f"drag k = {drag.k.numpy().round(4)}; {E} neural ODEs trained in {history.
 # %%
 t0 = time.perf_counter()
 pred = {"drag model": F.rollout_predict(drag, x_test.double(), Ts, N).float()[None],
-        "neural ODE": F.split_members(F.rollout_predict(ens, xs_test, Ts, N), E),
-        "feedback": F.split_members(F.cascade_predict(ens, xs_test, Ts, N, F.Gains(L, beta)), E)}  # (seeds, throws, T, 6)
+        "neural ODE": split_members(F.rollout_predict(ens, xs_test, Ts, N), E),
+        "feedback": split_members(F.cascade_predict(ens, xs_test, Ts, N, F.Gains(L, beta)), E)}  # (seeds, throws, T, 6)
 predict_s = time.perf_counter() - t0
-err = {k: F.error_norm(z[..., :-N, :3], x_test[:, N:, :3].expand_as(z[..., :-N, :3])) for k, z in pred.items()}  # (seeds, throws, T - N)
+err = {k: error_norm(z[..., :-N, :3], x_test[:, N:, :3].expand_as(z[..., :-N, :3])) for k, z in pred.items()}  # (seeds, throws, T - N)
 per_throw = {k: e.mean(-1).T for k, e in err.items()}  # (throws, seeds): each throw's mean error, per seed
 summary = {k: {"mean": float(e.mean()), "std_over_throws": float(e.mean((0, 2)).std()),
                "per_seed": e.mean((1, 2)).tolist(), "per_throw": e.mean((0, 2)).tolist()} for k, e in err.items()}
@@ -103,7 +112,7 @@ gap_cm = (100 * (per_throw["feedback"] - per_throw["neural ODE"]))  # (throws, s
 
 # %%
 colors = {"drag model": "luenberger", "neural ODE": "neural_ode", "feedback": "feedback"}
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 ax = axes[0, 0]
 for name, e in err.items():
     e_t = e.reshape(-1, e.shape[-1])  # every (seed, throw) row
@@ -122,7 +131,7 @@ ax.axhline(0, color="k", lw=0.8)
 ax.set(xlabel="test throw", ylabel="feedback − neural ODE [cm]", title="paired gap per throw (< 0: feedback better)")
 ax.set_xticks(throw_idx)
 ax.legend(fontsize=7)
-fig_6 = F.save_figure(fig, out, "fig6_bottle_errors")
+fig_6 = save_figure(fig, out, "fig6_bottle_errors")
 
 # %% [markdown]
 # ## Predicted positions and learned accelerations of all test throws (Figs. S2, S3, claim O2)
@@ -132,9 +141,9 @@ fig_6 = F.save_figure(fig, out, "fig6_bottle_errors")
 # %%
 est = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=6 * E).observe(xs_test)
 with torch.no_grad():
-    acc_nn_s = F.split_members(F.eval_field(ens, xs_test), E)[..., 3:]  # (seeds, throws, T, 3)
-acc_fb_s, acc_meas = F.split_members(est.f_hat, E)[..., 3:], test.acc.float()
-acc_rmse = {"neural ODE": [F.rmse(a, acc_meas) for a in acc_nn_s], "feedback": [F.rmse(a, acc_meas) for a in acc_fb_s]}
+    acc_nn_s = split_members(eval_field(ens, xs_test), E)[..., 3:]  # (seeds, throws, T, 3)
+acc_fb_s, acc_meas = split_members(est.f_hat, E)[..., 3:], test.acc.float()
+acc_rmse = {"neural ODE": [rmse(a, acc_meas) for a in acc_nn_s], "feedback": [rmse(a, acc_meas) for a in acc_fb_s]}
 acc_nn, acc_fb = acc_nn_s[0], acc_fb_s[0]  # the panels show the first seed
 
 # %%
@@ -145,7 +154,7 @@ for i, ax in enumerate(axes):
         ax.plot(t_test, x_test[i, :, j], color=F.plotting.COLORS["truth"], lw=1)
         ax.plot(t_test[N:], pred["feedback"][0, i, :-N, j], "--", color=F.plotting.COLORS["feedback"], lw=1)
     ax.set(title=f"test throw {i + 1}", xlabel="t [s]", ylabel="position [m]")
-fig_s2 = F.save_figure(fig, out, "figS2_positions")
+fig_s2 = save_figure(fig, out, "figS2_positions")
 
 # %%
 fig, axes = F.plotting.trajectory_grid(n_throws)
@@ -155,7 +164,7 @@ for i, ax in enumerate(axes):
         ax.plot(t_test, acc_nn[i, :, j], ":", color=F.plotting.COLORS["neural_ode"], lw=1)
         ax.plot(t_test, acc_fb[i, :, j], "--", color=F.plotting.COLORS["feedback"], lw=1)
     ax.set(title=f"test throw {i + 1}", xlabel="t [s]", ylabel="acceleration [m/s²]")
-fig_s3 = F.save_figure(fig, out, "figS3_accelerations")
+fig_s3 = save_figure(fig, out, "figS3_accelerations")
 acc_rmse
 
 # %% [markdown]
@@ -170,7 +179,7 @@ acc_rmse
 #   every throw's 0.5 s position error (mean over seeds) is below 10 % of the mean distance flown in 0.5 s.
 
 # %% tags=["nbval-check-output"]
-travel = float(F.error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
+travel = float(error_norm(x_test[:, N:, :3], x_test[:, :-N, :3]).mean())
 m = {k: v["mean"] for k, v in summary.items()}
 claims = [
     rules.o1(feedback=per_throw["feedback"], neural_ode=per_throw["neural ODE"],
@@ -180,7 +189,7 @@ claims = [
                  "per_seed_m": {k: v["per_seed"] for k, v in summary.items()},
                  "per_throw_m": {k: v["per_throw"] for k, v in summary.items()},
                  "throws_feedback_better": int((gap_cm.mean(1) < 0).sum()), "data": data},
-        figure=fig_6, headline=F.headline_number("0.5 s error, feedback − neural ODE",
+        figure=fig_6, headline=headline_number("0.5 s error, feedback − neural ODE",
                                                  gap_cm.mean(0).tolist(), unit="cm"))]
 
 # %%
@@ -191,13 +200,13 @@ claims += [
         numbers=dict(o2.numbers) | {"acc_rmse": acc_rmse, "mean_travel_0.5s_m": travel,
                  "feedback_error_per_throw_m": summary["feedback"]["per_throw"],
                  "feedback_mean_error_m": summary["feedback"]["per_seed"], "data": data},
-        figure=fig_s2, headline=F.headline_number("acceleration RMSE, feedback / neural ODE",
+        figure=fig_s2, headline=headline_number("acceleration RMSE, feedback / neural ODE",
                                                   [f / n for f, n in zip(acc_rmse["feedback"],
                                                                          acc_rmse["neural ODE"])])),
 ]
 
 # %%
-F.write_results(out, task="bottle", profile=profile, claims=claims,
+write_results(out, task="bottle", profile=profile, claims=claims,
                 metrics={"train_seconds": history.seconds, "predict_seconds": predict_s, "drag_k": drag.k,
                          "seeds": seeds})
 for c in claims:

@@ -41,7 +41,6 @@ mlp_epochs = 300
 mlp_lr = 0.001
 
 # %%
-import fnnlib as F
 
 from fnnbook.tasks.quadrotor_learning import QuadrotorLearningSettings
 settings = QuadrotorLearningSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -54,13 +53,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-import fnnlib as F
+from fnnbook.results import headline_number, verdict_from_checks, write_results
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.training import save_checkpoint
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
 from fnnlib.models.residual import AeroResidual
 from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc import FeedbackCascadeModel, PredictionModel
-from fnnlib.quadrotor_presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
+from fnnlib.quadrotor.presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
                                       PAPER_MLP_RECIPE)
 from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
 from fnnlib.training.residual import (ResidualRecipe, convergence_checks, predict_flights, state_group_errors,
@@ -91,12 +92,12 @@ print(f"flew {train.n_flights} training flights x {train.n_steps} nodes and 2 x 
       f"max speed {float(train.x[..., 3:6].norm(dim=-1).max()):.1f} m/s")
 
 # %%
-fig, ax = F.new_figure(1, 1, subplot_kw={"projection": "3d"})
+fig, ax = new_figure(1, 1, subplot_kw={"projection": "3d"})
 for k in range(train.n_flights):
     p = train.x[k, :, :3].numpy()
     ax.plot(p[:, 0], p[:, 1], -p[:, 2], lw=0.8)
 ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="height -z [m]", title=f"{train.n_flights} training flights")
-F.save_figure(fig, out, "training_flights")
+save_figure(fig, out, "training_flights")
 
 # %% [markdown]
 # ## Training: 5 random initialisations at once (Q1, Q6)
@@ -128,18 +129,18 @@ print(f"{len(seeds)} initialisations x {epochs} epochs in {fit.seconds:.0f} s ({
 
 # %%
 residual = fit.members[best].double()
-F.save_checkpoint(out / "residual.pt", residual, {"seed": seeds[best], "epochs": epochs, "lr": lr,
+save_checkpoint(out / "residual.pt", residual, {"seed": seeds[best], "epochs": epochs, "lr": lr,
                                                   "segment_length": segment_length, "val_loss": float(val_loss[-1, best])})
 # every initialisation too: the MPC task flies each of them, one per independent unit
 member_files = []
 for e, s in enumerate(seeds):
     name = f"residual_seed{s}.pt"
-    F.save_checkpoint(out / name, fit.members[e].double(), {"seed": s, "epochs": epochs, "lr": lr,
+    save_checkpoint(out / name, fit.members[e].double(), {"seed": s, "epochs": epochs, "lr": lr,
                                                             "val_loss": float(val_loss[-1, e])})
     member_files.append(name)
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 axes = axes[0]
 for e, s in enumerate(seeds):
     axes[0].semilogy(np.arange(epochs + 1), member_loss[:, e], label=f"seed {s}")
@@ -148,7 +149,7 @@ axes[0].set(xlabel="epoch", ylabel="training loss (per segment)", title="Trainin
 axes[1].set(xlabel="epoch", ylabel="validation loss (per flight)",
             title=f"{val.n_flights} selection flights, 2.5x longer")
 axes[0].legend(fontsize=7)
-F.save_figure(fig, out, "training_curves")
+save_figure(fig, out, "training_curves")
 
 # %% [markdown]
 # ## The MLP baseline (App. A.5.4)
@@ -179,10 +180,10 @@ mlp_files = []
 for e, s in enumerate(seeds):
     meta = {"seed": s, "mlp_epochs": mlp_epochs, "mlp_lr": mlp_lr, "final_mse": mlp_loss[e][-1],
             "selection_mse": mlp_sel_mse[e]}  # the run record's names, checked when loaded
-    F.save_checkpoint(out / f"mlp_seed{s}.pt", mlps[e], meta)
+    save_checkpoint(out / f"mlp_seed{s}.pt", mlps[e], meta)
     mlp_files.append(f"mlp_seed{s}.pt")
     if e == best_mlp:
-        F.save_checkpoint(out / "mlp.pt", mlps[e], meta)
+        save_checkpoint(out / "mlp.pt", mlps[e], meta)
 print(f"{len(seeds)} MLPs in {mlp_s:.1f} s; single-step MSE " + ", ".join(
     f"seed {s}: {loss[0]:.3f} -> {loss[-1]:.4f}" for s, loss in zip(seeds, mlp_loss))
       + f" (m/s^2)^2; kept seed {seeds[best_mlp]} (lowest on the selection flights)")
@@ -220,7 +221,7 @@ for name in ("nominal", "MLP"):
 labels = {"p": ["x", "y", "z"], "v": ["vx", "vy", "vz"], "Theta": ["roll", "pitch", "yaw"], "omega": ["wx", "wy", "wz"]}
 t_val = np.arange(heldout.n_steps + 1) * Ts
 for k in range(heldout.n_flights):
-    fig, axes = F.new_figure(4, 3, sharex=True)
+    fig, axes = new_figure(4, 3, sharex=True)
     for r, (g, sl) in enumerate(STATE_GROUPS.items()):
         for c in range(3):
             ax = axes[r, c]
@@ -231,7 +232,7 @@ for k in range(heldout.n_flights):
     axes[-1, 1].set_xlabel("t [s]")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Held-out flight {k + 1}: all 12 states, kept network (seed {seeds[best]}) (Figs. S5-S7)")
-    F.save_figure(fig, out, f"validation_flight_{k + 1}")
+    save_figure(fig, out, f"validation_flight_{k + 1}")
 
 # %% [markdown]
 # ## Verdicts
@@ -243,18 +244,18 @@ n_feedback_params = rules.count_trainable(t for t in vars(feedback).values() if 
 r1, r2 = rules.q1_convergence(member_loss), rules.q2_prediction(rel["neural ODE"], rel["nominal"], units=seeds)
 r6 = rules.q6_training_cost(n_feedback_params, per_model_s * 50 / epochs)
 for q, r in (("Q1", r1), ("Q2", r2), ("Q6", r6)):
-    print(q, F.verdict_from_checks(r.checks), r.checks)
+    print(q, verdict_from_checks(r.checks), r.checks)
 
 # %%
 q1 = r1.replace(figure="figures/training_curves.png",
                numbers={"seeds": seeds, "initial_loss": first.tolist(), "val_loss_final": val_loss[-1].tolist(), **r1.numbers},
-               headline=F.headline_number("final / initial training loss", final / first),
+               headline=headline_number("final / initial training loss", final / first),
                paper="training converges for 5-6 random initialisations (Fig. A)", title="Training converges")
 
 # %%
 q2 = r2.replace(figure="figures/validation_flight_1.png",
                numbers={**r2.numbers, "MLP (kept)": rel["MLP"], "seeds": seeds},
-               headline=F.headline_number("neural ODE relative RMSE of p, held-out flights",
+               headline=headline_number("neural ODE relative RMSE of p, held-out flights",
                                           [r["p"] for r in rel["neural ODE"]]),
                paper="the learned model predicts all 12 states on 3 flights 2.5x longer than training (Figs. S4-S7)",
                rule=f"{r2.rule} (over {r2.n} trained networks, on {heldout.n_flights} held-out flights)",
@@ -267,13 +268,13 @@ claims = [
     r6.replace(figure="figures/training_curves.png",
                numbers={**r6.numbers, "seconds_all_members": round(fit.seconds, 1), "members": len(seeds),
                         "ms_per_update": round(fit.history.ms_per_update, 1), "updates": fit.history.n_updates},
-               headline=F.headline_number("training time per model, 50 epochs (authors: 30 min)", per_model_s * 50 / epochs, unit="s"),
+               headline=headline_number("training time per model, 50 epochs (authors: 30 min)", per_model_s * 50 / epochs, unit="s"),
                paper="linear feedback needs no training; about 30 min for 50 epochs on a 14-core laptop",
                title="Training cost"),
 ]
 
 # %%
-F.write_results(out, task="quadrotor_learning", profile=profile, claims=claims,
+write_results(out, task="quadrotor_learning", profile=profile, claims=claims,
                 metrics={"best_seed": seeds[best], "best_mlp_seed": seeds[best_mlp],
                          "mlp_final_mse": [loss[-1] for loss in mlp_loss], "mlp_selection_mse": mlp_sel_mse,
                          "mlp_seconds": round(mlp_s, 1), "epochs": epochs, "member_checkpoints": member_files,

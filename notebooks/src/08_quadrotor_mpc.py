@@ -54,7 +54,6 @@ validation_vehicles = 4
 validation_vehicle_seed = 1001
 
 # %%
-import fnnlib as F
 
 from fnnbook.tasks.quadrotor_mpc import QuadrotorMPCSettings
 settings = QuadrotorMPCSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -65,21 +64,23 @@ from pathlib import Path
 
 import numpy as np
 
-import fnnlib as F
+from fnnbook.results import headline_number, verdict_from_checks, write_results
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.training import load_checkpoint, load_seed_checkpoints
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import quadrotor as rules
 from fnnlib.mpc import randomized_vehicles, validation_references
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_THRUST_MAX, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_THRUST_MAX, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 # %%
 up = Path(upstream_dirs["quadrotor_learning"])
-residual, meta_res = F.load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
-mlp, meta_mlp = F.load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
+residual, meta_res = load_checkpoint(up / "residual.pt", expected_kind="AeroResidual")
+mlp, meta_mlp = load_checkpoint(up / "mlp.pt", expected_kind="AeroResidual")
 residual, mlp = residual.double(), mlp.double()  # the kept ones, picked on quadrotor_learning's selection flights
 members, mlps = ([(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
-                  F.load_seed_checkpoints(up, stem, expected_kind="AeroResidual", run=upstream_parameters(up))]
+                  load_seed_checkpoints(up, stem, expected_kind="AeroResidual", run=upstream_parameters(up))]
                  for stem in ("residual", "mlp"))
 if disturbance_draws != len(members) or [s for s, _ in mlps] != [s for s, _ in members]:
     raise ValueError(f"one drawn disturbance per trained network: disturbance_draws = {disturbance_draws} must equal the "
@@ -87,7 +88,7 @@ if disturbance_draws != len(members) or [s for s, _ in mlps] != [s for s, _ in m
                      f"{[s for s, _ in mlps]})")
 
 # %%
-setup = M.flight_tests_from_settings(globals())  # the test vehicle: the paper's force, then one drawn per unit
+setup = M.flight_tests(M.FlightSettings.of(settings.as_dict()))  # the test vehicle: the paper's force, then one per unit
 test_params, forces, x_r, u_r, tests = setup.vehicle, setup.forces, setup.x_r, setup.u_r, setup.tests
 numerics = M.Backend(backend, linearize_method)
 models_kw = dict(plant=Quadrotor(NOMINAL), L=L, beta=beta, N=N, Gamma=Gamma, Ts=Ts)
@@ -135,7 +136,7 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # - *Vehicles*: `validation_vehicles` vehicles drawn by domain randomisation around the **training** vehicle, in
 #   the spirit of the paper's Alg. 1 / Eq. (12) (seed `validation_vehicle_seed`): mass, each inertia and each drag
 #   coefficient uniform in training value x (1 +- 0.5), and a constant force with each axis uniform in +- 0.1 x the
-#   training vehicle's weight (`fnnlib.quadrotor_presets.VALIDATION_RANDOMIZATION`, whose docstring gives the
+#   training vehicle's weight (`fnnlib.quadrotor.presets.VALIDATION_RANDOMIZATION`, whose docstring gives the
 #   reasons: the relative spread of the paper's own randomised spiral cases, made symmetric). On the training
 #   vehicle itself the adaptation has nothing to correct and the validation RMSE is flat over the grid, so
 #   $\Gamma$ is not identifiable there.
@@ -232,7 +233,7 @@ for k, fl in tables.items():
 # %%
 t_grid = np.arange(steps + 1) * Ts
 for cost, fl in main.items():
-    fig, axes = F.new_figure(1, 2)
+    fig, axes = new_figure(1, 2)
     axes = axes[0]
     axes[0].plot(x_r[:steps + 1, 0], x_r[:steps + 1, 1], "k", lw=2, label="reference")
     for n, r in fl.items():
@@ -242,7 +243,7 @@ for cost, fl in main.items():
     axes[0].set(xlabel="x [m]", ylabel="y [m]", title=f"Lissajous tracking, {cost}, thrust <= {u_max_judged:g} N (Fig. 7)")
     axes[1].set(xlabel="t [s]", ylabel="position error [m]", yscale="log")
     axes[0].legend(fontsize=6)
-    F.save_figure(fig, out, f"tracking_{cost}")
+    save_figure(fig, out, f"tracking_{cost}")
 
 # %% [markdown]
 # ## Why the two costs differ: Nomi's altitude
@@ -250,7 +251,7 @@ for cost, fl in main.items():
 # heavier vehicle, it trades altitude for thrust. With the release's weighting the inputs are in effect free.
 
 # %%
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 axes = axes[0]
 for cost, fl in main.items():
     axes[0].plot(t_grid, fl["Nomi"].x[:, 2], lw=1, label=f"Nomi, {cost}")
@@ -260,7 +261,7 @@ axes[1].plot(t_grid[:-1], u_r[:steps].sum(axis=1), "k--", lw=1, label="reference
 axes[0].set(xlabel="t [s]", ylabel="z [m] (z down)", title="Nomi's altitude under both costs")
 axes[1].set(xlabel="t [s]", ylabel="total thrust [N]")
 axes[0].legend(fontsize=7)
-F.save_figure(fig, out, "nomi_z_costs")
+save_figure(fig, out, "nomi_z_costs")
 
 # %%
 z = {cost: judged[cost]["Nomi"].z for cost in costs}
@@ -271,7 +272,7 @@ print(" ".join(f"{cost}: Nomi's z RMSE {z[cost]:.3f} m, {100 * share[cost]:.0f} 
 
 # %%
 for cost, fl in main.items():
-    fig, axes = F.new_figure(1, 3, sharey=True)
+    fig, axes = new_figure(1, 3, sharey=True)
     axes = axes[0]
     for c, ax in enumerate(axes):
         ax.plot(t_grid[:-1], fl["Nomi"].xdot_true[:, 3 + c], "k", lw=1.5, label="truth")
@@ -280,7 +281,7 @@ for cost, fl in main.items():
         ax.set(xlabel="t [s]", title=f"first-step prediction of dv{'xyz'[c]}/dt, {cost}")
     axes[0].set_ylabel("acceleration [m/s^2]")
     axes[0].legend(fontsize=6)
-    F.save_figure(fig, out, f"acc_prediction_{cost}")
+    save_figure(fig, out, f"acc_prediction_{cost}")
 
 # %% [markdown]
 # ## Speed
@@ -314,14 +315,14 @@ print(f"whole flight: {speed['real_time_factor_worst_model']:.1f}x to {speed['re
 transient = int(round(transient_s / Ts))
 thm2 = {cost: [M.theorem2_check(r, L, transient) for r in g["AdapFNN"]] for cost, g in grid.items()}
 thm2_paper = {cost: M.theorem2_check(fl["AdapFNN"], L, transient) for cost, fl in main.items()}  # the figure's flight
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 for cost, fl in main.items():
     ax.semilogy(t_grid[:-1], np.linalg.norm(fl["AdapFNN"].x_tilde, axis=1), lw=1, label=f"AdapFNN, {cost}")
     ax.axhline(thm2_paper[cost]["ball_x"], ls="--", lw=0.8, label=f"ball gamma / lambda_m(L), {cost}")
 ax.axvline(transient_s, color="gray", lw=0.8)
 ax.set(xlabel="t [s]", ylabel="||x - x_hat||", title=f"Observation error, thrust <= {u_max_judged:g} N (Fig. S14)")
 ax.legend(fontsize=7)
-F.save_figure(fig, out, "adapfnn")
+save_figure(fig, out, "adapfnn")
 
 # %% [markdown]
 # ## Spread over the independent units
@@ -331,13 +332,13 @@ F.save_figure(fig, out, "adapfnn")
 rmse = {cost: {n: [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs] for n, runs in g.items()}
         for cost, g in grid.items()}
 acc = {cost: {n: [M.acc_pred_rmse(r) for r in runs] for n, runs in g.items()} for cost, g in grid.items()}
-fig, axes = F.new_figure(1, len(costs))
+fig, axes = new_figure(1, len(costs))
 for ax, cost in zip(np.ravel(axes), costs):
     for i, n in enumerate(rmse[cost]):
         ax.plot(np.full(len(rmse[cost][n]), i), rmse[cost][n], "o", alpha=0.6)
     ax.set(xticks=range(len(rmse[cost])), xticklabels=list(rmse[cost]), ylabel="mean per-axis RMSE [m]",
            yscale="log", title=f"{cost}, {u_max_judged:g} N: {len(grid[cost].units)} independent units")
-_ = F.save_figure(fig, out, "seed_spread")
+_ = save_figure(fig, out, "seed_spread")
 
 # %% [markdown]
 # ## Verdicts
@@ -354,7 +355,7 @@ r4 = {c: rules.q4_prediction({n: acc[c][n] for n in rules.SIX}, units=grid[c].un
 r5 = {c: rules.q5_adaptive(rmse[c], [t["inside_fraction"] for t in thm2[c]], label=c) for c in costs}
 for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
     for c in costs:
-        print(f"{q} {c}: {F.verdict_from_checks(r[c].checks)}; " + "; ".join(
+        print(f"{q} {c}: {verdict_from_checks(r[c].checks)}; " + "; ".join(
             f"{k.split(': ', 1)[1]} {'holds' if v else 'fails'}" for k, v in r[c].checks.items()))
         held = r[c].numbers.get("paired", {})
         print("   holds in " + ", ".join(f"{k}: {w['wins']}/{w['seeds']}" for k, w in held.items())
@@ -363,7 +364,7 @@ for q, r in (("Q3", r3), ("Q4", r4), ("Q5", r5)):
 # %% [markdown]
 # Each claim joins its cost variants (`rules.join_costs`), with the flights at the other bounds as context (reported,
 # never judged), and says what the paper's stated setting gives and why it is not judged there
-# (`M.unjudged_bound_note`).
+# (`rules.unjudged_bound_note`).
 
 # %%
 context_numbers = {"context_4N_mean_axis": {k.label(u_max_judged): {n: round(v.mean_axis, 4) for n, v in rows.items()}
@@ -371,13 +372,13 @@ context_numbers = {"context_4N_mean_axis": {k.label(u_max_judged): {n: round(v.m
 merged = partial(rules.join_costs, numbers=context_numbers)
 S = len(grid[costs[0]].units)  # the independent units of every comparison
 paper_rows = table.get(M.TableKey("as_written", PAPER_THRUST_MAX))  # the paper's stated setting: R = I, 4 N (or None)
-at_paper = partial(M.unjudged_bound_note, paper_rows, need=need, u_max=PAPER_THRUST_MAX,
+at_paper = partial(rules.unjudged_bound_note, paper_rows, need=need, u_max=PAPER_THRUST_MAX,
                    setting="the paper's setting (Eq. (28) as written, R = I)",
                    flown="kept network, the paper's force, one flight per model")
 
 # %%
 q3 = merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
-            headline=F.headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
+            headline=headline_number(f"FNN tracking RMSE, {costs[-1]}, {u_max_judged:g} N", rmse[costs[-1]]["FNN"], unit="m"),
             paper="FNN-MPC tracks best of Nomi, Neural, MLP, FB, AdapNN, FNN; Neural < Nomi; MLP worse than Neural (Fig. 7)",
             title="MPC tracking with the feedback model", n=S, at_paper_setting=at_paper(metric="mean_axis", unit="m", compare=("FNN", "Nomi")),
             rule=f"paired wins over {S} independent units per cost at {u_max_judged:g} N")
@@ -386,12 +387,12 @@ q3 = merged(r3, figure=f"figures/tracking_{costs[-1]}.png",
 claims = [
     q3,
     merged(r4, figure=f"figures/acc_prediction_{costs[-1]}.png",
-           headline=F.headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
+           headline=headline_number(f"FNN first-step acceleration RMSE, {costs[-1]}", acc[costs[-1]]["FNN"], unit="m/s^2"),
            paper="the first-step acceleration prediction is best with the feedback model (Fig. S8)",
            title="First-step prediction", n=S, at_paper_setting=at_paper(metric="acc_pred_rmse", unit="m/s^2", compare=("FNN", "Nomi")),
            rule=f"FNN paired-beats the other five over {S} independent units per cost"),
     merged(r5, figure="figures/adapfnn.png",
-           headline=F.headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
+           headline=headline_number(f"AdapFNN / FNN RMSE, {costs[-1]}", np.divide(rmse[costs[-1]]["AdapFNN"], rmse[costs[-1]]["FNN"])),
            paper="AdapFNN is comparable to FNN with a slightly larger RMSE (Fig. S14, Theorem 2)",
            title="Adaptive feedback network", n=S, at_paper_setting=at_paper(metric="mean_axis", unit="m", compare=("AdapFNN", "FNN")),
            rule=f"within 25 % in >= S - 1 of S = {S} independent units and mean >= FNN's; Theorem 2 ball a guarantee"),
@@ -406,7 +407,7 @@ gamma_protocol = {"rule": f"lowest median validation RMSE (diverged = worst); ti
                   "test_vehicle_in_ranges": test_in_range}
 
 # %%
-F.write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
+write_results(out, task="quadrotor_mpc", profile=profile, claims=claims,
                 metrics={"table": M.flight_table_json(table, u_max_judged), "speed": speed, "disturbances": forces,
                          "units": list(grid[costs[0]].units), "thrust_needed_per_motor": need,
                          "adapnn_gamma": {c: {"chosen": s.value, "validation": s.table} for c, s in gamma_sel.items()},

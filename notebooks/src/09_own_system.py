@@ -54,6 +54,12 @@ hand_beta_grid = [0.0, 0.02, 0.05, 0.1, 0.2, 0.5]
 
 # %%
 import fnnlib as F
+from fnnbook.results import write_results
+from fnnlib.metrics import n_step_errors
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
+from fnnlib.training import load_checkpoint, load_seed_checkpoints
 
 from fnnbook.tasks.own_system import OwnSystemSettings
 settings = OwnSystemSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -135,9 +141,9 @@ print(f"{len(seeds)} pendulum runs in {pendulum_seconds:.1f} s")
 # with its own noise, and evaluated on the S3 trajectory.
 
 # %%
-spiral_nets = F.load_seed_checkpoints(Path(upstream_dirs["spiral"]), "neural_ode", expected_kind="NeuralODE")
+spiral_nets = load_seed_checkpoints(Path(upstream_dirs["spiral"]), "neural_ode", expected_kind="NeuralODE")
 t_s = torch.arange(spiral_n_samples, dtype=torch.float64) * spiral_Ts
-sys_s = F.Spiral(*spiral_test)
+sys_s = Spiral(*spiral_test)
 x_s = sys_s.simulate(torch.tensor(spiral_x0), t_s).float()
 x_s_tune = sys_s.simulate(torch.tensor(spiral_tune_x0), t_s[:spiral_tune_samples]).float()
 
@@ -155,7 +161,7 @@ print(f"{len(spiral)} spiral runs (one per network) in {spiral_seconds:.1f} s")
 # %%
 names = ["open_loop", "hand", "tuned", "kalman"]
 colors = [F.plotting.COLORS[c] for c in ("neural_ode", "feedback_nodecay", "feedback", "kalman")]
-fig, axes = F.new_figure(1, 3)
+fig, axes = new_figure(1, 3)
 for ax, runs, title in [(axes[0, 0], pendulum, f"pendulum, N = {N}"), (axes[0, 1], spiral, f"noisy spiral, N = {spiral_N}")]:
     for i, (name, color) in enumerate(zip(names, colors)):
         vals = [r["errors"][name] for r in runs]
@@ -171,7 +177,7 @@ for name, color in zip(names, colors):
     ax.plot(tt, tr[name], "--", color=color, lw=1, label=name)
 ax.set(xlabel="t [s]", ylabel="theta", title=f"pendulum, {N}-step predictions (seed {seeds[0]})")
 ax.legend(fontsize=7)
-fig_b1 = F.save_figure(fig, out, "own_system_b1")
+fig_b1 = save_figure(fig, out, "own_system_b1")
 
 # %%
 errors = {"pendulum": {k: [r["errors"][k] for r in pendulum] for k in names},
@@ -184,7 +190,7 @@ coverage = b1_coverage(tuned_values, hand_sweeps)
 print("tuned gains inside the hand grid: " + ", ".join(f"{k} {c['covered']} of {c['units']}" for k, c in coverage.items()))
 
 # %% tags=["nbval-check-output"]
-F.write_results(out, task="own_system", profile=profile, claims=[],
+write_results(out, task="own_system", profile=profile, claims=[],
                 metrics={"b1": {"errors": errors, "paired": b1_paired(errors), "tuned": tuned_values,
                                 "figure": fig_b1,
                                 "hand_sweeps": hand_sweeps, "budget": budget, "coverage": coverage,
@@ -205,8 +211,8 @@ for name, ok in checks.items():
 # truth. This section does not enter B1.
 
 # %%
-model_s, _ = F.load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt", expected_kind="NeuralODE")
-gen = F.make_generator(2000 + seeds[0])
+model_s, _ = load_checkpoint(Path(upstream_dirs["spiral"]) / "neural_ode.pt", expected_kind="NeuralODE")
+gen = make_generator(2000 + seeds[0])
 y_full = F.add_measurement_noise(x_s, spiral_noise_std, gen)
 lost = torch.rand(y_full.shape[0], generator=gen) < 0.3
 y_drop = torch.where(lost[:, None], torch.tensor(float("nan")), y_full)
@@ -224,4 +230,4 @@ with torch.no_grad():
 assert all(bool(torch.isfinite(z).all()) for z in drop_preds.values())  # no NaN reaches a prediction
 print(f"{int(lost.sum())} of {lost.numel()} samples lost")
 for name, z in drop_preds.items():
-    print(f"{name:28s} mean {spiral_N}-step error {float(F.n_step_errors(z, x_s, spiral_N).mean()):.4f}")
+    print(f"{name:28s} mean {spiral_N}-step error {float(n_step_errors(z, x_s, spiral_N).mean()):.4f}")

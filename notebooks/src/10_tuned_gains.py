@@ -51,6 +51,12 @@ quad_hand_beta_grid = [0.02, 0.1]
 
 # %%
 import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, headline_number, read_results, write_results
+from fnnlib.data import bottle_throws
+from fnnlib.paper import cascade_position_errors, position_gain_sweep, position_gain_tuning
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator
+from fnnlib.training import load_seed_checkpoints
 
 from fnnbook.tasks.tuned_gains import TunedGainsSettings
 settings = TunedGainsSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -70,7 +76,7 @@ from fnnbook.rules import beyond as rules
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
-upstream = {k: F.read_results(up[k] / F.RESULTS_FILENAME) for k in ("own_system", "bottle", "quadrotor_mpc")}
+upstream = {k: read_results(up[k] / RESULTS_FILENAME) for k in ("own_system", "bottle", "quadrotor_mpc")}
 ran = {k: upstream_parameters(up[k]) for k in ("bottle", "quadrotor_mpc")}  # what those tasks ran with: their
 # data, hand-tuned gains and flight settings are used as they were, never declared again here
 t_start = time.perf_counter()
@@ -108,14 +114,14 @@ seconds: dict[str, float] = {}
 # %% tags=["hide-input"]
 b_results, b_ran = upstream["bottle"], ran["bottle"]
 o1 = b_results.claim("O1").numbers
-b_train, b_test = F.bottle_throws(b_ran["data"], data_dir=data_dir, synthetic_sizes=b_ran["synthetic_sizes"],
+b_train, b_test = bottle_throws(b_ran["data"], data_dir=data_dir, synthetic_sizes=b_ran["synthetic_sizes"],
                                   seed=b_ran["seeds"][0])  # the bottle task's throws, chosen as it chose them
 if not 1 <= bottle_tune_throws <= b_train.state.shape[0]:
     raise ValueError(f"bottle_tune_throws must lie in 1..{b_train.state.shape[0]} (the training throws), "
                      f"got {bottle_tune_throws}")
 b_Ts, bN, bottle_L, bottle_beta = b_train.Ts, b_ran["N"], b_ran["L"], b_ran["beta"]
 x_b_train, x_b_test = b_train.state.float(), b_test.state.float()
-b_loaded = F.load_seed_checkpoints(up["bottle"], "neural_ode", expected_kind="NeuralODE")
+b_loaded = load_seed_checkpoints(up["bottle"], "neural_ode", expected_kind="NeuralODE")
 b_seeds, b_nets = [s for s, _, _ in b_loaded], [net for _, net, _ in b_loaded]
 if b_seeds != b_ran["seeds"]:
     raise ValueError(f"bottle's checkpoints hold seeds {b_seeds}, its run used {b_ran['seeds']}")
@@ -123,28 +129,28 @@ print(f"{len(b_nets)} neural ODEs of bottle loaded (seeds {b_seeds}); hand-tuned
       f"beta = {bottle_beta:g}, N = {bN}")
 
 # %% [markdown]
-# Each network's tuning throws (drawn with its seed), its hand gains (`F.position_gain_sweep`) and its tuned gains
-# (`F.position_gain_tuning`), both on O1's error; then each test throw's O1 error with either
-# (`F.cascade_position_errors`).
+# Each network's tuning throws (drawn with its seed), its hand gains (`position_gain_sweep`) and its tuned gains
+# (`position_gain_tuning`), both on O1's error; then each test throw's O1 error with either
+# (`cascade_position_errors`).
 
 # %%
-tuning = {s: x_b_train[torch.randperm(x_b_train.shape[0], generator=F.make_generator(s))[:bottle_tune_throws]]
+tuning = {s: x_b_train[torch.randperm(x_b_train.shape[0], generator=make_generator(s))[:bottle_tune_throws]]
           for s in b_seeds}
 t0 = time.perf_counter()
-b_hand = [F.position_gain_sweep(net, tuning[s], b_Ts, bN, bottle_hand_L_grid, bottle_hand_beta_grid)
+b_hand = [position_gain_sweep(net, tuning[s], b_Ts, bN, bottle_hand_L_grid, bottle_hand_beta_grid)
           for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_hand_sweep"] = time.perf_counter() - t0
 t0 = time.perf_counter()
-b_tuned = [F.position_gain_tuning(net, tuning[s], b_Ts, bN, L0=bottle_L, beta0=bottle_beta,
+b_tuned = [position_gain_tuning(net, tuning[s], b_Ts, bN, L0=bottle_L, beta0=bottle_beta,
                                   iterations=bottle_tune_iterations, lr=bottle_tune_lr) for s, net in zip(b_seeds, b_nets)]
 seconds["bottle_tune"] = time.perf_counter() - t0
 
 # %%
 t0 = time.perf_counter()
 with torch.no_grad():
-    tuned_per_seed = torch.stack([F.cascade_position_errors(net, x_b_test, b_Ts, bN, r.L, r.beta)
+    tuned_per_seed = torch.stack([cascade_position_errors(net, x_b_test, b_Ts, bN, torch.tensor(r.L), r.beta)
                                   for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
-    hand_per_seed = torch.stack([F.cascade_position_errors(net, x_b_test, b_Ts, bN, h.L, h.beta)
+    hand_per_seed = torch.stack([cascade_position_errors(net, x_b_test, b_Ts, bN, h.L, h.beta)
                                  for net, h in zip(b_nets, b_hand)])
 
 # %%
@@ -191,7 +197,7 @@ print("hand sweep picks (L, beta): " + ", ".join(f"({h.L:g}, {h.beta:g})" for h 
 # %% tags=["hide-input"]
 import fnnlib.mpc as M
 from fnnlib.data.quadrotor import load_flights
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the flight settings it flew
@@ -199,13 +205,13 @@ quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]
 q_rmse = q_mpc["paired_mean_axis_rmse_m"]
 costs = list(q_rmse)
 members = [(seed, net.double()) for seed, net, _ in  # (int seed, network), checked against the run record
-           F.load_seed_checkpoints(up["quadrotor_learning"], "residual", expected_kind="AeroResidual",
+           load_seed_checkpoints(up["quadrotor_learning"], "residual", expected_kind="AeroResidual",
                                    run=upstream_parameters(up["quadrotor_learning"]))]
 
 
 # %% tags=["hide-input"]
 plant = Quadrotor(NOMINAL)
-setup = M.flight_tests_from_settings(m)  # quadrotor_mpc's flight tests, built as it builds them
+setup = M.flight_tests(M.FlightSettings.of(m))  # quadrotor_mpc's flight tests, built as it builds them
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
     raise ValueError(f"the disturbances of quadrotor_mpc's settings {setup.forces} are not those it flew "
                      f"{q_mpc['disturbances']}")
@@ -213,7 +219,7 @@ unit_tests = setup.unit_tests  # one per independent unit of quadrotor_mpc (its 
 if len(unit_tests) != len(members) or len(q_mpc["units"]) != len(members):
     raise ValueError(f"quadrotor_mpc flew {len(q_mpc['units'])} units on {len(unit_tests)} drawn disturbances; "
                      f"{len(members)} networks here")
-mpcs = {cost: M.mpc_from_settings(m, cost=cost, u_max=m["u_max_judged"]) for cost in costs}
+mpcs = {cost: M.MPCSettings.of(m).build(cost=cost, u_max=m["u_max_judged"]) for cost in costs}
 seconds["quad_compile"] = M.warm_up(*[net for _, net in members]) if m["backend"] == "numba" else 0.0
 val_vehicles = M.randomized_vehicles(TRAINING_TRUTH, m["validation_vehicles"], seed=m["validation_vehicle_seed"],
                                      **VALIDATION_RANDOMIZATION)  # quadrotor_mpc's validation set, rebuilt as it builds it
@@ -239,7 +245,7 @@ if not 1 <= quad_tune_cases <= len(val_tests):
 # %%
 train_flights, _ = load_flights(up["quadrotor_learning"] / "flights_train.npz")  # the training set, as trained on
 x_train_q, u_train_q = train_flights.x[:, :-1, :12], train_flights.u  # (K, T, 12) states, (K, T, 4) thrusts
-cases = {s: [val_tests[i] for i in torch.randperm(len(val_tests), generator=F.make_generator(s))[:quad_tune_cases].tolist()]
+cases = {s: [val_tests[i] for i in torch.randperm(len(val_tests), generator=make_generator(s))[:quad_tune_cases].tolist()]
          for s, _ in members}  # the validation cases each network is tuned on, never the test flight
 
 # %%
@@ -301,13 +307,13 @@ for k in ("pendulum", "spiral"):
 # points below the diagonal are units where the tuned gains predict (or fly) better.
 
 # %%
-fig, axes = F.new_figure(1, len(errors))
+fig, axes = new_figure(1, len(errors))
 for ax, (name, e) in zip(np.ravel(axes), errors.items()):
     ax.plot(e["hand"], e["tuned"], "o", color=F.plotting.COLORS["feedback"])
     lim = [min(e["hand"] + e["tuned"]), max(e["hand"] + e["tuned"])]
     ax.plot(lim, lim, "k--", lw=0.8)
     ax.set(xlabel="hand-tuned", ylabel="tuned", title=name)
-fig_b1 = F.save_figure(fig, out, "b1_tuned_vs_hand")
+fig_b1 = save_figure(fig, out, "b1_tuned_vs_hand")
 
 # %% [markdown]
 # ## Verdict
@@ -338,7 +344,7 @@ claims = [rule.replace(figure=fig_b1, title="L and beta tuned from data",
                                "hand_sweeps": hand_sweeps, "paper_gain_errors": paper_errors,
                                "bottle_tuned_per_seed": tuned_per_seed.tolist(),
                                "quadrotor_tuned_flights": tuned_flights, "quadrotor_hand_flights": hand_flights},
-                      headline=F.headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
+                      headline=headline_number("bottle 0.5 s error, tuned / hand-tuned gains",
                                                  float(np.mean(errors["bottle"]["tuned"]) /
                                                        np.mean(errors["bottle"]["hand"]))),
                       paper="no number: the paper names the choice of gains as its open problem")]
@@ -356,5 +362,5 @@ for name, row in summary.items():
 
 # %%
 seconds["total"] = time.perf_counter() - t_start
-F.write_results(out, task="tuned_gains", profile=profile, claims=claims, metrics={"seconds": seconds})
+write_results(out, task="tuned_gains", profile=profile, claims=claims, metrics={"seconds": seconds})
 {k: round(v, 1) for k, v in seconds.items()}

@@ -29,8 +29,14 @@ settings = QuickStartSettings.from_namespace(globals())  # checked as `fnn-pipel
 import torch
 
 import fnnlib as F
+from fnnbook.results import write_results
+from fnnlib.metrics import n_step_errors
+from fnnlib.models.neural_ode import init_parameters
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator
 
 
+# %%
 class Cart(F.DynamicalSystem):  # the plant: x = (position, velocity), u = force; the model never sees it
     n, m = 2, 1
 
@@ -38,7 +44,7 @@ class Cart(F.DynamicalSystem):  # the plant: x = (position, velocity), u = force
         return torch.stack([x[:, 1], -2.0 * x[:, 0] - 0.5 * x[:, 1] + u[:, 0]], -1)
 
 
-gen, f64 = F.make_generator(0), torch.float64
+gen, f64 = make_generator(0), torch.float64
 C = torch.tensor([[1.0, 0.0]], dtype=f64)  # y = C x: the position only
 t = torch.arange(T, dtype=f64) * Ts
 u = torch.sin(0.8 * t)[None, :, None] * (1 + torch.rand(4, 1, 1, generator=gen, dtype=f64))  # four records
@@ -49,7 +55,7 @@ y[torch.rand(y.shape, generator=gen) < drop] = float("nan")  # ... with lost sam
 # %%
 A_guess = torch.tensor([[0.0, 1.0], [-1.0, 0.0]], dtype=f64)  # a rough guess (an undamped unit oscillator)
 L_y = F.place_observer_gain(torch.eye(2, dtype=f64) + Ts * A_guess, Ts * C, [0.8, 0.85])  # the observer's gain
-model = F.init_parameters(F.NeuralODE(2, (16, 16), "tanh", n_input=1).double(), gen)
+model = init_parameters(F.NeuralODE(2, (16, 16), "tanh", n_input=1).double(), gen)
 F.train_from_outputs(model, y[:2], C, F.OutputRecipe(iterations=train_iterations, L=L_y.tolist()), Ts=Ts, u=u[:2])
 observer = F.MeasuredFeedback(model, Ts, L=L_y, measurement=F.Measurement(C=C), allow_unstable=True)  # layer 0
 
@@ -60,9 +66,8 @@ preds = {"open loop": observer.predict(y[3], N, u[3]),
          "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.schedule(), u=u[3], observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
-    preds[name] = kf(model, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], noise_std ** 2), C=C, disturbance=[1],
-                     A=A).predict(y[3], N, u[3])
-errors = {k: float(F.n_step_errors(z @ C.T, x[3] @ C.T, N)[T // 4:].mean()) for k, z in preds.items()}
+    preds[name] = kf(model, Ts, 2, [1e-6, 1e-6, 1e-3], noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[3], N, u[3])
+errors = {k: float(n_step_errors(z @ C.T, x[3] @ C.T, N)[T // 4:].mean()) for k, z in preds.items()}
 
 # %% [markdown]
 # `errors` is the mean error of the position predicted $N$ samples ahead on the fourth record, against the true
@@ -80,15 +85,15 @@ print(f"tuned L = {[round(v, 3) for v in tuned.L.tolist()]}, beta = {tuned.beta:
 # made $N$ samples earlier.
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 ax.plot(t, x[3, :, 0], color="black", lw=1.5, label="true position")
 ax.plot(t, y[3, :, 0], ".", color="grey", ms=3, label="measured (noisy, gaps)")
 for name in ("open loop", "feedback, tuned"):
     ax.plot(t[N:], preds[name][: T - N, 0], lw=1, label=f"{name}, {N} samples ahead")
 ax.set(xlabel="time [s]", ylabel="position")
 ax.legend(fontsize=8, ncol=2)
-figure = F.save_figure(fig, out_dir, "quick_start_prediction")
+figure = save_figure(fig, out_dir, "quick_start_prediction")
 
 # %%
-results_file = F.write_results(out_dir, task="quick_start", profile=profile, claims=[],
-                               metrics={"errors": errors, "L": tuned.L.tolist(), "beta": tuned.beta})
+results_file = write_results(out_dir, task="quick_start", profile=profile, claims=[],
+                               metrics={"errors": errors, "L": tuned.L, "beta": tuned.beta})

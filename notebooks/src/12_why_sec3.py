@@ -59,19 +59,29 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import read_results
+from fnnlib.feedback import cascade_sweep, eval_field, observe_gains, Gains
+from fnnlib.metrics import error_norm, n_step_errors, rmse_over_time
+from fnnlib.models import stack_members
+from fnnlib.paper import colon_range, n_step_rmse, paired_levels, residual_level_runs, switched_spiral_run
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator, seed_everything
+from fnnlib.stability import gain_eigen_bounds, observe_continuous, reconvergence
+from fnnlib.systems import BatchedSpirals, Spiral, add_member_noise
+from fnnlib.training import load_seed_ensemble
 from fnnbook import why as W
 from fnnbook.rules import sec3, why_sec3
 
 # %%
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
-F.seed_everything(seed)
+seed_everything(seed)
 started, started_cpu = time.perf_counter(), time.process_time()
-ens = F.load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
+ens = load_seed_ensemble(upstream_dirs["spiral"])  # every seed's network of the spiral task on the stacked state
 seeds, S = ens.seeds, ens.size
 t = torch.arange(n_samples, dtype=torch.float64) * Ts
-x_test = F.Spiral(*test).simulate(torch.tensor(x0), t).float()  # (T, 2): the test spiral of Fig. 4
-xs_test = F.stack_members(x_test, S)
+x_test = Spiral(*test).simulate(torch.tensor(x0), t).float()  # (T, 2): the test spiral of Fig. 4
+xs_test = stack_members(x_test, S)
 print(f"{S} networks (seeds {seeds}) from the spiral task")
 UNIT = "seed (one ensemble)"  # the spiral task's seeds train side by side on shared mini-batches: not independent
 
@@ -109,13 +119,13 @@ def plot_heat(ax, grid, title, value=None):
 # paper profile's.
 
 # %%
-unit = torch.cat([torch.randn(x_test.shape, generator=F.make_generator(s + 1), dtype=x_test.dtype) for s in seeds],
+unit = torch.cat([torch.randn(x_test.shape, generator=make_generator(s + 1), dtype=x_test.dtype) for s in seeds],
                  dim=-1)  # the spiral task's draw, one per seed
 stds3 = [0.0, *s3_noise]
 xm3 = torch.stack([xs_test + std * unit for std in stds3])  # (levels, T, 2S)
-err3_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
+err3_nn = n_step_errors(ens.split(F.rollout_predict(ens, xm3, Ts, N)), x_test, N).mean(-1)  # (S, levels)
 betas3 = torch.tensor([0.0, *s3_beta], dtype=torch.float64)
-err3_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xm3, Ts, N, F.Gains.sweep(L, betas3))), x_test, N).mean(-1)  # (S, B, levels)
+err3_fb = n_step_errors(ens.split(cascade_sweep(ens, xm3, Ts, N, Gains.sweep(L, betas3))), x_test, N).mean(-1)  # (S, B, levels)
 
 # %%
 holds3 = np.zeros((len(s3_noise), len(s3_beta)), bool)
@@ -141,9 +151,9 @@ grid3 = W.WhyGrid(
              "noise_std_rows": stds3, "beta_columns": betas3.tolist()})
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 plot_heat(ax, grid3, f"S3 ({S} seeds, x: fails): decayed / open-loop error", ratio3)
-fig_s3 = F.save_figure(fig, out, "why_s3")
+fig_s3 = save_figure(fig, out, "why_s3")
 
 # %% [markdown]
 # ## S5: how conservative Theorem 1's ball is, over the test spiral
@@ -156,11 +166,11 @@ fig_s3 = F.save_figure(fig, out, "why_s3")
 # continuous observer, the feedback network and the L sweep, float64).
 
 # %%
-ens64 = F.load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
-lam_m, lam_M = F.gain_eigen_bounds(L, 2)
+ens64 = load_seed_ensemble(upstream_dirs["spiral"], dtype=torch.float64)
+lam_m, lam_M = gain_eigen_bounds(L, 2)
 t_tr = transient_time_constants / lam_m
 after_tr, last_half = t >= t_tr, t >= t[-1] / 2
-points5 = [F.Spiral(test[0], eta, eps) for eps in s5_eps for eta in s5_eta]  # the grid's spirals, row-major
+points5 = [Spiral(test[0], eta, eps) for eps in s5_eps for eta in s5_eta]  # the grid's spirals, row-major
 
 
 # %% [markdown]
@@ -168,14 +178,14 @@ points5 = [F.Spiral(test[0], eta, eps) for eps in s5_eps for eta in s5_eta]  # t
 # row $p$ of the state is spiral $p$); the feedback network runs on the same states.
 
 # %%
-x0s = F.stack_members(torch.tensor(x0), S).expand(len(points5), -1)
-x5, ct5 = F.observe_continuous(F.BatchedSpirals(points5, S), ens64, L, x0s, t)  # (P, T, 2S) each
+x0s = stack_members(torch.tensor(x0), S).expand(len(points5), -1)
+x5, ct5 = observe_continuous(BatchedSpirals(points5, S), ens64, L, x0s, t)  # (P, T, 2S) each
 xs5 = ens.split(x5)  # (S, P, T, 2): the true states (the same for every seed)
 with torch.no_grad():
     f5 = ens.split(torch.stack([s.rate(x5[p, :, :2]).repeat(1, S) for p, s in enumerate(points5)]))
-    gamma5 = (f5 - ens.split(F.eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
+    gamma5 = (f5 - ens.split(eval_field(ens64, x5))).norm(dim=-1).amax(dim=-1)  # (S, P): Assumption 1 along the run
 fb5 = F.LinearFeedback(ens64, Ts, gains=F.Gains(L), n=2 * S).observe(x5)
-lim5 = (xs5[:, None] - ens.split(F.observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
+lim5 = (xs5[:, None] - ens.split(observe_gains(ens64, x5, Ts, torch.tensor(L_sweep)).x_hat)).norm(dim=-1)  # (S, G, P, T)
 lim5 = lim5[..., last_half].amax(-1)  # (S, G, P)
 err5 = {k: ((xs5 - ens.split(e.x_hat)).norm(dim=-1), (f5 - ens.split(e.f_hat)).norm(dim=-1))
         for k, e in (("fb", fb5), ("ct", ct5))}  # (S, P, T) each
@@ -201,9 +211,9 @@ grid5 = W.WhyGrid(
     rule="the claim holds at a grid point when sec3.s5 reads reproduced there (both balls at least "
          f"{conservative_ratio:g}x the measured limit, and the limit falling as L grows, in >= S-1 seeds)",
     numbers={"ratio_x_min_over_seeds": ratio5})
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 plot_heat(ax, grid5, f"S5 ({S} seeds, x: fails): ball / limit of |x~|, min", ratio5)
-fig_s5 = F.save_figure(fig, out, "why_s5")
+fig_s5 = save_figure(fig, out, "why_s5")
 
 # %% [markdown]
 # ## S8: the margin at each of the 12 residual levels (Fig. S9), over the gain
@@ -213,19 +223,19 @@ fig_s5 = F.save_figure(fig, out, "why_s5")
 # learned model is exact.
 
 # %%
-res_levels = F.paired_levels(F.colon_range(*domega_range), F.colon_range(*deta_range), F.colon_range(*deps_range))
-x8, f8 = F.residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
-xs8 = F.stack_members(x8, S)
+res_levels = paired_levels(colon_range(*domega_range), colon_range(*deta_range), colon_range(*deps_range))
+x8, f8 = residual_level_runs(residual_base, res_levels, torch.tensor(x0), t)  # (12, T, 2): states, true rates
+xs8 = stack_members(x8, S)
 with torch.no_grad():
-    f8_nn = ens.split(F.eval_field(ens, xs8))  # (S, 12, T, 2)
+    f8_nn = ens.split(eval_field(ens, xs8))  # (S, 12, T, 2)
 gains8 = torch.tensor(s8_L, dtype=torch.float64)
-f8_fb = ens.split(F.observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
-rate8_nn = F.rmse_over_time(f8_nn, f8.expand_as(f8_nn)).T  # (12, S)
-rate8_fb = F.rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
+f8_fb = ens.split(observe_gains(ens, xs8, Ts, gains8).f_hat)  # (S, G, 12, T, 2)
+rate8_nn = rmse_over_time(f8_nn, f8.expand_as(f8_nn)).T  # (12, S)
+rate8_fb = rmse_over_time(f8_fb, f8.expand_as(f8_fb))  # (S, G, 12)
 
 # %%
-ms8_nn = F.n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T  # (12, S)
-ms8_fb = F.n_step_errors(ens.split(F.cascade_sweep(ens, xs8, Ts, N, F.Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
+ms8_nn = n_step_errors(ens.split(F.rollout_predict(ens, xs8, Ts, N)), x8, N).mean(-1).T  # (12, S)
+ms8_fb = n_step_errors(ens.split(cascade_sweep(ens, xs8, Ts, N, Gains.sweep(gains8, beta))), x8, N).mean(-1)  # (S, G, 12)
 holds8 = np.stack([why_sec3.s8_levels(rate_neural_ode=rate8_nn, rate_feedback=rate8_fb[:, g].T,
                                       err_N_neural_ode=ms8_nn, err_N_feedback=ms8_fb[:, g].T,
                                       offsets=res_levels) for g in range(len(s8_L))], axis=1)  # (12, G)
@@ -244,13 +254,13 @@ grid8 = W.WhyGrid(
              (rate8_fb.mean(0) / rate8_nn.mean(1)[None]).T.numpy()})
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 plot_heat(ax, grid8, f"S8 ({S} seeds, x: fails): feedback / ODE N-step error", margin8)
 zero = set(range(len(domega))) - set(sec3.residual_levels(res_levels, len(domega), "S8").tolist())
 ax.set_yticks(range(len(domega)), [f"{v:g}" + (" (zero residual)" if j in zero else "") for j, v in enumerate(domega)])
 for j in zero:
     ax.get_yticklabels()[j].set(color="tab:blue", fontweight="bold")
-fig_s8 = F.save_figure(fig, out, "why_s8")
+fig_s8 = save_figure(fig, out, "why_s8")
 
 # %% [markdown]
 # ## S9: how thin the margin of the decay-rate ablation is (Fig. S11)
@@ -262,11 +272,10 @@ fig_s8 = F.save_figure(fig, out, "why_s8")
 # %%
 n_fine = round(s9_beta_max / min(s9_beta_steps))
 betas9 = torch.arange(n_fine + 1, dtype=torch.float64) * (s9_beta_max / n_fine)  # the finest grid; the others: every k-th
-gens = [F.make_generator(seed + s + 1) for s in seeds]
-unit9 = F.add_member_noise(x_test, 1.0, gens, draws=noise_draws) - xs_test  # (draws, T, 2S): unit noise per seed
-clean9 = F.n_step_rmse(ens.split(F.cascade_sweep(ens, xs_test, Ts, N, F.Gains.sweep(L, betas9))), x_test, N)  # (S, B)
-noisy9 = torch.stack([F.n_step_rmse(ens.split(F.cascade_sweep(ens, xs_test + std * unit9, Ts, N,
-                                                              F.Gains.sweep(L, betas9))), x_test,
+gens = [make_generator(seed + s + 1) for s in seeds]
+unit9 = add_member_noise(x_test, 1.0, gens, draws=noise_draws) - xs_test  # (draws, T, 2S): unit noise per seed
+clean9 = n_step_rmse(ens.split(cascade_sweep(ens, xs_test, Ts, N, Gains.sweep(L, betas9))), x_test, N)  # (S, B)
+noisy9 = torch.stack([n_step_rmse(ens.split(cascade_sweep(ens, xs_test + std * unit9, Ts, N, Gains.sweep(L, betas9))), x_test,
                                     N, dim=(2, 3)) for std in s9_noise])  # (noise, S, B): the draws pooled
 
 # %%
@@ -290,9 +299,9 @@ grid9 = W.WhyGrid(
              "rmse_noise_free": clean9.tolist()})
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 plot_heat(ax, grid9, f"S9 ({S} seeds, x: fails): best noisy beta, median", best9)
-fig_s9 = F.save_figure(fig, out, "why_s9")
+fig_s9 = save_figure(fig, out, "why_s9")
 holds9
 
 # %% [markdown]
@@ -304,14 +313,14 @@ holds9
 # unchanged (strict reading) at each point; the errors are computed once.
 
 # %%
-x10, f10 = F.switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
-xs10 = F.stack_members(x10, S)
+x10, f10 = switched_spiral_run(before, after, t_switch, torch.tensor(x0), t)  # (T, 2): states, true rates
+xs10 = stack_members(x10, S)
 est10 = F.LinearFeedback(ens, Ts, gains=F.Gains(L), n=2 * S).observe(xs10)
 with torch.no_grad():
-    e10_nn = F.error_norm(ens.split(F.eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
-e10 = {"x": (t, F.error_norm(ens.split(est10.x_hat), x10.expand(S, -1, -1))),
-       "f": (t, F.error_norm(ens.split(est10.f_hat), f10.expand(S, -1, -1))),
-       "multistep": (t[:-N], F.n_step_errors(ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), x10, N))}
+    e10_nn = error_norm(ens.split(eval_field(ens, xs10)), f10.expand(S, -1, -1))  # (S, T)
+e10 = {"x": (t, error_norm(ens.split(est10.x_hat), x10.expand(S, -1, -1))),
+       "f": (t, error_norm(ens.split(est10.f_hat), f10.expand(S, -1, -1))),
+       "multistep": (t[:-N], n_step_errors(ens.split(F.cascade_predict(ens, xs10, Ts, N, F.Gains(L, beta))), x10, N))}
 peak10 = {k: err[:, tt >= t_switch].amax(-1).tolist() for k, (tt, err) in e10.items()}
 
 
@@ -330,12 +339,12 @@ grid10 = W.WhyGrid(
          "leaves the band after the step and is back within the window, in >= S-1 seeds; the feedback rate "
          "error then below the neural ODE's)",
     numbers={"peak_over_steady_x": (np.array(peak10["x"]) / np.array(
-        [F.reconvergence(t, e, t_switch, window=steady_window, band_factor=1.0)["band"] for e in e10["x"][1]])).tolist()})
+        [reconvergence(t, e, t_switch, window=steady_window, band_factor=1.0)["band"] for e in e10["x"][1]])).tolist()})
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 plot_heat(ax, grid10, f"S10 ({S} seeds): the strict reading per point")
-fig_s10 = F.save_figure(fig, out, "why_s10")
+fig_s10 = save_figure(fig, out, "why_s10")
 holds10
 
 # %% [markdown]
@@ -362,7 +371,7 @@ sources = {"S3": ("spiral", grid3, fig_s3), "S5": ("theory", grid5, fig_s5), "S8
            "S9": ("ablations", grid9, fig_s9), "S10": ("ablations", grid10, fig_s10)}
 whys = []
 for cid, (task, grid, fig_path) in sources.items():
-    c = F.read_results(Path(upstream_dirs[task]) / "results.json").claim(cid)  # the claim's paper-profile result
+    c = read_results(Path(upstream_dirs[task]) / "results.json").claim(cid)  # the claim's paper-profile result
     whys.append(W.Why(cid, c.verdict, grids=(grid,), readings=c.reading_verdicts(), figure=fig_path, note=notes[cid]))
 W.write_whys(out, whys)
 

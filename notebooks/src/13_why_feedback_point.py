@@ -8,7 +8,7 @@
 # rollout refresh (`refresh_every`; Alg. 1 reruns the feedback over the cases at every iteration). The frozen
 # neural ODEs are the `spiral` task's (seeds `0 .. n_seeds-1`, as in the `neural_feedback` task); the neural
 # feedbacks are retrained from the same initialisations and mini-batch seeds, then judged by the rules of D2,
-# D3 and D4 (`fnnbook.rules.sec4`) on the `neural_feedback` task's evaluation (`fnnbook.feedback_eval`).
+# D3 and D4 (`fnnbook.rules.sec4`) on the `neural_feedback` task's evaluation (`fnnlib.paper.feedback_eval`, judged by `fnnbook.feedback_eval`).
 # D1 does not depend on the feedback and is not judged here.
 
 # %% tags=["parameters"]
@@ -58,7 +58,12 @@ import numpy as np
 import torch
 
 import fnnlib as F
-from fnnbook.feedback_eval import evaluation_setup, judge, release_form_loss
+from fnnlib.models import NeuralFeedbackEnsemble
+from fnnlib.paper import colon_range, paired_levels, simulate_levels
+from fnnlib.systems import Spiral
+from fnnlib.training import load_seed_checkpoints
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, release_form_loss
 from fnnlib.io import atomic_write
 
 # %% [markdown]
@@ -71,8 +76,9 @@ recipe = F.FeedbackRecipe(iterations=round(fb_iterations * change.get("iteration
                           batch_size=fb_batch_size, lr=fb_lr * change.get("lr_times", 1.0),
                           optimizer=change.get("optimizer", fb_optimizer),
                           refresh_every=change.get("refresh_every", refresh_every))
-setup = evaluation_setup(globals())  # the neural_feedback task's nominal task, S8 and held-out levels
-loaded = F.load_seed_checkpoints(Path(upstream_dirs["spiral"]), stem="neural_ode", expected_kind="NeuralODE")
+# the neural_feedback task's nominal task, S8 and held-out levels
+setup = evaluation_setup(EvaluationSettings.of(settings.as_dict()))
+loaded = load_seed_checkpoints(Path(upstream_dirs["spiral"]), stem="neural_ode", expected_kind="NeuralODE")
 if len(loaded) < n_seeds:
     raise ValueError(f"n_seeds = {n_seeds}, but the spiral task has {len(loaded)} seeds")
 loaded = loaded[:n_seeds]
@@ -83,12 +89,12 @@ print(f"change {change}: {recipe}; seeds {seeds}")
 # ## Alg. 1 with this recipe, the seeds side by side
 
 # %%
-cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
+cases = paired_levels(colon_range(*dr_omega_range), colon_range(*dr_eta_range), colon_range(*dr_eps_range))
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
-X_dr = F.simulate_levels([F.Spiral(*row) for row in cases.tolist()], torch.tensor(x0, dtype=torch.float64), t_dr,
+X_dr = simulate_levels([Spiral(*row) for row in cases.tolist()], torch.tensor(x0, dtype=torch.float64), t_dr,
                          exact=True).float()
 f_ens = F.NeuralODEEnsemble.from_members([m for _, m, _ in loaded], seeds)
-h_ens = F.NeuralFeedbackEnsemble(2, fb_hidden, fb_activation, seeds)
+h_ens = NeuralFeedbackEnsemble(2, fb_hidden, fb_activation, seeds)
 hist = F.train_neural_feedback(f_ens, h_ens, t_dr, X_dr, recipe, seed=seeds)
 print(f"{len(seeds)} feedbacks: {hist.seconds:.1f} s ({hist.ms_per_iteration:.1f} ms/iteration)")
 

@@ -70,18 +70,25 @@ import numpy as np
 import torch
 
 import fnnlib as F
+from fnnbook.results import read_results
+from fnnlib.models import NeuralFeedbackEnsemble
+from fnnlib.paper import colon_range, paired_levels, simulate_levels
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.systems import Spiral
+from fnnlib.training import load_seed_checkpoints, load_seed_ensemble
 from fnnbook import why as W
-from fnnbook.feedback_eval import evaluation_setup, feedback_ensemble, judge, rate_error_curves, release_form_loss
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, rate_error_curves, release_form_loss
 from fnnbook.rules import sec4
 from fnnbook.rules import why_feedback as WF
-from fnnlib.data import release
+from fnnlib import release
 
 # %%
 task_start = time.perf_counter()
 out = Path(out_dir)
 (out / "figures").mkdir(parents=True, exist_ok=True)
 nf_dir = Path(upstream_dirs["neural_feedback"])
-paper = F.read_results(nf_dir / "results.json")
+paper = read_results(nf_dir / "results.json")
 point_dirs = sorted(Path(d) for k, d in upstream_dirs.items() if k.startswith("why_feedback_point"))
 if not point_dirs:
     raise ValueError("no why_feedback_point folder among the upstream folders")
@@ -91,15 +98,15 @@ print(f"{len(points)} grid points: {[p['change'] for p in points]}")
 # %% [markdown]
 # ## The profile point: our paper-profile networks on the shared evaluation
 # The paper profile's frozen neural ODEs, neural feedbacks and domain-randomized neural ODEs, judged again
-# through `fnnbook.feedback_eval` (the evaluation every grid point and the authors' networks get). It must give
+# through `fnnlib.paper.feedback_eval` (the evaluation every grid point and the authors' networks get). It must give
 # the paper profile's checks of D1, D2 and D4 (checked below); D3 reads the paper profile's loss numbers.
 
 # %%
-f_ours = F.load_seed_ensemble(upstream_dirs["spiral"])
+f_ours = load_seed_ensemble(upstream_dirs["spiral"])
 seeds = f_ours.seeds
-h_loaded = F.load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")
-h_ours = feedback_ensemble([m for _, m, _ in h_loaded], [s for s, _, _ in h_loaded])
-dr_ours = F.load_seed_ensemble(nf_dir, "neural_ode_dr")
+h_loaded = load_seed_checkpoints(nf_dir, stem="neural_feedback", expected_kind="NeuralFeedback")
+h_ours = NeuralFeedbackEnsemble.from_members([m for _, m, _ in h_loaded], [s for s, _, _ in h_loaded])
+dr_ours = load_seed_ensemble(nf_dir, "neural_ode_dr")
 
 # %% [markdown]
 # They are judged by D1, D2 and D4's rules on the evaluation built from this notebook's parameters; D3 takes the
@@ -107,7 +114,7 @@ dr_ours = F.load_seed_ensemble(nf_dir, "neural_ode_dr")
 
 # %%
 th = WF.Thresholds(d2_factor=d2_factor, d3_ratio=d3_ratio, d3_flat=d3_flat, d1_factor=d1_factor)
-setup = evaluation_setup(globals())
+setup = evaluation_setup(EvaluationSettings.of(settings.as_dict()))
 ours, ours_numbers = judge(f_ours, h_ours, setup, len(seeds), loss=None, factor=d2_factor, ratio_max=d3_ratio,
                            flat=d3_flat, f_dr=dr_ours, d1_factor=d1_factor)
 d3n = paper.claim("D3").numbers
@@ -118,9 +125,9 @@ ours_numbers |= {"ratio": np.asarray(d3n["ratio"]), "last_window_trend_relative"
 # D3's release-form reading needs our feedback's loss in the release's form, on the randomized training cases.
 
 # %%
-cases = F.paired_levels(F.colon_range(*dr_omega_range), F.colon_range(*dr_eta_range), F.colon_range(*dr_eps_range))
+cases = paired_levels(colon_range(*dr_omega_range), colon_range(*dr_eta_range), colon_range(*dr_eps_range))
 t_dr = torch.arange(dr_n_samples, dtype=torch.float64) * dr_Ts
-X_dr = F.simulate_levels([F.Spiral(*row) for row in cases.tolist()], torch.tensor(x0, dtype=torch.float64), t_dr,
+X_dr = simulate_levels([Spiral(*row) for row in cases.tolist()], torch.tensor(x0, dtype=torch.float64), t_dr,
                          exact=True).float()
 ours_numbers["release_form_final"] = release_form_loss(f_ours, h_ours, X_dr, dr_Ts, len(seeds))
 same = {cid: ours[cid].checks == paper.claim(cid).checks for cid in ("D1", "D2", "D3", "D4")}
@@ -168,7 +175,7 @@ for cid, gs in grids.items():
 # ## The authors' networks on the same evaluation
 # The release's nominal neural ODE `authors_ode`, the neural feedback trained against it `authors_feedback`
 # (the release pairs them) and its domain-randomized neural ODE `authors_dr_ode`, read by the tested loaders
-# of `fnnlib.data.release` (a refusing unpickler, pinned SHA-256). They were trained on the release's spiral,
+# of `fnnlib.release` (a refusing unpickler, pinned SHA-256). They were trained on the release's spiral,
 # the transpose of Eq. (26) (`release.release_spiral`: $\omega$ negated), so they are judged on that spiral's
 # nominal task, S8 and held-out levels (same parameters, metrics and rules as ours). One network of each kind:
 # n = 1, so "in >= S-1 of S seeds" reads "in the run" and a win is "lower". Each check names the networks it
@@ -178,7 +185,7 @@ for cid, gs in grids.items():
 nets = release.load_release_spiral_networks(data_dir, authors_ode, authors_feedback, authors_dr_ode)
 NETS = {"D1": f"{authors_dr_ode} vs {authors_ode}", "D2": f"{authors_ode} + {authors_feedback}",
         "D4": f"{authors_ode} + {authors_feedback}"}
-authors, setup_theirs = None, evaluation_setup(globals(), release.release_spiral)
+authors, setup_theirs = None, evaluation_setup(EvaluationSettings.of(settings.as_dict()), release.release_spiral)
 if nets is None:
     print(f"the authors' networks are not checked (judging ours only): the release's spiral networks are not "
           f"all in data_dir = {data_dir!r} with their published SHA-256")
@@ -246,7 +253,7 @@ settle = {who: sec4.settling_index(c["neural_feedback"]) * setup.Ts for who, c i
 print({who: np.round(ts, 2).tolist() for who, ts in settle.items()}, "settling times (s)")
 
 # %%
-fig, ax = F.new_figure()
+fig, ax = new_figure()
 t_nom = np.arange(setup.x_nom.shape[0]) * setup.Ts
 for (who, c), ls in zip(runs.items(), ("-", ":")):
     ax.plot(t_nom, c["neural_ode"].mean(0), ls, color=F.plotting.COLORS["neural_ode"], label=f"{who}: neural ODE")
@@ -254,7 +261,7 @@ for (who, c), ls in zip(runs.items(), ("-", ":")):
     ax.axvline(float(np.median(settle[who])), ls="--", color="k", lw=0.6)
 ax.set(xlabel="t (s)", ylabel="||f_hat - f|| / RMS ||f||", yscale="log", title="D2: per-time change-rate error")
 ax.legend(fontsize=7)
-curve_fig = F.save_figure(fig, out, "why_d2_per_time")
+curve_fig = save_figure(fig, out, "why_d2_per_time")
 
 # %% [markdown]
 # ## One figure per why
@@ -280,7 +287,7 @@ def plot_points(ax, cid, key):
 # %%
 def plot_why(cid, key, threshold, ylabel, theirs=None, log=False):
     """A claim's figure: its points, the authors' star and the rule's threshold."""
-    fig, ax = F.new_figure()
+    fig, ax = new_figure()
     labels = plot_points(ax, cid, key)
     if theirs is not None:
         ax.plot([len(labels)], [theirs], "*", ms=12, color=F.plotting.COLORS["neural_ode"])
@@ -288,7 +295,7 @@ def plot_why(cid, key, threshold, ylabel, theirs=None, log=False):
     ax.axhline(threshold, ls="--", color="k", lw=0.8)
     ax.set_xticks(range(len(labels)), labels, rotation=35, ha="right", fontsize=7)
     ax.set(ylabel=ylabel, title=f"{cid} (filled: its rule holds)", yscale="log" if log else "linear")
-    return F.save_figure(fig, out, f"why_{cid.lower()}")
+    return save_figure(fig, out, f"why_{cid.lower()}")
 
 
 # %%

@@ -27,6 +27,11 @@ beta_grid = [0.005, 0.02, 0.1]
 
 # %%
 import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.data import bottle_throws
+from fnnlib.paper import cascade_position_errors
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.training import load_seed_checkpoints
 
 from fnnbook.tasks.why_bottle import WhyBottleSettings
 settings = WhyBottleSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -42,18 +47,18 @@ from tqdm.auto import tqdm
 from fnnbook import why as W
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import bottle as rules
-from fnnlib.data import release
+from fnnlib import release
 
 # %% tags=["hide-input"]
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = Path(upstream_dirs["bottle"])
-o1_up, ran = F.read_results(up / F.RESULTS_FILENAME).claim("O1"), upstream_parameters(up)
+o1_up, ran = read_results(up / RESULTS_FILENAME).claim("O1"), upstream_parameters(up)
 N, L_ours, beta_ours = ran["N"], float(ran["L"]), float(ran["beta"])
 if L_ours not in L_grid or beta_ours not in beta_grid:
     raise ValueError(f"the grid must pass through bottle's own gains L = {L_ours:g}, beta = {beta_ours:g} "
                      f"(got L_grid {L_grid}, beta_grid {beta_grid})")
-train, test = F.bottle_throws(ran["data"], data_dir=data_dir, synthetic_sizes=ran["synthetic_sizes"],
+train, test = bottle_throws(ran["data"], data_dir=data_dir, synthetic_sizes=ran["synthetic_sizes"],
                               seed=ran["seeds"][0])  # the bottle task's test throws, chosen as it chose them
 for L in L_grid:
     F.decayed_gains(F.check_gain(L, 6, train.Ts), N, max(beta_grid))  # refuse an unstable gain up front
@@ -71,7 +76,7 @@ t_start = time.perf_counter()
 # $T_s$, position error 0.5 s ahead, as in `bottle`).
 
 # %% tags=["hide-input"]
-loaded = F.load_seed_checkpoints(up, "neural_ode", expected_kind="NeuralODE")
+loaded = load_seed_checkpoints(up, "neural_ode", expected_kind="NeuralODE")
 seeds = [s for s, _, _ in loaded]
 if seeds != ran["seeds"]:
     raise ValueError(f"bottle's checkpoints hold seeds {seeds}, its run used {ran['seeds']}")
@@ -83,13 +88,13 @@ FEEDBACK_CHECKS = ("feedback<neural_ode per throw", "feedback<neural_ode over se
 
 
 # %% [markdown]
-# Each network's O1 error per test throw, (E, throws) (`F.cascade_position_errors`: the mean 0.5 s position error
+# Each network's O1 error per test throw, (E, throws) (`cascade_position_errors`: the mean 0.5 s position error
 # over every start); $L = 0$ is the open-loop neural ODE (the cascade without feedback is the Euler rollout).
 # O1's rule reads them with the stored drag errors (`rules.o1_per_seed`).
 
 # %% tags=["hide-input"]
 t0 = time.perf_counter()
-nn_err = F.cascade_position_errors(ens, x_test, Ts, N, 0.0, 0.0)  # (E, throws): the open loop, once
+nn_err = cascade_position_errors(ens, x_test, Ts, N, 0.0, 0.0)  # (E, throws): the open loop, once
 if not np.allclose(nn_err.mean(0), stored["per_throw_m"]["neural ODE"], rtol=1e-3):
     raise ValueError("the open-loop errors of the loaded networks are not those bottle measured")
 
@@ -103,7 +108,7 @@ for i, j in tqdm([(i, j) for i in range(len(L_grid)) for j in range(len(beta_gri
                                                           (("feedback", "feedback"), ("neural_ode", "neural ODE"))})
         gap_cm[i, j] = 100 * (np.mean(per_throw["feedback"]) - np.mean(per_throw["neural_ode"]))
     else:
-        fb = F.cascade_position_errors(ens, x_test, Ts, N, L_grid[i], beta_grid[j])
+        fb = cascade_position_errors(ens, x_test, Ts, N, L_grid[i], beta_grid[j])
         r = rules.o1_per_seed(feedback=fb, neural_ode=nn_err, drag=drag_per_throw)
         gap_cm[i, j] = float(100 * (fb - nn_err).mean())
     results[i, j] = r
@@ -162,7 +167,7 @@ except release.ReleaseError as exc:
 if theirs is not None:
     t0, A = time.perf_counter(), len(theirs)
     ens_a = F.NeuralODEEnsemble.from_members(theirs, list(range(A)))
-    fb_a, nn_a = (F.cascade_position_errors(ens_a, x_test, Ts, N, L, b) for L, b in ((L_ours, beta_ours), (0.0, 0.0)))
+    fb_a, nn_a = (cascade_position_errors(ens_a, x_test, Ts, N, L, b) for L, b in ((L_ours, beta_ours), (0.0, 0.0)))
     authors_result = rules.o1_per_seed(feedback=fb_a, neural_ode=nn_a, drag=drag_per_throw)
     authors = W.AuthorsCheck(verdict=authors_result.verdict, ours=o1_up.verdict, checks=authors_result.checks,
                              networks=", ".join(release.BOTTLE_ODE_NAMES), n=A)
@@ -177,7 +182,7 @@ if theirs is not None:
 # authors', open loop and with the profile's gains, with the drag model's as a line.
 
 # %% tags=["hide-input"]
-fig, axes = F.new_figure(1, 2)
+fig, axes = new_figure(1, 2)
 ax = axes[0, 0]
 lim = min(float(np.abs(gap_cm).max()), 1.0)  # cm: a diverging point (large gain, slow decay) would wash out the rest
 im = ax.imshow(gap_cm, cmap="RdBu", vmin=-lim, vmax=lim, aspect="auto")
@@ -200,7 +205,7 @@ if authors_result is not None:
 ax.axhline(np.mean(drag_per_throw), color="k", lw=0.8, ls="--", label="drag model")
 ax.set(xlabel="network", ylabel="mean 0.5 s error [m]", title=f"L = {L_ours:g}, beta = {beta_ours:g}")
 ax.legend(fontsize=7)
-fig_why = F.save_figure(fig, out, "why_o1")
+fig_why = save_figure(fig, out, "why_o1")
 
 # %% [markdown]
 # ## The why

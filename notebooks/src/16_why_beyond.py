@@ -26,6 +26,12 @@ min_seeds_grid = [2, 3, 5]
 
 # %%
 import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.data import bottle_throws
+from fnnlib.paper import cascade_position_errors
+from fnnlib.plotting import new_figure, save_figure
+from fnnlib.seeding import make_generator
+from fnnlib.training import load_seed_checkpoints
 
 from fnnbook.tasks.why_beyond import WhyBeyondSettings
 settings = WhyBeyondSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
@@ -50,7 +56,7 @@ up = {k: Path(v) for k, v in upstream_dirs.items()}
 for need in ("tuned_gains", "bottle"):
     if need not in up:
         raise ValueError(f"upstream_dirs needs {need!r} (got {sorted(up)})")
-b1_up = F.read_results(up["tuned_gains"] / F.RESULTS_FILENAME).claim("B1")
+b1_up = read_results(up["tuned_gains"] / RESULTS_FILENAME).claim("B1")
 ran_t, ran_b = upstream_parameters(up["tuned_gains"]), upstream_parameters(up["bottle"])
 t_start = time.perf_counter()
 
@@ -64,13 +70,13 @@ t_start = time.perf_counter()
 # open loop, paired over the 9 test throws, each throw's error averaged over the five networks).
 
 # %% tags=["hide-input"]
-train, test = F.bottle_throws(ran_b["data"], data_dir=data_dir, synthetic_sizes=ran_b["synthetic_sizes"],
+train, test = bottle_throws(ran_b["data"], data_dir=data_dir, synthetic_sizes=ran_b["synthetic_sizes"],
                               seed=ran_b["seeds"][0])  # the bottle task's throws, chosen as it chose them
 Ts, bN = train.Ts, ran_b["N"]
 if not 1 <= multi_step_N < bN:
     raise ValueError(f"multi_step_N must lie in 1..{bN - 1} (below the judged horizon N = {bN}), got {multi_step_N}")
 x_train, x_test = train.state.float(), test.state.float()
-loaded = F.load_seed_checkpoints(up["bottle"], "neural_ode", expected_kind="NeuralODE")
+loaded = load_seed_checkpoints(up["bottle"], "neural_ode", expected_kind="NeuralODE")
 b_seeds, b_nets = [s for s, _, _ in loaded], [net for _, net, _ in loaded]
 b1_numbers = b1_up.numbers
 hand = b1_numbers["hand_sweeps"]["bottle"]  # per network: the hand sweep (judged against, never a start)
@@ -82,10 +88,10 @@ HORIZON = {"one_step": 1, "multi_step": multi_step_N, "judged": bN}
 # %% [markdown]
 # At each objective, every network's $(L, \beta)$ is tuned as `tuned_gains` tunes them (`F.tune_gains`, Adam from
 # the paper's gains, on the tuning throws it drew with the network's seed) on the objective's horizon, and each
-# test throw's O1 error is read with the tuned gains (`F.cascade_position_errors`), averaged over the networks.
+# test throw's O1 error is read with the tuned gains (`cascade_position_errors`), averaged over the networks.
 
 # %% tags=["hide-input"]
-tuning = {s: x_train[torch.randperm(x_train.shape[0], generator=F.make_generator(s))[:ran_t["bottle_tune_throws"]]]
+tuning = {s: x_train[torch.randperm(x_train.shape[0], generator=make_generator(s))[:ran_t["bottle_tune_throws"]]]
           for s in b_seeds}
 tune = partial(F.tune_gains, L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
                lr=ran_t["bottle_tune_lr"])
@@ -99,7 +105,7 @@ for obj in tqdm(objectives, desc="objectives"):
         tuned_at[obj] = b1_numbers["tuned"]["bottle"]
     else:
         runs = [tune(net, tuning[s], Ts, HORIZON[obj]) for s, net in zip(b_seeds, b_nets)]
-        tuned = torch.stack([F.cascade_position_errors(net, x_test, Ts, bN, torch.as_tensor(r.L), r.beta)
+        tuned = torch.stack([cascade_position_errors(net, x_test, Ts, bN, torch.as_tensor(r.L), r.beta)
                              for net, r in zip(b_nets, runs)]).mean(0).tolist()
         tuned_at[obj] = [{"seed": s, "L": r.L.tolist(), "beta": r.beta, "loss": r.loss} for s, r in zip(b_seeds, runs)]
     b1_at[obj] = rules.b1({"bottle": {"tuned": tuned, "hand": stored["hand"], "open_loop": stored["open_loop"]}})
@@ -133,8 +139,8 @@ print(f"B1 bottle objectives in {b1_seconds:.0f} s: " + ", ".join(f"{k} {v:.4f} 
 # %% tags=["hide-input"]
 from fnnbook.scoreboard import SEEDS_CHECK_ID, SELF_CHECK_ID  # noqa: E402
 
-results = {task: F.read_results(Path(d) / F.RESULTS_FILENAME) for task, d in upstream_dirs.items()
-           if (Path(d) / F.RESULTS_FILENAME).is_file()}
+results = {task: read_results(Path(d) / RESULTS_FILENAME) for task, d in upstream_dirs.items()
+           if (Path(d) / RESULTS_FILENAME).is_file()}
 claims = {c.id: (task, c) for task, r in results.items() for c in r if c.id not in (SEEDS_CHECK_ID, SELF_CHECK_ID)}
 headlines = {cid: c.headline for cid, (_, c) in claims.items()}
 no_spread = [cid for cid, h in headlines.items() if h is None or h.n is None or h.n < 2]
@@ -176,7 +182,7 @@ print(f"B2 (scoreboard): {b2_profile.verdict} {b2_profile.checks}; holds:\n{hold
 # claims with a per-seed headline).
 
 # %% tags=["hide-input"]
-fig, ax = F.new_figure(1, 1)
+fig, ax = new_figure(1, 1)
 xs = np.arange(len(objectives))
 ax.bar(xs, [mean_err[k] for k in objectives], color=["C2" if h else "0.6" for h in objective_grid.holds])
 ax.axhline(np.mean(stored["hand"]), color=F.plotting.COLORS["feedback"], ls="--", label="hand-tuned")
@@ -185,10 +191,10 @@ ax.set(xticks=xs, xticklabels=[f"{k}\n(N = {HORIZON[k]})" for k in objectives], 
        title="B1, bottle: tuned on ... (green: B1 holds)")
 ax.set_ylim(0.9 * min([*mean_err.values(), np.mean(stored["hand"])]), None)
 ax.legend(fontsize=7)
-fig_b1 = F.save_figure(fig, out, "why_b1")
+fig_b1 = save_figure(fig, out, "why_b1")
 
 # %% tags=["hide-input"]
-fig, ax = F.new_figure(1, 1)
+fig, ax = new_figure(1, 1)
 im = ax.imshow(holds.astype(float), cmap="RdYlGn", vmin=0, vmax=1, aspect="auto")
 for i in range(holds.shape[0]):
     for j in range(holds.shape[1]):
@@ -197,7 +203,7 @@ for i in range(holds.shape[0]):
 ax.set(xticks=range(len(left_out)), xticklabels=[f"left out:\n{v}" for v in left_out], yticks=range(len(min_seeds_grid)),
        yticklabels=[str(m) for m in min_seeds_grid], ylabel="min seeds", title="B2 (headline: share per seed)")
 ax.tick_params(axis="x", labelsize=7)
-fig_b2 = F.save_figure(fig, out, "why_b2")
+fig_b2 = save_figure(fig, out, "why_b2")
 
 # %% [markdown]
 # ## The whys

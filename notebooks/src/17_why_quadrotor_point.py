@@ -35,12 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.training import load_seed_checkpoints
 import fnnlib.mpc as M
 from fnnbook.params import upstream_parameters
-from fnnbook.quadrotor_eval import at_gains, fly_record
-from fnnlib.data import release
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
+from fnnlib.quadrotor.evaluation import at_gains, fly_record
+from fnnlib import release
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 t_start = time.perf_counter()
@@ -55,22 +56,22 @@ out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
 ran = upstream_parameters(up["quadrotor_mpc"])  # the flight test's settings, as it flew them
-q_mpc = F.read_results(up["quadrotor_mpc"] / F.RESULTS_FILENAME).metrics
+q_mpc = read_results(up["quadrotor_mpc"] / RESULTS_FILENAME).metrics
 costs = list(ran["costs"])
 chosen = {c: q_mpc["adapnn_gamma"][c]["chosen"] for c in costs}  # AdapNN's gain chosen on validation there
 
 # %% [markdown]
 # ## The paper profile's units, rebuilt
-# Unit $k$: trained residual network $k$, MLP $k$ and drawn disturbance $k$ (`flight_tests_from_settings`, the
+# Unit $k$: trained residual network $k$, MLP $k$ and drawn disturbance $k$ (`flight_tests`, the
 # builder the flight test uses). The profile's own gains must be grid values, so that the grid passes through
 # the profile's point.
 
 # %% tags=["hide-input", "nbval-check-output"]
 members, mlps = ([(seed, net.double()) for seed, net, _ in
-                  F.load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
+                  load_seed_checkpoints(up["quadrotor_learning"], stem, expected_kind="AeroResidual",
                                           run=upstream_parameters(up["quadrotor_learning"]))]
                  for stem in ("residual", "mlp"))
-setup = M.flight_tests_from_settings(ran)
+setup = M.flight_tests(M.FlightSettings.of(ran))
 if [list(f) for f in setup.forces] != q_mpc["disturbances"]:
     raise ValueError(f"the rebuilt disturbances {setup.forces} are not those quadrotor_mpc flew {q_mpc['disturbances']}")
 if ran["Gamma"] not in Gamma_grid or not set(chosen.values()) <= set(Gamma_adapnn_grid):
@@ -90,7 +91,7 @@ print(f"u_max = {u_max:g} N; the test vehicle needs {need['hover']:.2f} N per mo
 # AdapFNN's flights keep the share of each flight's steps inside Theorem 2's bound (`fly_record`).
 
 # %% tags=["hide-input"]
-mpcs = {c: M.mpc_from_settings(ran, cost=c, u_max=u_max) for c in costs}
+mpcs = {c: M.MPCSettings.of(ran).build(cost=c, u_max=u_max) for c in costs}
 fly = partial(fly_record, tests=setup.unit_tests, model_settings=kw, adapnn_grid=Gamma_adapnn_grid,
               Gamma_grid=Gamma_grid, transient=int(round(ran["transient_s"] / ran["Ts"])))  # one set, one cost
 ours = {c: fly(members, mlps, mpc=mpcs[c], adapnn_gamma=chosen[c], names=["Nomi", "Neural", "MLP", "FB", "FNN"])

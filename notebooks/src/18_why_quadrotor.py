@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.plotting import new_figure, save_figure
 from fnnbook.rules import why_quadrotor as WQ
 from fnnbook.why import Axis, AuthorsCheck, Why, WhyGrid, write_whys
 
@@ -46,7 +47,7 @@ from fnnbook.why import Axis, AuthorsCheck, Why, WhyGrid, write_whys
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = {k: Path(v) for k, v in upstream_dirs.items()}
-profile_result = F.read_results(up["quadrotor_mpc"] / F.RESULTS_FILENAME)
+profile_result = read_results(up["quadrotor_mpc"] / RESULTS_FILENAME)
 points = sorted((json.loads((d / "point.json").read_text()) for d in up.values() if (d / "point.json").is_file()),
                 key=lambda p: p["u_max"])
 if len(points) < 2:
@@ -196,10 +197,10 @@ def plot_grid_panel(ax, q, g):
 # %% tags=["hide-input"]
 def plot_claim(q):
     """Claim ``q``'s figure: its grid under each cost side by side."""
-    fig, axes = F.new_figure(1, len(costs))
+    fig, axes = new_figure(1, len(costs))
     for ax, g in zip(np.ravel(axes), grids[q]):
         plot_grid_panel(ax, q, g)
-    return F.save_figure(fig, out, f"why_{q.lower()}")
+    return save_figure(fig, out, f"why_{q.lower()}")
 
 
 # %% tags=["hide-input"]

@@ -69,10 +69,13 @@ from pathlib import Path
 import numpy as np
 from IPython.display import Markdown, display
 
-import fnnlib as F
+from fnnbook.results import write_results
+from fnnlib.data.tanks import simulation_rmse, tanks_records
+from fnnlib.models.arx import select_arx
+from fnnlib.plotting import new_figure, save_figure
 from fnnlib.data.tanks import PUBLISHED_RESULTS
 
-rec = F.tanks_records(data, data_dir=data_dir, n_samples=synthetic_samples, seed=seed, noise_std=synthetic_noise)
+rec = tanks_records(data, data_dir=data_dir, n_samples=synthetic_samples, seed=seed, noise_std=synthetic_noise)
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 t = rec.t.numpy()
@@ -86,7 +89,7 @@ print(f"{rec.source} records: {rec.y_est.shape[0]} samples each at Ts = {rec.Ts}
 # 10 V limit (the overflow) are marked.
 
 # %% tags=["hide-input"]
-fig, ax = F.new_figure(2, 2)
+fig, ax = new_figure(2, 2)
 for j, (name, u, y, k) in enumerate([("estimation", rec.u_est, rec.y_est, "est"),
                                      ("validation", rec.u_val, rec.y_val, "val")]):
     ax[0, j].plot(t, u.numpy()[:, 0], lw=0.8)
@@ -96,7 +99,7 @@ for j, (name, u, y, k) in enumerate([("estimation", rec.u_est, rec.y_est, "est")
     ax[1, j].plot(t[s], y.numpy()[s, 0], "r.", ms=3, label="at the 10 V limit")
     ax[1, j].set(xlabel="t [s]", ylabel="lower level y [V]")
     ax[1, j].legend(loc="lower right")
-records_figure = F.save_figure(fig, out, "tanks_records")
+records_figure = save_figure(fig, out, "tanks_records")
 
 # %% [markdown]
 # ## A linear baseline measured here
@@ -106,22 +109,22 @@ records_figure = F.save_figure(fig, out, "tanks_records")
 # validation record from its first `n_init` measured samples.
 
 # %% tags=["hide-input"]
-arx, arx_grid = F.select_arx(rec.u_est, rec.y_est, na=range(1, arx_max_order + 1), nb=range(1, arx_max_order + 1),
+arx, arx_grid = select_arx(rec.u_est, rec.y_est, na=range(1, arx_max_order + 1), nb=range(1, arx_max_order + 1),
                            nk=(0, 1), n_init=n_init)
 arx_val = arx.simulate(rec.u_val, rec.y_val, n_init=n_init)
-arx_rmse = {"estimation": min(arx_grid.values()), "validation": F.simulation_rmse(arx_val, rec.y_val, skip=n_init)}
+arx_rmse = {"estimation": min(arx_grid.values()), "validation": simulation_rmse(arx_val, rec.y_val, skip=n_init)}
 print(f"ARX orders na={len(arx.a)}, nb={len(arx.b)}, nk={arx.nk}; free-run RMSE: estimation "
       f"{arx_rmse['estimation']:.4f} V, validation {arx_rmse['validation']:.4f} V (samples {n_init}..{len(t) - 1})")
 
 # %% tags=["hide-input"]
-fig, ax = F.new_figure(1, 1)
+fig, ax = new_figure(1, 1)
 ax.plot(t, rec.y_val.numpy()[:, 0], "k", lw=0.8, label="measured")
 ax.plot(t, arx_val, lw=0.8, label=f"ARX free run ({arx_rmse['validation']:.3f} V)")
 s = rec.saturated("val").numpy()
 ax.plot(t[s], rec.y_val.numpy()[s, 0], "r.", ms=3, label="at the 10 V limit")
 ax.set(xlabel="t [s]", ylabel="lower level y [V]", title="validation record")
 ax.legend(loc="lower right")
-simulation_figure = F.save_figure(fig, out, "tanks_free_run")
+simulation_figure = save_figure(fig, out, "tanks_free_run")
 
 # %% [markdown]
 # ## A neural ODE learned from the level, through its observer
@@ -150,14 +153,10 @@ simulation_figure = F.save_figure(fig, out, "tanks_free_run")
 # on the estimation record. Everything below is measured on the validation record.
 
 # %% tags=["hide-input"]
-from fnnbook import tanks_eval as TE
+from fnnlib.tanks import evaluation as TE
 from fnnbook.rules import tanks as rules
 
-settings = {k: globals()[k] for k in (
-    "hidden", "activation", "rate", "x_center", "x_scale", "u_center", "u_scale", "observer_gain", "train_N",
-    "train_iterations", "train_lr", "L_start", "beta_start", "horizons", "hand_L_grid", "hand_beta_grid", "kf_q",
-    "kf_qd_grid", "kf_r", "n_init", "overflow_after", "overflow_gap", "series_N", "baseline_starts", "baseline_horizon")}
-runs, seconds, trained = TE.run_seeds(rec, seeds, settings)
+runs, seconds, trained = TE.run_seeds(rec, seeds, TE.TanksSettings.of(settings.as_dict()))
 TE.save_trained(out / "tanks_models.pt", trained)  # the pages that judge these models again load them
 print("seconds over the seeds: " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()))
 print("no-feedback baseline per seed: " + "; ".join(
@@ -229,7 +228,7 @@ for c in (b4, b5, b6):
 # below gives the error during each episode and over the `overflow_after` samples after it (mean over seeds).
 
 # %% tags=["hide-input"]
-fig, ax = F.new_figure(1, 1)
+fig, ax = new_figure(1, 1)
 first = runs[seeds[0]]
 ax.plot(t, rec.y_val.numpy()[:, 0], "k", lw=0.9, label="measured")
 for name, series in first["series"].items():
@@ -239,7 +238,7 @@ for a, b in first["overflow"]["episodes"]:
     ax.axvspan(t[a], t[b - 1], color="r", alpha=0.15)
 ax.set(xlabel="t [s]", ylabel="lower level y [V]", title=f"validation record, seed {seeds[0]}")
 ax.legend(loc="lower right", fontsize=7)
-figure = F.save_figure(fig, out, "tanks_predictions")
+figure = save_figure(fig, out, "tanks_predictions")
 
 # %% tags=["hide-input"]
 episodes = first["overflow"]["episodes"]  # each model's error during and after each, the mean over the seeds
@@ -264,7 +263,7 @@ for c in (b4, b5, b6):
 claims = [b4.replace(figure=figure, title="feedback beats open loop on a real plant"),
           b5.replace(figure=figure, title="training through the observer beats training without feedback"),
           b6.replace(figure=figure, title="tuned gains beat hand gains on a real plant")]
-results_file = F.write_results(out_dir, task="cascaded_tanks", profile=profile, claims=claims, metrics={
+results_file = write_results(out_dir, task="cascaded_tanks", profile=profile, claims=claims, metrics={
     "data": rec.source, "n_init": n_init, "saturated_samples": sat, "arx": {
         "orders": [len(arx.a), len(arx.b), arx.nk], "rmse": arx_rmse,
         "grid": {f"{a},{b},{k}": e for (a, b, k), e in arx_grid.items()}},

@@ -31,18 +31,20 @@ b5_starts = ["free", "encoder"]
 b5_horizons = [25, 100]
 
 # %%
-import fnnlib as F
+from fnnbook.results import RESULTS_FILENAME, read_results
+from fnnlib.data.tanks import tanks_records
 
 from fnnbook.tasks.why_tanks import WhyTanksSettings
 settings = WhyTanksSettings.from_namespace(globals())  # checked as `fnn-pipeline check` checks them
 
 # %% tags=["hide-input"]
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
-from fnnbook import tanks_eval as TE
+from fnnlib.tanks import evaluation as TE
 from fnnbook import why as W
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import tanks as rules
@@ -51,10 +53,11 @@ from fnnbook.rules import tanks as rules
 out = Path(out_dir)
 out.mkdir(parents=True, exist_ok=True)
 up = Path(upstream_dirs["cascaded_tanks"])
-result, ran = F.read_results(up / F.RESULTS_FILENAME), upstream_parameters(up)
-rec = F.tanks_records(ran["data"], data_dir=data_dir, n_samples=ran["synthetic_samples"], seed=ran["seed"],
+result, ran = read_results(up / RESULTS_FILENAME), upstream_parameters(up)
+rec = tanks_records(ran["data"], data_dir=data_dir, n_samples=ran["synthetic_samples"], seed=ran["seed"],
                       noise_std=ran["synthetic_noise"])  # the chapter's records, made as it made them
-trained = TE.load_trained(up / "tanks_models.pt", ran)
+s_ran = TE.TanksSettings.of(ran)  # the chapter's settings, as it ran
+trained = TE.load_trained(up / "tanks_models.pt", s_ran)
 Ns = [int(N) for N in ran["horizons"]]
 t_start = time.perf_counter()
 
@@ -66,8 +69,8 @@ t_start = time.perf_counter()
 
 # %% tags=["hide-input"]
 grid = [(L, b) for L in L_grid for b in beta_grid]
-keep = {"all": None, "outside_overflow": TE.outside_overflow(rec, ran)}
-errs = {(w, f): TE.judged_again(rec, trained, ran, first=f, keep=keep[w], grid=grid if (w, f) == ("all", "first_level")
+keep = {"all": None, "outside_overflow": TE.outside_overflow(rec, s_ran)}
+errs = {(w, f): TE.judged_again(rec, trained, s_ran, first=f, keep=keep[w], grid=grid if (w, f) == ("all", "first_level")
                                 else ()) for w in windows for f in first_estimates}
 own, stored = errs["all", "first_level"], result.metrics["n_step"]
 for col in ("open_loop", "tuned", "hand"):
@@ -120,8 +123,8 @@ ours_free = result.metrics["free_run"]["observer_trained"]
 b5_free = {}
 for start in b5_starts:
     for H in b5_horizons:
-        s_pt = dict(ran, baseline_starts=[start], baseline_horizon=int(H))
-        b5_free[start, H] = [TE.no_feedback(rec, seed, s_pt, TE.one_member(ran, seed), TE.LEVEL)["free_run"]
+        s_pt = dataclasses.replace(s_ran, baseline_starts=(start,), baseline_horizon=int(H))
+        b5_free[start, H] = [TE.no_feedback(rec, seed, s_pt, TE.one_member(s_ran, seed), TE.LEVEL)["free_run"]
                              for seed in trained["seeds"]]
 b5_res = [[rules.b5(observer_trained=ours_free, no_feedback=b5_free[a, H]) for H in b5_horizons] for a in b5_starts]
 print(f"B5 baselines in {time.perf_counter() - t0:.0f} s: " + "; ".join(

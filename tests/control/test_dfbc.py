@@ -9,7 +9,7 @@ import torch
 
 from fnnlib.control.dfbc import DFBC
 from fnnlib.control.flatness import flat_to_input, flat_to_state
-from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_TS
+from fnnlib.quadrotor.presets import PAPER_DFBC_GAINS, PAPER_TS
 from fnnlib.systems.allocation import allocation_matrix
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 

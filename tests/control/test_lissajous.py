@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fnnlib.control.lissajous import lissajous, lissajous_flat_outputs
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS
 
 
 def curve(**changes: float) -> dict[str, float]:

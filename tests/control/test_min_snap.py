@@ -16,7 +16,7 @@ from fnnlib.control.min_snap import (
     random_min_snap_flights,
     random_waypoints,
 )
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_WAYPOINT_BOX
+from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, PAPER_WAYPOINT_BOX
 
 DRAW = {k: PAPER_FLIGHT_DATA[k] for k in ("n_waypoints", "box", "max_speed")}
 

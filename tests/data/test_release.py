@@ -18,8 +18,8 @@ import pytest
 import torch
 from torch import nn
 
-from fnnlib.data import release
-from fnnlib.data.release import (
+from fnnlib import release
+from fnnlib.release import (
     ReleaseError,
     UnsafePickleError,
     load_release_bottle_ode,
@@ -425,7 +425,7 @@ def test_real_residual_and_mlp_predict_the_drag_on_a_dfbc_flight() -> None:
     unnegated networks are off by about 200 %."""
     from fnnlib.control.dfbc import DFBC
     from fnnlib.data.quadrotor import make_flights
-    from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA
+    from fnnlib.quadrotor.presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA
     from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 
     flight = make_flights(1, 150, Ts=0.02, seed=3, truth=TRAINING_TRUTH, controller=DFBC(NOMINAL, **PAPER_DFBC_GAINS),
@@ -447,7 +447,7 @@ def test_real_residual_and_mlp_predict_the_drag_on_a_dfbc_flight() -> None:
 def test_the_loaders_are_on_fnnlib_flat_face() -> None:
     import fnnlib
 
-    assert fnnlib.load_release_spiral_ode is load_release_spiral_ode and fnnlib.UnsafePickleError is UnsafePickleError
+    assert fnnlib.release.load_release_spiral_ode is load_release_spiral_ode and fnnlib.release.UnsafePickleError is UnsafePickleError
 
 
 def test_a_feedback_loss_curve_is_cut_at_its_iteration_and_checked(tmp_path: Path, monkeypatch) -> None:

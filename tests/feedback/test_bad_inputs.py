@@ -6,6 +6,9 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import DEFAULT_TUNE_RECIPE
+from fnnlib.metrics import n_step_errors
+from fnnlib.systems import LinearSystem
 
 from tests.feedback.test_inputs import A, B, F64, TS
 
@@ -13,7 +16,7 @@ C = torch.tensor([[1.0, 0.0]], dtype=F64)
 T = 40
 
 
-class CountingPlant(F.LinearSystem):
+class CountingPlant(LinearSystem):
     """The linear plant, counting its calls: a check 'before any work' leaves the count at 0."""
 
     calls = 0
@@ -46,7 +49,7 @@ def test_inputs_rows_off_are_refused_before_the_loop(plant):
     for call in (lambda: ekf.predict(y, 5, u_short), lambda: ukf.observe(y, u_short), lambda: mf.predict(y, 5, u_short),
                  lambda: F.cascade_predict(plant, y, TS, 5, F.Gains(1.0), u=u_short, observer=mf),
                  lambda: F.rollout_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, u=u_short),
-                 lambda: F.tune_gains(plant, torch.zeros(T, 2, dtype=F64), TS, 3, u=u_short, recipe=F.DEFAULT_TUNE_RECIPE)):
+                 lambda: F.tune_gains(plant, torch.zeros(T, 2, dtype=F64), TS, 3, u=u_short, recipe=DEFAULT_TUNE_RECIPE)):
         with pytest.raises(ValueError, match=r"inputs u have 34 rows but .* has 40 samples: give one input row per sample"):
             call()
     _check_no_work()
@@ -79,7 +82,7 @@ def test_nan_truth_in_n_step_errors_is_refused():
     truth = torch.zeros(T, 2, dtype=F64)
     truth[20, 0] = float("nan")
     with pytest.raises(ValueError, match="truth holds a NaN or infinite value among the scored samples"):
-        F.n_step_errors(torch.zeros(T, 2, dtype=F64), truth, 5)
+        n_step_errors(torch.zeros(T, 2, dtype=F64), truth, 5)
 
 
 def test_a_callable_measurement_with_the_wrong_output_and_an_inf_sample(plant):
@@ -98,7 +101,7 @@ def test_a_callable_measurement_with_the_wrong_output_and_an_inf_sample(plant):
 
 
 def test_kalman_and_luenberger_refuse_gaps_with_a_pointer():
-    f = F.LinearSystem(A, B)
+    f = LinearSystem(A, B)
     x = torch.zeros(T, 2, dtype=F64)
     with pytest.raises(NotImplementedError, match="for gaps use ExtendedKalmanObserver, UnscentedKalmanObserver"):
         F.KalmanObserver(lambda t, z: z @ A.T, TS, n=2, cov=F.Covariances(1e-6, 1e-4)).predict(x, 3, mask=torch.ones(T, dtype=torch.bool))

@@ -7,7 +7,9 @@ import math
 import pytest
 import torch
 
-from fnnlib import Gains, cascade_depths, rollout_depths, Spiral, cascade_predict, cascade_predict_loop, rollout_predict
+from fnnlib import cascade_predict, rollout_predict
+from fnnlib.feedback import cascade_predict_loop, Gains, cascade_depths, rollout_depths
+from fnnlib.systems import Spiral
 
 F64 = torch.float64
 TS = 0.1

@@ -7,6 +7,8 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import cascade_sweep, Gains
+from fnnlib.systems import LinearSystem
 from fnnlib.feedback.measurement import model_jacobian
 
 from tests.feedback.test_inputs import A, B, F64, TS
@@ -14,7 +16,7 @@ from tests.feedback.test_inputs import _euler_data as _euler
 
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
 T = 120
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 
 
 def _data():
@@ -68,7 +70,7 @@ def test_cascade_through_a_gap_full_state_equals_the_paper_cascade_outside_it():
     assert bool(torch.isfinite(z).all())
     torch.testing.assert_close(z[:50], ref[:50], rtol=0, atol=1e-12)  # the gap loop is the scan's recursion
     torch.testing.assert_close(z[90:], ref[90:], rtol=0, atol=1e-9)  # exact data: the model is right, so are both
-    sweep = F.cascade_sweep(PLANT, x_gap, TS, 4, F.Gains.sweep(torch.tensor([1.0, 3.0]), 0.1), u=u)
+    sweep = cascade_sweep(PLANT, x_gap, TS, 4, Gains.sweep(torch.tensor([1.0, 3.0]), 0.1), u=u)
     torch.testing.assert_close(sweep[1], z, rtol=0, atol=1e-12)
 
 
@@ -158,12 +160,12 @@ def test_cascade_sweep_with_an_observer_sweeps_the_layers_after_it():
     y = x @ C.T
     y[30:45] = float("nan")
     obs = F.MeasuredFeedback(PLANT, TS, L=_gain(), measurement=F.Measurement(C=C), A=A)
-    sweep = F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(torch.tensor([1.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
+    sweep = cascade_sweep(PLANT, y, TS, 5, Gains.sweep(torch.tensor([1.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
     assert sweep.shape == (2, T, 2)
     for g, (L, beta) in enumerate([(1.0, 0.05), (3.0, 0.2)]):
         torch.testing.assert_close(sweep[g], F.cascade_predict(PLANT, y, TS, 5, F.Gains(L, beta), u=u, observer=obs),
                                    rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="do not pair up"):
-        F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(torch.tensor([1.0, 2.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
+        cascade_sweep(PLANT, y, TS, 5, Gains.sweep(torch.tensor([1.0, 2.0, 3.0]), [0.05, 0.2]), u=u, observer=obs)
     with pytest.raises(TypeError, match="observer must be a fnnlib.MeasuredFeedback"):
-        F.cascade_sweep(PLANT, y, TS, 5, F.Gains.sweep(1.0, 0.1), u=u, observer="C")
+        cascade_sweep(PLANT, y, TS, 5, Gains.sweep(1.0, 0.1), u=u, observer="C")

@@ -5,7 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import Covariances, Gains, KalmanObserver, LinearFeedback, LinearSystem, NeuralODE, Pendulum, cascade_predict, eval_field
+from fnnlib import KalmanObserver, LinearFeedback, NeuralODE, cascade_predict
+from fnnlib.observers import Covariances
+from fnnlib.feedback import eval_field, Gains
+from fnnlib.systems import LinearSystem, Pendulum
 from fnnlib.feedback.layer import shift_inputs
 
 F64 = torch.float64

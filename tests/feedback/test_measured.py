@@ -5,7 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import GainError, LinearSystem, MeasuredFeedback, Measurement, check_output_gain, place_observer_gain
+from fnnlib import GainError, MeasuredFeedback, place_observer_gain
+from fnnlib.observers import Covariances
+from fnnlib.feedback import check_output_gain, Measurement
+from fnnlib.systems import LinearSystem
 
 from tests.feedback.test_inputs import A, B, F64, TS
 from tests.feedback.test_inputs import _euler_data as _euler
@@ -58,7 +61,8 @@ def test_checks_name_what_fails():
 
 
 def test_ekf_takes_the_same_C_and_refuses_an_undetectable_disturbance_layout():
-    from fnnlib import Covariances, DetectabilityError, ExtendedKalmanObserver
+    from fnnlib import ExtendedKalmanObserver
+    from fnnlib.feedback import DetectabilityError
 
     f = LinearSystem(A, torch.zeros(2, 1, dtype=F64))
     x = _euler(torch.tensor([1.0, -2.0], dtype=F64), torch.zeros(T, 1, dtype=F64))

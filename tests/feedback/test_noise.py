@@ -8,7 +8,8 @@ import warnings
 import pytest
 import torch
 
-from fnnlib import noise_amplification_exact, Gains, GainWarning, NOISE_AMPLIFICATION_LIMIT, cascade_predict, check_gain, noise_amplification
+from fnnlib import cascade_predict, check_gain, noise_amplification
+from fnnlib.feedback import GainWarning, NOISE_AMPLIFICATION_LIMIT, Gains, noise_amplification_exact
 
 F64 = torch.float64
 

@@ -10,6 +10,7 @@ import torch
 from torch import nn
 
 import fnnlib as F
+from fnnlib.feedback import cascade_depths
 from fnnlib.feedback.cascade import run_cascade
 from fnnlib.feedback.gaps import first_layer, layer_loop, measure_fn, start_state
 from fnnlib.feedback.measurement import check_measurements
@@ -145,7 +146,7 @@ def test_cascade_with_an_observer_is_its_layer_then_the_paper_cascade():
     obs = F.MeasuredFeedback(f, TS, L=_gain(), measurement=F.Measurement(C=C), allow_unstable=True)
     z_hat = obs.observe_loop(y, u).x_hat
     first = z_hat[..., 1:, :]
-    all_depths = F.cascade_depths(f, y, TS, 6, F.Gains(2.0, 0.1), u=u, observer=obs)
+    all_depths = cascade_depths(f, y, TS, 6, F.Gains(2.0, 0.1), u=u, observer=obs)
     torch.testing.assert_close(all_depths[0], z_hat, rtol=0, atol=1e-10)
     torch.testing.assert_close(all_depths[1][..., :-1, :], first, rtol=0, atol=1e-10)
     rest = run_cascade(f, all_depths[1], [torch.full((2,), 2.0 * math.exp(-0.1 * i),

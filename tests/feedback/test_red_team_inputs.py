@@ -7,6 +7,8 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import DEFAULT_TUNE_RECIPE
+from fnnlib.systems import LinearSystem
 
 from tests.feedback.test_inputs import A, B, F64, TS
 
@@ -14,7 +16,7 @@ T = 40
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
 
 
-class Counting(F.LinearSystem):
+class Counting(LinearSystem):
     calls = 0
 
     def __call__(self, t, x, u=None):
@@ -42,7 +44,7 @@ def test_a_record_with_no_present_sample_is_refused(plant):
                  lambda: F.cascade_predict(plant, y, TS, 3, F.Gains(1.0), observer=mf),
                  lambda: mf.observe(y),
                  lambda: mf.predict(y, 3),
-                 lambda: F.tune_gains(plant, x, TS, 3, recipe=F.DEFAULT_TUNE_RECIPE),
+                 lambda: F.tune_gains(plant, x, TS, 3, recipe=DEFAULT_TUNE_RECIPE),
                  lambda: F.cascade_predict(plant, torch.zeros(T, 2, dtype=F64), TS, 3, F.Gains(1.0),
                                            measurement=F.Measurement(mask=hide)),
                  lambda: mf.observe(torch.zeros(T, 1, dtype=F64), mask=hide)):

@@ -7,13 +7,15 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import DEFAULT_TUNE_RECIPE, cascade_sweep, Gains, Measurement, cascade_depths
+from fnnlib.systems import LinearSystem
 from fnnlib.feedback.sampling import check_times
 
 from tests.feedback.test_inputs import A, B, F64, TS
 
 T = 80
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 
 
 def _gain():
@@ -31,8 +33,8 @@ def test_uniform_times_equal_the_step_path():
     x, u = _data()
     t = torch.arange(T, dtype=F64) * TS
     for N, L, beta in [(1, 2.0, 0.0), (6, 3.0, 0.1)]:
-        a = F.cascade_depths(PLANT, x, TS, N, F.Gains(L, beta), u=u)
-        b = F.cascade_depths(PLANT, x, None, N, F.Gains(L, beta), u=u, measurement=F.Measurement(t=t))
+        a = cascade_depths(PLANT, x, TS, N, F.Gains(L, beta), u=u)
+        b = cascade_depths(PLANT, x, None, N, F.Gains(L, beta), u=u, measurement=F.Measurement(t=t))
         torch.testing.assert_close(a, b, rtol=0, atol=1e-12)
     gap = x.clone()
     gap[:, 20:30] = float("nan")
@@ -47,9 +49,9 @@ def test_uniform_times_equal_the_step_path():
                                F.cascade_predict(PLANT, y, None, 5, F.Gains(2.0, 0.1), u=u,
                                                  measurement=F.Measurement(t=t), observer=obs_t),
                                rtol=0, atol=1e-12)
-    torch.testing.assert_close(F.cascade_sweep(PLANT, x, TS, 4, F.Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u),
-                               F.cascade_sweep(PLANT, x, None, 4, F.Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u,
-                                               measurement=F.Measurement(t=t)),
+    torch.testing.assert_close(cascade_sweep(PLANT, x, TS, 4, Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u),
+                               cascade_sweep(PLANT, x, None, 4, Gains.sweep(torch.tensor([1.0, 2.0]), 0.1), u=u,
+                                             measurement=Measurement(t=t)),
                                rtol=0, atol=1e-12)
     for method in ("euler", "rk4"):
         torch.testing.assert_close(F.rollout_predict(PLANT, x, TS, 4, solver=F.Solver(method), u=u),
@@ -117,7 +119,7 @@ def test_bad_times_are_refused_before_any_work(bad, match):
                                            measurement=F.Measurement(t=bad(t))),
                  lambda: obs.observe(x[0] @ C.T, u[0], t=bad(t)),
                  lambda: F.rollout_predict(counting, x[0], None, 3, u=u[0], measurement=F.Measurement(t=bad(t))),
-                 lambda: F.tune_gains(counting, x[0], None, 3, u=u[0], recipe=F.DEFAULT_TUNE_RECIPE,
+                 lambda: F.tune_gains(counting, x[0], None, 3, u=u[0], recipe=DEFAULT_TUNE_RECIPE,
                                       measurement=F.Measurement(t=bad(t)))):
         with pytest.raises((ValueError, TypeError), match=match):
             call()

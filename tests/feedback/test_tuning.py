@@ -9,9 +9,11 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import (Gains, CascadeGains, GainWarning, LinearSystem, NeuralODE, add_measurement_noise, cascade_forward,
-                    cascade_predict, check_gain, make_generator, n_step_errors, spectral_radius, tune_gains,
-                    TuneRecipe)
+from fnnlib import NeuralODE, add_measurement_noise, cascade_predict, check_gain, tune_gains
+from fnnlib.feedback import CascadeGains, GainWarning, cascade_forward, spectral_radius, Gains, TuneRecipe
+from fnnlib.metrics import n_step_errors
+from fnnlib.seeding import make_generator
+from fnnlib.systems import LinearSystem
 from fnnlib.feedback.tuning import prediction_loss
 
 F64 = torch.float64
@@ -160,7 +162,7 @@ def test_tune_gains_equals_descent_on_the_whole_cascade():
 
 
 def test_sweep_gains_keeps_the_cheapest_pair_and_skips_diverged_ones():
-    from fnnlib import sweep_gains
+    from fnnlib.feedback import sweep_gains
 
     calls = []
 

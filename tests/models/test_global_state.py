@@ -9,6 +9,8 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.models import NeuralFeedbackEnsemble
+from fnnlib.seeding import seed_everything
 from fnnlib.models.scaled import ScaledField
 from fnnlib.seeding import seeded
 
@@ -23,7 +25,7 @@ def _same(a, b) -> bool:
 
 @pytest.mark.parametrize("build", [
     lambda: F.NeuralODEEnsemble(2, (8, 8), "tanh", [0, 1, 2]),
-    lambda: F.NeuralFeedbackEnsemble(2, (8,), "tanh", [3, 4]),
+    lambda: NeuralFeedbackEnsemble(2, (8,), "tanh", [3, 4]),
     lambda: ScaledField(2, 1, (8,), "tanh", [0, 1]),
 ])
 def test_building_an_ensemble_leaves_the_global_generators_untouched(build) -> None:
@@ -41,9 +43,9 @@ def test_seeded_members_are_what_their_seed_gives_and_the_block_restores_state()
     with seeded(1):
         inside = torch.rand(3)
     assert _same(before, _states())
-    F.seed_everything(1)
+    seed_everything(1)
     assert torch.equal(inside, torch.rand(3))
     ens = F.NeuralODEEnsemble(2, (8,), "tanh", [1, 2])
-    F.seed_everything(2)
+    seed_everything(2)
     member = F.NeuralODE(2, (8,), "tanh")
     assert torch.equal(ens.member(1).net[0].weight, member.net[0].weight)

@@ -6,7 +6,8 @@ import pytest
 import torch
 from torch import nn
 
-from fnnlib import MODELS, NeuralODE, mlp
+from fnnlib import NeuralODE
+from fnnlib.models import MODELS, mlp
 from fnnlib.models import ACTIVATIONS
 
 

@@ -9,7 +9,7 @@ import torch
 
 from fnnlib.models import MODELS
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual, EnsembleResidual
-from fnnlib.quadrotor_presets import PAPER_GAMMA
+from fnnlib.quadrotor.presets import PAPER_GAMMA
 from fnnlib.training import load_checkpoint, save_checkpoint
 
 F64 = torch.float64

@@ -16,7 +16,7 @@ from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.flight import FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearize import linearize
 from fnnlib.mpc.models import paper_models
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64

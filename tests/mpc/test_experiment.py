@@ -12,14 +12,14 @@ from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.experiment import (CARRYING, SIX, SPEED_TARGETS, FlightRow, TableKey, acc_pred_rmse, adapnn_flights,
                                    adapnn_gain_on_validation, adapnn_model, disturbance_realisations, fallback_note,
-                                   flight_row, flight_table_json, flight_tests_from_settings, fnn_model, make_mpc,
-                                   mpc_from_settings, paired_units, pooled_speed, speed_summary, theorem2_check,
-                                   thrust_needed, unjudged_bound_note)
+                                   flight_row, flight_table_json, FlightSettings, MPCSettings, flight_tests, fnn_model, make_mpc,
+                                   paired_units, pooled_speed, speed_summary, theorem2_check,
+                                   thrust_needed)
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference
 from fnnlib.mpc.models import paper_models
 from fnnlib.mpc.linearized import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.tuning import randomized_vehicles
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH, Quadrotor
 
 
@@ -191,6 +191,8 @@ def test_thrust_needed_is_hover_plus_the_references_peak_acceleration():
 
 
 def test_unjudged_bound_note_states_the_outcome_and_the_reason_with_the_numbers():
+    from fnnbook.rules.quadrotor import unjudged_bound_note  # noqa: PLC0415 (the book's prose on these flights)
+
     rows = {n: flight_row(_result(seed=k)) for k, n in enumerate(("Nomi", "FNN"))}
     need = {"hover": 3.26, "peak": 5.53, "t_peak": 0.7}
     note = unjudged_bound_note(rows, metric="mean_axis", unit="m", need=need, u_max=4.0, setting="as written",
@@ -225,7 +227,7 @@ def test_adapnn_gain_on_validation_flies_every_vehicle_on_every_reference() -> N
 
 def _settings(**changes) -> dict:
     """quadrotor_mpc's flight settings with tiny sizes (the names of its parameters cell)."""
-    from fnnlib.quadrotor_presets import PAPER_MPC_WEIGHTS
+    from fnnlib.quadrotor.presets import PAPER_MPC_WEIGHTS
 
     s = {"steps": 3, "N": 3, "Ts": 0.02, "truth_mass": TEST_TRUTH.mass, "truth_inertia": list(TEST_TRUTH.inertia),
          "truth_drag": list(TEST_TRUTH.drag), "disturbance": list(TEST_TRUTH.force_disturbance), "disturbance_draws": 1,
@@ -235,9 +237,9 @@ def _settings(**changes) -> dict:
     return {**s, **changes}
 
 
-def test_flight_tests_from_settings_build_the_test_vehicle_per_disturbance():
+def test_flight_tests_build_the_test_vehicle_per_disturbance():
     s = _settings()
-    setup = flight_tests_from_settings(s)
+    setup = flight_tests(FlightSettings.of(s))
     assert setup.forces == disturbance_realisations(s["disturbance"], 1, seed=11, spread=0.5)
     assert len(setup.tests) == 2 and setup.vehicle == TEST_TRUTH
     assert [t.truth.params.force_disturbance for t in setup.tests] == setup.forces
@@ -245,7 +247,10 @@ def test_flight_tests_from_settings_build_the_test_vehicle_per_disturbance():
     assert setup.x_r.shape == (3 + 3 + 1, 12) and setup.tests[0].backend == Backend("torch", "forward")
     x_r, _ = lissajous_reference(3, 3, Ts=0.02, params=NOMINAL, curve=PAPER_LISSAJOUS)
     assert torch.equal(setup.x_r, x_r)
-    assert flight_tests_from_settings(_settings(truth_mass=0.9)).tests[0].truth.params.mass == 0.9
+    assert flight_tests(FlightSettings.of(_settings(truth_mass=0.9))).tests[0].truth.params.mass == 0.9
+    with pytest.raises(KeyError, match="truth_mass"):  # a record without a setting is refused, not defaulted
+        FlightSettings.of({k: v for k, v in s.items() if k != "truth_mass"})
+    assert MPCSettings.of(s) == MPCSettings("osqp", 3, s["Q"], s["R"], PAPER_THETA_MAX, "OSQP")
 
 
 def test_fnn_flown_again_from_the_settings_is_the_paired_units_flight():
@@ -253,19 +258,19 @@ def test_fnn_flown_again_from_the_settings_is_the_paired_units_flight():
     paper's gains, is bit for bit the FNN flight quadrotor_mpc flies (network k on unit test k)."""
     nets, mlps, _, _, _ = _tiny_units()
     s = _settings(disturbance_draws=2)
-    setup = flight_tests_from_settings(s)
+    setup = flight_tests(FlightSettings.of(s))
     kw = dict(plant=Quadrotor(NOMINAL), L=3.0, beta=0.1, N=s["N"], Gamma=0.16, Ts=s["Ts"])
-    grid = paired_units(nets, mlps, tests=setup.unit_tests, mpc=mpc_from_settings(s, cost="as_flown", u_max=6.0),
+    grid = paired_units(nets, mlps, tests=setup.unit_tests, mpc=MPCSettings.of(s).build(cost="as_flown", u_max=6.0),
                         model_settings=kw, adapnn_gamma=0.16)
     # as the tuned-gains chapter builds it: again from the settings, its own MPC, fnn_model
-    again_tests = flight_tests_from_settings(dict(s)).unit_tests
-    mpc = mpc_from_settings(s, cost="as_flown", u_max=6.0)
+    again_tests = flight_tests(FlightSettings.of(dict(s))).unit_tests
+    mpc = MPCSettings.of(s).build(cost="as_flown", u_max=6.0)
     for k, ((_, net), test) in enumerate(zip(nets, again_tests)):
         again = fly(fnn_model(net, 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, test)
         flown = grid.unit(k)["FNN"]
         assert np.array_equal(again.x, flown.x) and flight_row(again).mean_axis == flight_row(flown).mean_axis
     # and the check can fail: other settings fly another flight
-    other = flight_tests_from_settings(_settings(truth_mass=0.9, disturbance_draws=2)).unit_tests[0]
+    other = flight_tests(FlightSettings.of(_settings(truth_mass=0.9, disturbance_draws=2))).unit_tests[0]
     moved = fly(fnn_model(nets[0][1], 3.0, 0.1, plant=Quadrotor(NOMINAL), N=s["N"], Ts=s["Ts"]), mpc, other)
     assert not np.array_equal(moved.x, grid.unit(0)["FNN"].x)
 

@@ -14,7 +14,7 @@ from fnnlib.mpc import LinearizedMPC, OSQPMPC
 from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.flight import FlightResult, FlightTest, fly, lissajous_reference, tracking_rmse
 from fnnlib.mpc.models import FeedbackCascadeModel, PredictionModel
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64

@@ -10,7 +10,7 @@ from fnnlib.mpc.backends import Backend
 from fnnlib.mpc.flight import FlightTest, fly, lissajous_reference
 from fnnlib.mpc.linearized import DIVERGED_FALLBACK_SHARE
 from fnnlib.mpc.models import PredictionModel
-from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_TS
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS, PAPER_TS
 from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
 
 N, STEPS = 10, 20

@@ -11,7 +11,7 @@ import torch
 from fnnlib.models.residual import AdaptiveResidual, AeroResidual
 from fnnlib.mpc.models import AdaptiveNNModel, FeedbackCascadeModel, PredictionModel, paper_models
 from fnnlib.feedback import GainError
-from fnnlib.quadrotor_presets import PAPER_BETA, PAPER_GAMMA, PAPER_L
+from fnnlib.quadrotor.presets import PAPER_BETA, PAPER_GAMMA, PAPER_L
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
 F64 = torch.float64

@@ -13,12 +13,13 @@ import torch
 from conftest import ROOT
 from notebook_source import read_source
 
-import fnnlib as F
+from fnnbook.results import write_results
+from fnnlib.training import save_checkpoint
 from fnnlib.models.residual import AeroResidual
 from fnnlib.mpc.flight import FlightResult, lissajous_reference
 from fnnlib.mpc.tuning import (randomization_coordinates, randomized_vehicles, select_gain_on_validation,
                                validation_references)
-from fnnlib.quadrotor_presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_TS, VALIDATION_RANDOMIZATION
+from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_TS, VALIDATION_RANDOMIZATION
 from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, TRAINING_TRUTH
 
 N, STEPS = 10, 30
@@ -231,11 +232,11 @@ def _upstream(root: Path) -> Path:
     for seed in (0, 1):
         for stem in ("residual", "mlp"):
             net = AeroResidual((4,), "tanh").double()
-            F.save_checkpoint(up / f"{stem}_seed{seed}.pt", net, {"seed": seed})
+            save_checkpoint(up / f"{stem}_seed{seed}.pt", net, {"seed": seed})
             names.append(f"{stem}_seed{seed}.pt")
             if seed == 0:
-                F.save_checkpoint(up / f"{stem}.pt", net, {"seed": seed})
-    F.write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names[::2],
+                save_checkpoint(up / f"{stem}.pt", net, {"seed": seed})
+    write_results(up, task="quadrotor_learning", profile="smoke", claims=[], metrics={"member_checkpoints": names[::2],
                                                                                    "mlp_checkpoints": names[1::2]})
     (up / ".fingerprint.json").write_text(json.dumps({"parameters": {"seeds": [0, 1]}}))  # the run record
     return up

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.systems import LinearSystem
 from fnnlib.models import NeuralFeedback
 
 from tests.feedback.test_inputs import A, B, F64, TS
@@ -24,7 +25,7 @@ class _Counting(torch.nn.Module):
 
     def forward(self, t, x, u=None):
         self.calls += self.armed
-        out = F.LinearSystem(A, B).rate(t, x, u)
+        out = LinearSystem(A, B).rate(t, x, u)
         return out if self.out_shape is None else out.new_zeros(x.shape[0], *self.out_shape)
 
 
@@ -95,7 +96,7 @@ def test_a_bad_first_estimate_is_refused(kind):
 def test_a_first_estimate_starts_the_filter(kind):
     x, u = _data()
     y = _y(kind, x)
-    obs = _make(kind, F.LinearSystem(A, B))
+    obs = _make(kind, LinearSystem(A, B))
     x0 = torch.tensor([[0.3, 0.1], [-0.2, 0.4]], dtype=F64)
     a = obs.observe(y, u, x0=x0).x_hat
     b = obs.observe(y, u).x_hat
@@ -139,7 +140,7 @@ def test_a_diverging_ukf_stops_with_the_sample():
 
 
 def test_the_neural_feedback_refuses_bad_measurements():
-    obs = F.NeuralFeedbackObserver(F.LinearSystem(A, torch.zeros(2, 0, dtype=F64)), TS,
+    obs = F.NeuralFeedbackObserver(LinearSystem(A, torch.zeros(2, 0, dtype=F64)), TS,
                                    h=NeuralFeedback(2, (4,), "tanh").double(), n=2)
     x, _ = _data(1)
     y = x[0].clone()
@@ -149,7 +150,7 @@ def test_the_neural_feedback_refuses_bad_measurements():
 
 
 def test_settings_given_as_text_are_refused():
-    plant = F.LinearSystem(A, B)
+    plant = LinearSystem(A, B)
     with pytest.raises(TypeError, match="observer gain L must be a matrix of numbers"):
         F.LuenbergerObserver.with_gain(plant, TS, n=2, L="abc")
     with pytest.raises(TypeError, match="poles must be numbers"):

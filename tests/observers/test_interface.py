@@ -7,9 +7,12 @@ import math
 import pytest
 import torch
 
-from fnnlib import Covariances, Gains, LinearFeedback, Spiral, add_measurement_noise, cascade_predict, make_generator, rollout_predict
-from fnnlib.feedback import Estimate
+from fnnlib import LinearFeedback, add_measurement_noise, cascade_predict, rollout_predict
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
+from fnnlib.feedback import Estimate, Gains
 from fnnlib.observers import (
+    Covariances,
     ExtendedKalmanObserver,
     KalmanObserver,
     LuenbergerObserver,

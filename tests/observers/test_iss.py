@@ -16,7 +16,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import Gains, LinearFeedback, spectral_radius
+from fnnlib import LinearFeedback
+from fnnlib.feedback import spectral_radius, Gains
 from fnnlib.stability import discrete_residual, iss_bound
 
 F64 = torch.float64

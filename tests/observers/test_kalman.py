@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib import Covariances, Spiral, add_measurement_noise, make_generator
-from fnnlib.observers import ExtendedKalmanObserver, KalmanObserver, augmented_matrices, steady_state_gain
+from fnnlib import add_measurement_noise
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
+from fnnlib.observers import ExtendedKalmanObserver, KalmanObserver, augmented_matrices, steady_state_gain, Covariances
 
 F64 = torch.float64
 TS = 0.01

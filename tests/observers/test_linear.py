@@ -9,7 +9,9 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import Gains, DynamicalSystem, GainError, GainWarning, LinearFeedback, Spiral, check_gain, decayed_gains, spectral_radius
+from fnnlib import DynamicalSystem, GainError, LinearFeedback, check_gain, decayed_gains
+from fnnlib.feedback import GainWarning, spectral_radius, Gains
+from fnnlib.systems import Spiral
 
 F64 = torch.float64
 

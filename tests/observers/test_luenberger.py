@@ -10,7 +10,10 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnnlib import Gains, LinearFeedback, Spiral, add_measurement_noise, make_generator
+from fnnlib import LinearFeedback, add_measurement_noise
+from fnnlib.feedback import Gains
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
 from fnnlib.observers import LuenbergerObserver, augmented_matrices, linear_feedback_gain, place_observer_gain
 
 F64 = torch.float64

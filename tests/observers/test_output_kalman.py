@@ -7,13 +7,14 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.systems import LinearSystem
 from fnnlib.feedback.measurement import DetectabilityError
 
 from tests.feedback.test_inputs import A, B, F64, TS
 from tests.feedback.test_inputs import _euler_data as _euler
 
 C = torch.tensor([[1.0, 0.0]], dtype=F64)  # position only
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 T = 120
 
 

@@ -9,6 +9,9 @@ import scipy.linalg
 import torch
 
 import fnnlib as F
+from fnnlib.feedback import Measurement
+from fnnlib.observers import evaluate_observer
+from fnnlib.systems import LinearSystem
 from fnnlib.models import NeuralFeedback, NeuralODE
 from fnnlib.observers import NeuralFeedbackObserver, augmented_matrices, rollout_corrected
 from fnnlib.observers.augmented import augmented_step
@@ -17,7 +20,7 @@ from tests.feedback.test_inputs import A, B, F64, TS
 from tests.feedback.test_inputs import _euler_data as _euler
 
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 T = 60
 TOL = dict(rtol=0, atol=1e-12)
 TS2 = 2.0 ** -4  # a step whose grid k * TS2 and intervals are exact in binary: the uniform-times comparisons
@@ -215,11 +218,10 @@ def test_evaluate_observer_takes_times():
     obs = F.ExtendedKalmanObserver(PLANT, TS, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], 1e-4), C=C, disturbance=[1],
                                    A=A)
     f_true = PLANT.rate(0.0, x[0], u[0])
-    rep = F.evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0], measurement=F.Measurement(t=t))
+    rep = evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0], measurement=Measurement(t=t))
     torch.testing.assert_close(rep.estimate.x_hat, obs.observe(x[0] @ C.T, u[0], t=t).x_hat, rtol=0, atol=0)
     with pytest.raises(ValueError, match="strictly increasing"):
-        F.evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0],
-                            measurement=F.Measurement(t=t.flip(0)))
+        evaluate_observer(obs, x[0] @ C.T, (x[0], f_true), 3, repeats=1, u=u[0], measurement=Measurement(t=t.flip(0)))
 
 
 class _Counting(torch.nn.Module):

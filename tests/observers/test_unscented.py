@@ -6,13 +6,15 @@ from __future__ import annotations
 import torch
 
 import fnnlib as F
+from fnnlib.observers import evaluate_observer
+from fnnlib.systems import LinearSystem
 
 from tests.feedback.test_inputs import A, B, F64, TS
 from tests.feedback.test_inputs import _euler_data as _euler
 
 C = torch.tensor([[1.0, 0.0]], dtype=F64)
 T = 100
-PLANT = F.LinearSystem(A, B)
+PLANT = LinearSystem(A, B)
 
 
 def _data():
@@ -47,6 +49,6 @@ def test_evaluate_observer_scores_a_partially_measured_system():
     y = x @ C.T + 0.001 * torch.randn(T, 1, generator=torch.Generator().manual_seed(0), dtype=F64)
     f_true = PLANT.rate(0.0, x, u)
     _, ukf = _filters()
-    report = F.evaluate_observer(ukf, y, (x, f_true), 5, settle=40, repeats=1, u=u)
+    report = evaluate_observer(ukf, y, (x, f_true), 5, settle=40, repeats=1, u=u)
     assert report.z_N.shape == (T, 2)
     assert report.metrics["state_rmse_settled"] < 0.01 and report.metrics["err_N_mean"] < 0.05

@@ -16,7 +16,7 @@ import yaml
 
 from fnnbook import PipelineError, PipelineSpec, load_spec
 from fnnbook.book import GENERATED, assemble_book, build_book
-from fnnlib.results import ClaimResult, write_results
+from fnnbook.results import ClaimResult, write_results
 
 REPO_BOOK = Path(__file__).resolve().parents[2] / "book"
 

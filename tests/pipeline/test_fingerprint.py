@@ -155,8 +155,8 @@ def test_the_notebooks_depend_on_the_fnnbook_modules_they_import() -> None:
             "fnnlib.observers"} <= set(observers)
     assert "fnnbook.tasks.bottle" in bottle and "fnnbook.tasks.observers" not in bottle
     assert "fnnbook.rules.sec3" not in bottle and "fnnbook.rules.bottle" in bottle
-    assert "fnnbook.feedback_eval" in _closure("14_why_feedback")
-    assert "fnnbook.feedback_eval" not in observers
+    assert {"fnnbook.feedback_eval", "fnnlib.paper.feedback_eval"} <= set(_closure("14_why_feedback"))
+    assert "fnnbook.feedback_eval" not in observers and "fnnlib.paper.feedback_eval" not in observers
     for name in ("fnnbook.runner", "fnnbook.executor", "fnnbook.book"):  # the machinery is no input
         assert name not in observers
 
@@ -198,6 +198,12 @@ def test_a_stricter_rule_changes_the_fingerprints_of_its_tasks_only(tmp_path: Pa
     moved = check(spec, "smoke", sources=packages)
     assert trigger(after.inputs["why_feedback"], moved.inputs["why_feedback"]).startswith("code: fnnbook.feedback_eval")
     assert moved.fingerprints["observers"] == after.fingerprints["observers"]
+    science = tmp_path / "fnnlib" / "paper" / "feedback_eval.py"  # the evaluation itself, in the library
+    science.write_text(science.read_text() + "\nEXTRA = 1\n")
+    again = check(spec, "smoke", sources=packages)
+    assert trigger(moved.inputs["why_feedback"], again.inputs["why_feedback"]).startswith(
+        "code: fnnlib.paper.feedback_eval")
+    assert again.fingerprints["observers"] == moved.fingerprints["observers"]
 
 
 def test_a_changed_setting_default_or_check_reruns_its_tasks_only(tmp_path: Path) -> None:

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 from fnnbook import PipelineError, check, load_spec
-from fnnlib.data import release
-from fnnlib.data.release import ReleaseError, read_pickled_module, release_files, release_present
+from fnnlib import release
+from fnnlib.release import ReleaseError, read_pickled_module, release_files, release_present
 
 from .nbfactory import MakePipeline, leaf_task, write_notebook
 

@@ -9,7 +9,7 @@ import pytest
 from fnnbook.scoreboard import (NOT_RUN, SCOREBOARD_TASK, Claim, headline_of, plot_verdicts, read_claims,
                                render_scoreboard, score_rows, self_check, short_title, verdict_counts,
                                with_scoreboard_claims)
-from fnnlib.results import BETTER, BY_CONSTRUCTION, ClaimResult, GuaranteeFailed, Reading, Results, headline_number
+from fnnbook.results import BETTER, BY_CONSTRUCTION, ClaimResult, GuaranteeFailed, Reading, Results, headline_number
 
 
 def _results(task: str, *claims: ClaimResult) -> dict[str, Results]:

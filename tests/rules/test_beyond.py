@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fnnbook.rules.beyond import KALMAN_FACTOR, b1, b1_budget, b1_coverage, b1_paired, b1_summary, b2
-from fnnlib.results import ClaimResult, Headline, headline_number
+from fnnbook.results import ClaimResult, Headline, headline_number
 
 GOOD = {"tuned": [1.0, 1.1, 0.9, 1.0, 1.05], "hand": [2.0, 2.1, 1.9, 2.2, 2.0],
         "open_loop": [3.0, 3.2, 2.9, 3.1, 3.0], "kalman": [0.8, 0.9, 0.7, 0.8, 0.9]}
@@ -112,7 +112,7 @@ def test_b2_fails_entirely_when_nothing_is_over_seeds() -> None:
 
 def test_b2_is_computed_by_the_scoreboard_from_the_tasks_claims() -> None:
     from fnnbook.scoreboard import seeds_check  # noqa: PLC0415
-    from fnnlib.results import Results  # noqa: PLC0415
+    from fnnbook.results import Results  # noqa: PLC0415
 
     s1 = ClaimResult("S1", checks={"a": True}, rule="r", headline=headline_number("e", [1.0] * 5))
     q6 = ClaimResult("Q6", checks={"a": True}, rule="r", headline=headline_number("t", 2.0))

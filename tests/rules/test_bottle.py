@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import bottle
-from fnnlib.results import ClaimResult
+from fnnbook.results import ClaimResult
 
 RNG = np.random.default_rng(0)
 DRAG = np.full(9, 0.10)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import beyond, bottle, quadrotor, sec3, sec4
-from fnnlib.results import BY_CONSTRUCTION, ClaimResult, Results, headline_number, read_results, write_results
+from fnnbook.results import BY_CONSTRUCTION, ClaimResult, Results, headline_number, read_results, write_results
 
 from .test_beyond import GOOD
 from .test_quadrotor import paper_like

@@ -1,4 +1,5 @@
-"""The Sec. 4 evaluation shared by the neural-feedback notebooks (fnnbook.feedback_eval), on tiny networks."""
+"""The Sec. 4 evaluation shared by the neural-feedback notebooks (fnnlib.paper.feedback_eval) and its judgement
+(fnnbook.feedback_eval), on tiny networks."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import pytest
 import torch
 
 import fnnlib as F
-from fnnbook.feedback_eval import evaluation_setup, judge, nominal_errors
+from fnnlib.models import NeuralFeedbackEnsemble
+from fnnbook.feedback_eval import judge
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup, nominal_errors
 from fnnbook.tasks import settings_class
 
 SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_range": [-0.03, 0.0275, 0.025],
@@ -18,12 +21,12 @@ SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_rang
 def networks(E: int):
     seeds = list(range(E))
     f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in seeds], seeds)
-    h = F.NeuralFeedbackEnsemble(2, [8], "relu", seeds)
+    h = NeuralFeedbackEnsemble(2, [8], "relu", seeds)
     return f, h
 
 
 def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
-    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    s = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     assert s.x_s8.shape == (3, 60, 2) and s.x_held.shape[1:] == (60, 2) and s.offsets.shape == (3, 3)
     f, h = networks(2)
     with torch.no_grad():
@@ -42,10 +45,13 @@ def test_a_zero_feedback_keeps_the_neural_ode_and_the_rules_see_it() -> None:
 
 def test_the_release_frame_turns_the_spiral_the_other_way() -> None:
     p = settings_class("neural_feedback").defaults() | SMALL
-    ours, theirs = evaluation_setup(p), evaluation_setup(p, F.data.release.release_spiral)
+    s = EvaluationSettings.of(p)
+    ours, theirs = evaluation_setup(s), evaluation_setup(s, F.release.release_spiral)
     assert torch.allclose(ours.x_nom[:, 0], theirs.x_nom[:, 0]) and torch.allclose(ours.x_nom[:, 1], -theirs.x_nom[:, 1])
     with pytest.raises(ValueError, match="held-out"):
-        evaluation_setup(p | {"heldout_min_distance": 100.0})
+        evaluation_setup(EvaluationSettings.of(p | {"heldout_min_distance": 100.0}))
+    with pytest.raises(KeyError, match="heldout_flip"):  # a record without a setting is refused, not defaulted
+        EvaluationSettings.of({k: v for k, v in p.items() if k != "heldout_flip"})
 
 
 def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -> None:
@@ -53,24 +59,25 @@ def test_an_ensemble_of_trained_feedbacks_holds_each_and_refuses_other_kinds() -
     import torch  # noqa: PLC0415
 
     import fnnlib as F  # noqa: PLC0415
-    from fnnbook.feedback_eval import feedback_ensemble  # noqa: PLC0415
+    from fnnlib.models import NeuralFeedbackEnsemble  # noqa: PLC0415
 
     members = []
     for s in (4, 9):
         torch.manual_seed(s)
         members.append(F.NeuralFeedback(2, (8,), "relu"))
-    ens = feedback_ensemble(members, [4, 9])
+    ens = NeuralFeedbackEnsemble.from_members(members, [4, 9])
     assert ens.seeds == [4, 9]
     for m, alone in enumerate(members):
         assert all(torch.equal(a, b) for a, b in zip(ens.member(m).parameters(), alone.parameters()))
     with pytest.raises(TypeError, match="NeuralFeedback"):
-        feedback_ensemble([F.NeuralODE(2, (8,), "relu")], [0])
+        NeuralFeedbackEnsemble.from_members([F.NeuralODE(2, (8,), "relu")], [0])
 
 
 def test_the_settled_window_the_centred_feedback_and_the_release_form_loss() -> None:
-    from fnnbook.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss, settled_errors
+    from fnnbook.feedback_eval import settled_errors
+    from fnnlib.paper.feedback_eval import CentredFeedback, rate_error_curves, release_form_loss
 
-    s = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    s = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     f, h = networks(2)
     curves = rate_error_curves(f, h, s, 2)
     assert curves["neural_feedback"].shape == (2, 60)

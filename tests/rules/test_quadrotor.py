@@ -9,7 +9,7 @@ import torch
 from fnnbook.rules.quadrotor import (AUTHORS_SECONDS_50_EPOCHS, GROUPS, SIX, count_trainable, join_readings,
                                      joined_verdict, q1_convergence, q2_prediction, q3_tracking, q4_prediction,
                                      q5_adaptive, q6_training_cost, rules_at_setting)
-from fnnlib.results import GuaranteeFailed
+from fnnbook.results import GuaranteeFailed
 
 RNG = np.random.default_rng(0)
 S = 5  # units: trained network k (and MLP k) with drawn disturbance k
@@ -187,7 +187,7 @@ def test_rules_at_a_setting_are_the_claims_own_rules_and_join_like_the_notebook(
 
 def test_join_costs_keeps_every_variants_checks_and_its_numbers_by_variant() -> None:
     from fnnbook.rules.quadrotor import join_costs
-    from fnnlib.results import ClaimResult
+    from fnnbook.results import ClaimResult
 
     a = ClaimResult("Q3", checks={"as_written: FNN beats Nomi": True}, numbers={"mean": 1.0}, rule="r")
     b = ClaimResult("Q3", checks={"as_flown: FNN beats Nomi": False}, numbers={"mean": 2.0}, rule="r",

@@ -1,4 +1,4 @@
-"""The flight records of the why grid of Q3-Q5 (fnnbook.quadrotor_eval), on hand-made flights."""
+"""The flight records of the why grid of Q3-Q5 (fnnlib.quadrotor.evaluation), on hand-made flights."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fnnbook.quadrotor_eval import at_gains, flight_numbers
+from fnnlib.quadrotor.evaluation import at_gains, flight_numbers
 
 
 def flight(offset: float, acc_error: float, diverged: bool = False) -> SimpleNamespace:
@@ -45,10 +45,10 @@ def test_a_record_flies_each_model_once_per_unit_and_the_adaptive_ones_per_gain(
     import torch
 
     import fnnlib.mpc as M
-    from fnnbook.quadrotor_eval import fly_record
+    from fnnlib.quadrotor.evaluation import fly_record
     from fnnlib.models import AeroResidual
     from fnnlib.mpc.backends import Backend
-    from fnnlib.quadrotor_presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
+    from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
     from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
 
     torch.manual_seed(0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import sec3
-from fnnlib.results import BY_CONSTRUCTION, ClaimResult, GuaranteeFailed
+from fnnbook.results import BY_CONSTRUCTION, ClaimResult, GuaranteeFailed
 
 SEEDS_WIN = [0.10, 0.11, 0.09, 0.10, 0.12]  # paired with SEEDS_LOSE: lower in every seed
 SEEDS_LOSE = [0.20, 0.21, 0.19, 0.22, 0.20]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fnnbook.rules import sec4
-from fnnlib.results import ClaimResult, GuaranteeFailed
+from fnnbook.results import ClaimResult, GuaranteeFailed
 
 
 def verdict(claim_id: str, rule: ClaimResult) -> str:

@@ -35,7 +35,7 @@ def test_b4_not_reproduced_when_feedback_never_wins() -> None:
 
 def test_n1_is_a_guarantee_not_a_check() -> None:
     """At N = 1 both predictions are the observer's: a difference there means the run itself is wrong."""
-    from fnnlib.results import GuaranteeFailed  # noqa: PLC0415
+    from fnnbook.results import GuaranteeFailed  # noqa: PLC0415
 
     same = {1: {"tuned": WIN, "hand": WIN}}
     assert b6(same).verdict == "verified by construction" and not b6(same).checks

@@ -8,9 +8,16 @@ import pytest
 import torch
 
 import fnnlib as F
-from fnnbook.tanks_eval import episode_errors, free_run, n_step_output_rmse, overflow_episodes
+from fnnlib.data.tanks import tanks_records
+from fnnbook.tasks import settings_class
+from fnnlib.tanks.evaluation import TanksSettings, episode_errors, free_run, n_step_output_rmse, overflow_episodes
 
 C = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
+
+
+def _tanks(**changes) -> TanksSettings:
+    """The chapter's settings (its paper values), with ``changes``."""
+    return TanksSettings.of(settings_class("cascaded_tanks").defaults() | changes)
 
 
 def test_n_step_rmse_pairs_row_k_with_sample_k_plus_n() -> None:
@@ -64,7 +71,7 @@ def test_overflow_episodes_and_their_errors() -> None:
 
 def _ensemble_setup(E: int):
     from fnnlib.models.scaled import ScaledField
-    rec = F.tanks_records("synthetic", n_samples=80, seed=0, noise_std=0.02)
+    rec = tanks_records("synthetic", n_samples=80, seed=0, noise_std=0.02)
     kw = dict(x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
     return rec, (lambda seeds: ScaledField(2, 1, [8], "tanh", seeds, **kw))
 
@@ -72,7 +79,7 @@ def _ensemble_setup(E: int):
 def test_depths_are_the_cascade_and_the_open_loop_at_every_horizon() -> None:
     """One cascade of depth N gives every shorter horizon: entry N'-1 equals cascade_predict at N' (a gain) and
     the observer's open-loop predict (L = 0)."""
-    from fnnbook.tanks_eval import depths
+    from fnnlib.tanks.evaluation import depths
     rec, field = _ensemble_setup(1)
     model = field([0])
     obs = F.MeasuredFeedback(model, rec.Ts, L=torch.tensor([[0.02], [0.15]], dtype=torch.float64),
@@ -90,7 +97,7 @@ def test_depths_are_the_cascade_and_the_open_loop_at_every_horizon() -> None:
 def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
     """tune_gains(members=E) on a stacked field with a block-diagonal observer gives each member the model,
     gains and decay rate it gets alone (losses add, gradients never mix)."""
-    from fnnbook.tanks_eval import _blocks
+    from fnnlib.tanks.evaluation import _blocks
     rec, field = _ensemble_setup(2)
     Lo = torch.tensor([[0.02], [0.15]], dtype=torch.float64)
 
@@ -118,7 +125,7 @@ def test_the_stacked_ensemble_tunes_each_member_as_alone() -> None:
 
 
 def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() -> None:
-    from fnnbook.tanks_eval import outside_overflow
+    from fnnlib.tanks.evaluation import outside_overflow
     y = torch.zeros(10, 1, dtype=torch.float64)
     x_pred = torch.zeros(10, 2, dtype=torch.float64)
     x_pred[4, 1] = 3.0  # row 4 predicts target 5 (N = 1) wrongly
@@ -126,8 +133,8 @@ def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() 
     assert n_step_output_rmse(x_pred, y, 1, C) > 0
     keep[5] = False
     assert n_step_output_rmse(x_pred, y, 1, C, keep=keep) == 0.0
-    rec = F.tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
-    s = {"overflow_gap": 3, "overflow_after": 7}
+    rec = tanks_records("synthetic", n_samples=400, seed=0, noise_std=0.02)
+    s = _tanks(overflow_gap=3, overflow_after=7)
     eps = overflow_episodes(rec.saturated("val").numpy(), gap=3)
     out = outside_overflow(rec, s)
     for a, b in eps:
@@ -136,9 +143,9 @@ def test_keep_scores_only_the_kept_targets_and_the_window_leaves_out_overflow() 
 
 
 def test_trained_ensembles_load_as_saved(tmp_path) -> None:
-    from fnnbook.tanks_eval import load_trained, one_member, save_trained
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
-    from fnnbook.tanks_eval import _field
+    from fnnlib.tanks.evaluation import load_trained, one_member, save_trained
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05)
+    from fnnlib.tanks.evaluation import _field
     m = _field(s, [3, 4])
     save_trained(tmp_path / "m.pt", {"seeds": [3, 4], "observer_trained": m, "no_feedback": _field(s, [3, 4]),
                                      "tuned_L": [0.1] * 4, "tuned_beta": [0.2, 0.3], "hand": []})
@@ -154,9 +161,9 @@ def test_the_baseline_start_is_chosen_on_the_estimation_record_only() -> None:
     record changes its score, never the choice."""
     import dataclasses
 
-    from fnnbook.tanks_eval import LEVEL, no_feedback, one_member
-    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+    from fnnlib.tanks.evaluation import LEVEL, no_feedback, one_member
+    rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              n_init=5, baseline_horizon=10, baseline_starts=["free", "encoder"], train_iterations=3, train_lr=0.01,
              observer_gain=[0.02, 0.15])
     a = no_feedback(rec, 0, s, one_member(s, 0), LEVEL)
@@ -171,10 +178,10 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
     """The free-start baseline of two seeds trained as one stacked ensemble gives each seed the model it gets
     alone (Adam is elementwise; the ensemble's mean loss scales each member's by 1/2, which Adam's steps ignore
     up to its epsilon)."""
-    from fnnbook.tanks_eval import LEVEL, _field, _free_starts
+    from fnnlib.tanks.evaluation import LEVEL, _field, _free_starts
     from fnnlib.training.outputs import OutputRecipe, train_from_outputs
-    rec = F.tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
-    s = dict(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
+    rec = tanks_records("synthetic", n_samples=60, seed=0, noise_std=0.02)
+    s = _tanks(hidden=[8], activation="tanh", x_center=5.0, x_scale=3.0, u_center=3.0, u_scale=2.0, rate=0.05,
              baseline_horizon=10, train_iterations=4, train_lr=0.01)
     both = _free_starts(rec, [0, 1], s, _field(s, [0, 1]), LEVEL)
     for e, seed in enumerate((0, 1)):
@@ -186,7 +193,7 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
 
 
 def test_the_overflow_table_averages_each_models_episode_errors_over_the_seeds() -> None:
-    from fnnbook.tanks_eval import overflow_table
+    from fnnlib.tanks.evaluation import overflow_table
 
     seeds = [{"tuned": [{"during": 0.2, "after": 0.1}], "open_loop": [{"during": 0.4, "after": None}]},
              {"tuned": [{"during": 0.4, "after": 0.3}], "open_loop": [{"during": 0.6, "after": 0.5}]}]

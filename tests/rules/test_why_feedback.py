@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from fnnbook.feedback_eval import evaluation_setup
+from fnnlib.paper.feedback_eval import EvaluationSettings, evaluation_setup
 from fnnbook.rules import why_feedback as WF
 from fnnbook.tasks import settings_class
 
@@ -96,10 +96,11 @@ SMALL = {"n_samples": 60, "N": 5, "domega_range": [-0.72, 0.66, 0.6], "deta_rang
 def test_the_usage_grid_judges_d4_at_every_metric_decay_and_first_estimate() -> None:
     """With h = 0 the feedback adds nothing: the cascade equals the Euler rollout, D4 fails in every metric."""
     import fnnlib as F
+    from fnnlib.models import NeuralFeedbackEnsemble
 
-    setup = evaluation_setup(settings_class("neural_feedback").defaults() | SMALL)
+    setup = evaluation_setup(EvaluationSettings.of(settings_class("neural_feedback").defaults() | SMALL))
     f = F.NeuralODEEnsemble.from_members([F.NeuralODE(2, [8], "relu") for _ in range(2)], [0, 1])
-    h = F.NeuralFeedbackEnsemble(2, [8], "relu", [0, 1])
+    h = NeuralFeedbackEnsemble(2, [8], "relu", [0, 1])
     with torch.no_grad():
         for p in h.parameters():
             p.zero_()

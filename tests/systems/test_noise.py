@@ -5,7 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import add_measurement_noise, make_generator
+from fnnlib import add_measurement_noise
+from fnnlib.models import split_members
+from fnnlib.seeding import make_generator
+from fnnlib.systems import add_member_noise
 
 
 def test_draws_stack_independent_copies():
@@ -32,11 +35,11 @@ def test_zero_std_copies_and_bad_settings():
 def test_add_member_noise_gives_each_member_its_own_seeded_draw() -> None:
     import fnnlib as F
     x = torch.randn(50, 2)
-    z = F.add_member_noise(x, 0.1, [F.make_generator(1), F.make_generator(2)], draws=3)
+    z = add_member_noise(x, 0.1, [make_generator(1), make_generator(2)], draws=3)
     assert z.shape == (3, 50, 4)
-    parts = F.split_members(z, 2)
+    parts = split_members(z, 2)
     for e, s in enumerate([1, 2]):
-        assert torch.equal(parts[e], F.add_measurement_noise(x, 0.1, F.make_generator(s), draws=3))
+        assert torch.equal(parts[e], F.add_measurement_noise(x, 0.1, make_generator(s), draws=3))
     assert not torch.equal(parts[0], parts[1])
     with pytest.raises(ValueError, match="one generator per ensemble member"):
-        F.add_member_noise(x, 0.1, [])
+        add_member_noise(x, 0.1, [])

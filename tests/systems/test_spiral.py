@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import Spiral, add_measurement_noise, make_generator
+from fnnlib import add_measurement_noise
+from fnnlib.seeding import make_generator
+from fnnlib.systems import Spiral
 
 PARAMS = [dict(omega=2.0, eta=0.1, eps=0.0), dict(omega=3.0, eta=0.05, eps=10.0), dict(omega=0.8, eta=0.22, eps=-24.0)]
 
@@ -128,7 +130,7 @@ def test_parameters_are_required():
 def test_batched_spirals_run_spiral_p_on_row_p_for_every_copy():
     """Row p, copy e of the batched field is Eq. (26) of spiral p at that copy's state; a run of the batch is
     each spiral's own run (its closed form)."""
-    from fnnlib import BatchedSpirals
+    from fnnlib.systems import BatchedSpirals
 
     spirals = [Spiral(**p) for p in PARAMS]
     batch = BatchedSpirals(spirals, 2)

@@ -6,7 +6,7 @@ import pytest
 import torch
 from torchdiffeq import odeint
 
-from fnnlib import Spiral
+from fnnlib.systems import Spiral
 from fnnlib.systems import SwitchedSystem
 
 F64 = torch.float64

@@ -8,7 +8,14 @@ import pytest
 import torch
 from torch import nn
 
-from fnnlib import CheckpointError, NeuralODE, load_checkpoint, load_seed_checkpoints, save_checkpoint, seed_checkpoint_name
+from fnnlib import NeuralODE
+from fnnlib.training import (
+    CheckpointError,
+    load_checkpoint,
+    load_seed_checkpoints,
+    save_checkpoint,
+    seed_checkpoint_name,
+)
 
 META = {"seed": 3, "final_loss": 0.0123, "method": "dopri5", "losses": [1.0, 0.5], "settings": {"lr": 1e-3}}
 
@@ -132,7 +139,7 @@ def test_config_that_does_not_fit_the_weights(saved):
 
 def test_unknown_model_type_refuses_to_save(tmp_path):
     with pytest.raises(TypeError, match=r"cannot checkpoint a Linear: register its class first with "
-                                        r"fnnlib.register_model\(Linear\).*known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
+                                        r"fnnlib.training.register_model\(Linear\).*known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
         save_checkpoint(tmp_path / "lin.pt", nn.Linear(2, 2))
     assert not (tmp_path / "lin.pt").exists()
 

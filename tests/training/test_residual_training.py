@@ -11,7 +11,7 @@ import torch
 from fnnlib.control.dfbc import DFBC
 from fnnlib.data.quadrotor import Flights, make_flights
 from fnnlib.models.residual import AeroResidual, EnsembleResidual
-from fnnlib.quadrotor_presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_RESIDUAL_RECIPE, PAPER_TS
+from fnnlib.quadrotor.presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_RESIDUAL_RECIPE, PAPER_TS
 from fnnlib.training.residual import PAPER_RESIDUAL, ResidualRecipe
 from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
 from fnnlib.training.external import make_segments, rollout

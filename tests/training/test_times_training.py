@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.training import QUICK_RECIPE
 
 F64 = torch.float64
 A = torch.tensor([[0.0, 1.0], [-1.0, -0.2]], dtype=F64)
@@ -34,7 +35,7 @@ def _records(seed=0, B=3, T=60):
 def test_a_linear_field_is_learned_from_uneven_times():
     t, x = _records()
     model = Linear()
-    recipe = F.QUICK_RECIPE.replace(iterations=300, batch_size=16, batch_time=6, lr=0.05, optimizer="adam")
+    recipe = QUICK_RECIPE.replace(iterations=300, batch_size=16, batch_time=6, lr=0.05, optimizer="adam")
     F.train_neural_ode(model, t, x, recipe, seed=0, progress=False)
     torch.testing.assert_close(model.W.detach(), A, rtol=0, atol=0.05)
 
@@ -42,6 +43,6 @@ def test_a_linear_field_is_learned_from_uneven_times():
 def test_uneven_times_are_checked():
     t, x = _records()
     with pytest.raises(ValueError, match="strictly increasing"):
-        F.train_neural_ode(Linear(), t.flip(-1), x, F.QUICK_RECIPE, seed=0, progress=False)
+        F.train_neural_ode(Linear(), t.flip(-1), x, QUICK_RECIPE, seed=0, progress=False)
     with pytest.raises(ValueError, match="points but x has"):
-        F.train_neural_ode(Linear(), t[:, :-1], x, F.QUICK_RECIPE, seed=0, progress=False)
+        F.train_neural_ode(Linear(), t[:, :-1], x, QUICK_RECIPE, seed=0, progress=False)

@@ -5,7 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fnnlib import PAPER_SPIRAL_RECIPE, NeuralODE, ODERecipe, Spiral, seed_everything, train_neural_ode
+from fnnlib import NeuralODE, ODERecipe, train_neural_ode
+from fnnlib.seeding import seed_everything
+from fnnlib.systems import Spiral
+from fnnlib.training import PAPER_SPIRAL_RECIPE
 from fnnlib.training import sample_segments
 
 F64 = torch.float64

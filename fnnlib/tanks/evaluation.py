@@ -13,15 +13,63 @@ r"""What the cascaded tanks chapter measures on a learned model, beside the benc
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["DIVERGED", "LEVEL", "capped", "judged_again", "load_trained", "one_member", "outside_overflow",
+from fnnlib.data.tanks import simulation_rmse
+
+__all__ = ["DIVERGED", "LEVEL", "TanksSettings", "capped", "judged_again", "load_trained", "one_member", "outside_overflow",
            "save_trained", "depths", "episode_errors", "free_run", "kalman_n_step", "n_step_output_rmse",
            "no_feedback", "overflow_episodes", "overflow_table", "run_seeds"]
+
+
+@dataclass(frozen=True)
+class TanksSettings:
+    """The settings of the cascaded tanks chapter's measures (its notebook's names).
+
+    The model: an MLP field (``hidden``, ``activation``) in the log's units (``x_center``, ``x_scale``,
+    ``u_center``, ``u_scale``, ``rate``); its training through the observer (output gain ``observer_gain``, horizon
+    ``train_N``, ``train_iterations`` Adam steps at ``train_lr``); the gains of Eqs. (7), (11) tuned from
+    ``L_start``, ``beta_start`` and picked by hand on ``hand_L_grid`` x ``hand_beta_grid``; the Kalman filters'
+    noises (``kf_q``, ``kf_qd_grid``, ``kf_r``); the horizons ``horizons`` and ``series_N``; the free run from
+    ``n_init`` samples; the overflow episodes (``overflow_after``, ``overflow_gap``); the no-feedback baseline's
+    starts ``baseline_starts`` and horizon ``baseline_horizon``.
+    """
+
+    hidden: tuple[int, ...]
+    activation: str
+    rate: float
+    x_center: float
+    x_scale: float
+    u_center: float
+    u_scale: float
+    observer_gain: tuple[float, ...]
+    train_N: int
+    train_iterations: int
+    train_lr: float
+    L_start: float
+    beta_start: float
+    horizons: tuple[int, ...]
+    hand_L_grid: tuple[float, ...]
+    hand_beta_grid: tuple[float, ...]
+    kf_q: tuple[float, ...]
+    kf_qd_grid: tuple[float, ...]
+    kf_r: float
+    n_init: int
+    overflow_after: int
+    overflow_gap: int
+    series_N: int
+    baseline_starts: tuple[str, ...]
+    baseline_horizon: int
+
+    @classmethod
+    def of(cls, parameters: Mapping[str, Any]) -> TanksSettings:
+        """These settings from a run's parameters (a record holding at least these names; the rest ignored)."""
+        return cls(**{f.name: parameters[f.name] for f in fields(cls)})
 
 
 def _signal(name: str, v: Any) -> np.ndarray:
@@ -172,16 +220,16 @@ LEVEL = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
 """The measurement of one member, :math:`y = C x` with :math:`C = [0, 1]` (the lower level)."""
 
 
-def one_member(s: Mapping[str, Any], seed: int) -> Any:
+def one_member(s: TanksSettings, seed: int) -> Any:
     """An untrained one-member field of ``seed`` with the chapter's settings ``s``."""
     return _field(s, [seed])
 
 
-def _field(s: Mapping[str, Any], members: Sequence[int]) -> Any:
+def _field(s: TanksSettings, members: Sequence[int]) -> Any:
     from fnnlib.models.scaled import ScaledField  # noqa: PLC0415
 
-    return ScaledField(2, 1, s["hidden"], s["activation"], list(members), x_center=s["x_center"], x_scale=s["x_scale"],
-                       u_center=s["u_center"], u_scale=s["u_scale"], rate=s["rate"])
+    return ScaledField(2, 1, s.hidden, s.activation, list(members), x_center=s.x_center, x_scale=s.x_scale,
+                       u_center=s.u_center, u_scale=s.u_scale, rate=s.rate)
 
 
 def _blocks(M: Tensor, E: int) -> Tensor:
@@ -217,7 +265,7 @@ def depths(model: Any, observer: Any, y: Tensor, u: Tensor, Ts: float, L: Tensor
                            return_all=True)
 
 
-def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
+def run_seeds(rec: Any, seeds: Sequence[int], s: TanksSettings
               ) -> tuple[dict[int, dict[str, Any]], dict[str, float], dict[str, Any]]:
     """Everything the chapter measures, for every seed: the trainings on the estimation record, then, on the
     validation record, the free runs, the N-step table, the gains and the overflow episodes.
@@ -240,8 +288,8 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
     E = len(seeds)
     C = torch.tensor([[0.0, 1.0]], dtype=f64)
     CE = _blocks(C, E)  # (E, 2E): member e's level
-    Ts, skip = rec.Ts, int(s["n_init"])
-    L_obs = _blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E)  # (2E, E): Eq. (7)'s gain per member
+    Ts, skip = rec.Ts, int(s.n_init)
+    L_obs = _blocks(torch.tensor(s.observer_gain, dtype=f64)[:, None], E)  # (2E, E): Eq. (7)'s gain per member
 
     def field(members: Sequence[int]) -> Any:
         return _field(s, members)
@@ -257,12 +305,12 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
     t0 = time.perf_counter()
     model = field(seeds)  # trained through its observer: Eqs. (7)-(8) first, the N-step output error descended
     ye = tile(rec.y_est)
-    recipe = F.TuneRecipe(L0=s["L_start"], beta0=s["beta_start"], iterations=int(s["train_iterations"]),
-                          lr=s["train_lr"], train_model=True, members=E)
-    tuned = F.tune_gains(model, ye, Ts, int(s["train_N"]), recipe, u=rec.u_est, observer=observer(model, ye))
+    tuned = F.tune_gains(model, ye, Ts, int(s.train_N),
+                         recipe=F.TuneRecipe(L0=s.L_start, beta0=s.beta_start, iterations=int(s.train_iterations), lr=s.train_lr, train_model=True, members=E),
+                         u=rec.u_est, observer=observer(model, ye))
     clock["train_observer"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    free = _free_starts(rec, seeds, s, field(seeds), C) if "free" in s["baseline_starts"] else None
+    free = _free_starts(rec, seeds, s, field(seeds), C) if "free" in s.baseline_starts else None
     base = [no_feedback(rec, seed, s, field([seed]), C, free=None if free is None else free.member(e))
             for e, seed in enumerate(seeds)]
     plain = _stacked([b["model"] for b in base], field(seeds))
@@ -281,7 +329,7 @@ def run_seeds(rec: Any, seeds: Sequence[int], s: Mapping[str, Any]
         out[e]["free_run"]["no_feedback"] = b["free_run"]
         out[e]["no_feedback"] = {k: v for k, v in b.items() if k not in ("model", "free_run", "series")}
         for N in out[e]["n_step"]:
-            out[e]["n_step"][N]["no_feedback_free_run"] = capped(F.simulation_rmse, b["series"][N:], rec.y_val[N:],
+            out[e]["n_step"][N]["no_feedback_free_run"] = capped(simulation_rmse, b["series"][N:], rec.y_val[N:],
                                                                  skip=skip)
         out[e]["loss"] = {"observer_total": [tuned.loss[0], tuned.loss[-1]]}
     trained = {"seeds": seeds, "observer_trained": model, "no_feedback": plain, "tuned_L": tuned.L.tolist(),
@@ -295,7 +343,7 @@ def save_trained(path: Any, trained: Mapping[str, Any]) -> None:
     torch.save({k: (v.state_dict() if isinstance(v, torch.nn.Module) else v) for k, v in trained.items()}, path)
 
 
-def load_trained(path: Any, s: Mapping[str, Any]) -> dict[str, Any]:
+def load_trained(path: Any, s: TanksSettings) -> dict[str, Any]:
     """:func:`save_trained`'s file, the ensembles rebuilt with the chapter's settings ``s``."""
     data = torch.load(path, weights_only=True)
     for k in ("observer_trained", "no_feedback"):
@@ -305,15 +353,15 @@ def load_trained(path: Any, s: Mapping[str, Any]) -> dict[str, Any]:
     return data
 
 
-def outside_overflow(rec: Any, s: Mapping[str, Any]) -> np.ndarray:
+def outside_overflow(rec: Any, s: TanksSettings) -> np.ndarray:
     """The validation samples (T,) neither in an overflow episode nor in the ``overflow_after`` samples after one."""
     keep = np.ones(rec.y_val.shape[0], dtype=bool)
-    for a, b in overflow_episodes(rec.saturated("val").numpy(), gap=int(s["overflow_gap"])):
-        keep[a:b + int(s["overflow_after"])] = False
+    for a, b in overflow_episodes(rec.saturated("val").numpy(), gap=int(s.overflow_gap)):
+        keep[a:b + int(s.overflow_after)] = False
     return keep
 
 
-def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, first: str, keep: np.ndarray | None,
+def judged_again(rec: Any, trained: Mapping[str, Any], s: TanksSettings, *, first: str, keep: np.ndarray | None,
                  grid: Sequence[tuple[float, float]] = ()) -> dict[str, dict[int, list[float]]]:
     """The N-step errors per seed of the trained ensemble on the validation record, for the open loop, the tuned
     and the hand gains and each fixed ``(L, beta)`` of ``grid`` (named ``"L=.., beta=.."``), with the observer's
@@ -323,11 +371,11 @@ def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, 
     import fnnlib as F  # noqa: PLC0415
 
     model, seeds = trained["observer_trained"], trained["seeds"]
-    E, f64, skip = len(seeds), torch.float64, int(s["n_init"])
+    E, f64, skip = len(seeds), torch.float64, int(s.n_init)
     C = torch.tensor([[0.0, 1.0]], dtype=f64)
     yv = rec.y_val.expand(-1, E)
     x0 = {"first_level": yv[0, 0].repeat(2 * E), "least_squares": None}[first]
-    obs = F.MeasuredFeedback(model, rec.Ts, L=_blocks(torch.tensor(s["observer_gain"], dtype=f64)[:, None], E),
+    obs = F.MeasuredFeedback(model, rec.Ts, L=_blocks(torch.tensor(s.observer_gain, dtype=f64)[:, None], E),
                              measurement=F.Measurement(C=_blocks(C, E), x0=x0), allow_unstable=True)
     two = lambda v: torch.as_tensor(v, dtype=f64).reshape(-1).repeat_interleave(2)  # noqa: E731  per member -> per state
     rows = {"open_loop": (torch.zeros(2 * E, dtype=f64), torch.zeros(2 * E, dtype=f64)),
@@ -335,14 +383,14 @@ def judged_again(rec: Any, trained: Mapping[str, Any], s: Mapping[str, Any], *, 
             "hand": (two([h["L"] for h in trained["hand"]]), two([h["beta"] for h in trained["hand"]]))}
     rows |= {f"L={L:g}, beta={b:g}": (torch.full((2 * E,), float(L), dtype=f64), torch.full((2 * E,), float(b), dtype=f64))
              for L, b in grid}
-    Ns = [int(N) for N in s["horizons"]]
+    Ns = [int(N) for N in s.horizons]
     d = depths(model, obs, yv, rec.u_val, rec.Ts, torch.stack([v[0] for v in rows.values()]),
                torch.stack([v[1] for v in rows.values()]), max(Ns))
     return {name: {N: [capped(n_step_output_rmse, d[N - 1, g, :, 2 * e:2 * e + 2], rec.y_val, N, C, skip=skip, keep=keep)
                        for e in range(E)] for N in Ns} for g, name in enumerate(rows)}
 
 
-def _free_starts(rec: Any, seeds: Sequence[int], s: Mapping[str, Any], stacked: Any, C: Tensor) -> Any:
+def _free_starts(rec: Any, seeds: Sequence[int], s: TanksSettings, stacked: Any, C: Tensor) -> Any:
     """The free-start baseline of every seed in one run: the stacked field on the record tiled once per member,
     with a block-diagonal measurement (each member's start states and weights are its own; Adam is elementwise,
     so each member descends as alone, its loss scaled by 1 / E)."""
@@ -350,12 +398,12 @@ def _free_starts(rec: Any, seeds: Sequence[int], s: Mapping[str, Any], stacked: 
 
     E = len(seeds)
     train_from_outputs(stacked, rec.y_est.expand(-1, E).contiguous(), _blocks(C, E), OutputRecipe(
-        start="free", iterations=int(s["train_iterations"]), lr=s["train_lr"], burn=1,
-        horizon=int(s["baseline_horizon"])), Ts=rec.Ts, u=rec.u_est, seed=seeds[0], progress=False)
+        start="free", iterations=int(s.train_iterations), lr=s.train_lr, burn=1,
+        horizon=int(s.baseline_horizon)), Ts=rec.Ts, u=rec.u_est, seed=seeds[0], progress=False)
     return stacked
 
 
-def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor, *, free: Any = None) -> dict[str, Any]:
+def no_feedback(rec: Any, seed: int, s: TanksSettings, make: Any, C: Tensor, *, free: Any = None) -> dict[str, Any]:
     """The same architecture and seed trained without feedback: for each start of ``baseline_starts`` (a free
     initial state per segment, or an encoder of the first ``n_init`` samples) over segments of
     ``baseline_horizon`` samples, with the same Adam steps and rate as the model trained through its observer;
@@ -369,28 +417,28 @@ def no_feedback(rec: Any, seed: int, s: Mapping[str, Any], make: Any, C: Tensor,
     import fnnlib as F  # noqa: PLC0415
     from fnnlib.training.outputs import OutputRecipe, train_from_outputs  # noqa: PLC0415
 
-    skip, H = int(s["n_init"]), int(s["baseline_horizon"])
+    skip, H = int(s.n_init), int(s.baseline_horizon)
     tried = {}
-    for start in s["baseline_starts"]:
+    for start in s.baseline_starts:
         if start == "free" and free is not None:
             m, encoder = free, None
         else:
             m = copy.deepcopy(make)
             encoder = train_from_outputs(m, rec.y_est, C, OutputRecipe(
-                start=start, iterations=int(s["train_iterations"]), lr=s["train_lr"],
+                start=start, iterations=int(s.train_iterations), lr=s.train_lr,
                 burn=1 if start == "free" else skip, horizon=H), Ts=rec.Ts, u=rec.u_est, seed=seed,
                 progress=False).encoder
         est = _simulate(F, m, encoder, rec.y_est, rec.u_est, rec.Ts, skip, C, s)
-        tried[start] = (m, encoder, capped(F.simulation_rmse, est, rec.y_est, skip=skip))
+        tried[start] = (m, encoder, capped(simulation_rmse, est, rec.y_est, skip=skip))
     best = min(tried, key=lambda k: tried[k][2])
     m, encoder, _ = tried[best]
     val = _simulate(F, m, encoder, rec.y_val, rec.u_val, rec.Ts, skip, C, s)
     return {"model": m, "start": best, "estimation_free_run": {k: v[2] for k, v in tried.items()},
-            "free_run": capped(F.simulation_rmse, val, rec.y_val, skip=skip), "series": val}
+            "free_run": capped(simulation_rmse, val, rec.y_val, skip=skip), "series": val}
 
 
 def _simulate(F: Any, m: Any, encoder: Any, y: Tensor, u: Tensor, Ts: float, skip: int, C: Tensor,
-              s: Mapping[str, Any]) -> np.ndarray:
+              s: TanksSettings) -> np.ndarray:
     """The free run (T,) of a one-member model from the first ``skip`` samples: its encoder's start, or the
     observer's (the first ``skip`` entries are the measured ones where the encoder starts)."""
     from fnnlib.training.outputs import free_run as from_start  # noqa: PLC0415
@@ -398,20 +446,20 @@ def _simulate(F: Any, m: Any, encoder: Any, y: Tensor, u: Tensor, Ts: float, ski
     if encoder is not None:
         sim = from_start(m, y, C, burn=skip, Ts=Ts, u=u, encoder=encoder)[:, 0].numpy()
         return np.r_[y[:skip, 0].numpy(), sim]
-    obs = F.MeasuredFeedback(m, Ts, L=torch.tensor(s["observer_gain"], dtype=C.dtype)[:, None],
+    obs = F.MeasuredFeedback(m, Ts, L=torch.tensor(s.observer_gain, dtype=C.dtype)[:, None],
                              measurement=F.Measurement(C=C, x0=y[0, 0].repeat(2)), allow_unstable=True)
     return free_run(obs, y, u, skip, C)
 
 
 def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: Any, CE: Tensor, Ts: float, skip: int,
-              s: Mapping[str, Any], E: int) -> list[dict[str, Any]]:
+              s: TanksSettings, E: int) -> list[dict[str, Any]]:
     """:func:`run_seeds`' measurements with the trained ensembles (no gradients), one dict per member."""
     f64 = CE.dtype
     yv, uv, ye, ue = rec.y_val.expand(-1, E), rec.u_val, rec.y_est.expand(-1, E), rec.u_est
-    Ns, N_h, N_s = [int(N) for N in s["horizons"]], int(s["train_N"]), int(s["series_N"])
+    Ns, N_h, N_s = [int(N) for N in s.horizons], int(s.train_N), int(s.series_N)
     obs_v, obs_e, plain_v = observer(model, yv), observer(model, ye), observer(plain, yv)
     free_obs = free_run(obs_v, yv, uv, skip, CE)  # (T, E)
-    grid = [(float(L), float(b)) for L in s["hand_L_grid"] for b in s["hand_beta_grid"]]
+    grid = [(float(L), float(b)) for L in s.hand_L_grid for b in s.hand_beta_grid]
     per_state = lambda v: torch.as_tensor(v, dtype=f64).reshape(-1, 1).expand(-1, 2 * E)  # noqa: E731
     L_grid, b_grid = per_state([g[0] for g in grid]), per_state([g[1] for g in grid])
     # hand gains: per member, the best (L, beta) of the sweep by the train_N-step error on the estimation record
@@ -436,7 +484,7 @@ def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: An
         free = {"observer_trained": free_obs[:, e]}
         L_h, b_h = grid[int(hand[e])]
         out.append({
-            "free_run": {"observer_trained": capped(F.simulation_rmse, free_obs[:, e], y_e, skip=skip)},
+            "free_run": {"observer_trained": capped(simulation_rmse, free_obs[:, e], y_e, skip=skip)},
             "n_step": table, "overflow": _overflow(rec, free, p, C1, s),
             "gains": {"tuned": {"L": tuned.L[2 * e:2 * e + 2].tolist(), "beta": float(beta_t[2 * e])},
                       "hand": {"L": L_h, "beta": b_h},
@@ -447,18 +495,18 @@ def _validate(F: Any, rec: Any, model: Any, plain: Any, observer: Any, tuned: An
     return out
 
 
-def _kalman_member(F: Any, model: Any, rec: Any, Ts: float, C: Tensor, skip: int, s: Mapping[str, Any]) -> dict:
+def _kalman_member(F: Any, model: Any, rec: Any, Ts: float, C: Tensor, skip: int, s: TanksSettings) -> dict:
     """One member's EKF and UKF: the disturbance's process noise the best of ``kf_qd_grid`` by the EKF's mean N-step
     error over the horizons on the estimation record, then both filters' N-step errors on the validation record."""
-    A = F.model_jacobian(model, torch.full((2,), float(s["x_center"]), dtype=C.dtype),
-                         torch.full((1,), float(s["u_center"]), dtype=C.dtype))  # the filters' linearisation point
-    Ns = [int(N) for N in s["horizons"]]
+    A = F.model_jacobian(model, torch.full((2,), float(s.x_center), dtype=C.dtype),
+                         torch.full((1,), float(s.u_center), dtype=C.dtype))  # the filters' linearisation point
+    Ns = [int(N) for N in s.horizons]
 
     def make(cls: Any, qd: float) -> Any:
-        return cls(model, Ts, n=2, cov=F.Covariances([*s["kf_q"], qd], s["kf_r"]), C=C, disturbance=[1], A=A)
+        return cls(model, Ts, 2, [*s.kf_q, qd], s.kf_r, C=C, disturbance=[1], A=A)
 
     score = {}
-    for qd in s["kf_qd_grid"]:
+    for qd in s.kf_qd_grid:
         score[qd] = float(np.mean(list(kalman_n_step(make(F.ExtendedKalmanObserver, qd), rec.y_est, rec.u_est, Ts, Ns,
                                                      C, skip=skip, x0=rec.y_est[0, 0].repeat(2)).values())))
     qd = min(score, key=score.get)
@@ -471,12 +519,12 @@ def _kalman_member(F: Any, model: Any, rec: Any, Ts: float, C: Tensor, skip: int
 
 
 def _overflow(rec: Any, free: Mapping[str, Any], preds: Mapping[int, Mapping[str, Tensor]], C: Tensor,
-              s: Mapping[str, Any]) -> dict[str, Any]:
+              s: TanksSettings) -> dict[str, Any]:
     """The error during and after each overflow episode of the validation record: the free run and, at
     ``series_N``, the open-loop and tuned-feedback predictions (each moved to its target sample)."""
-    eps = overflow_episodes(rec.saturated("val").numpy(), gap=int(s["overflow_gap"]))
-    N = int(s["series_N"])
+    eps = overflow_episodes(rec.saturated("val").numpy(), gap=int(s.overflow_gap))
+    N = int(s.series_N)
     series = {"free_run": free["observer_trained"]}
     series |= {k: _aligned(v, N, C) for k, v in preds.get(N, {}).items() if k in ("open_loop", "tuned")}
-    return {"episodes": eps, "after": int(s["overflow_after"]),
-            "errors": {k: episode_errors(v, rec.y_val, eps, after=int(s["overflow_after"])) for k, v in series.items()}}
+    return {"episodes": eps, "after": int(s.overflow_after),
+            "errors": {k: episode_errors(v, rec.y_val, eps, after=int(s.overflow_after)) for k, v in series.items()}}

@@ -1,4 +1,4 @@
-"""Sweep grids, uncertainty levels and the N-step errors the ablations score them by (Sec. 3.4, App. A.3).
+"""Sweep grids and uncertainty levels of the ablations (Sec. 3.4, App. A.3), and the sweeps run on them.
 
 The paper writes its grids in MATLAB colon form ``{start: +step: stop}``
 (:func:`colon_range`) and pairs them into uncertainty levels
@@ -19,7 +19,7 @@ from torch import Tensor
 from fnnlib.feedback.options import Gains
 from fnnlib.feedback.tuning import GainSweep, TunedGains, TuneRecipe
 from fnnlib.feedback.types import VectorField
-from fnnlib.metrics import ahead_position_errors, ahead_position_loss
+from fnnlib.metrics import ahead_position_errors, ahead_position_loss, n_step_errors
 from fnnlib.models.ensemble import NeuralODEEnsemble, stack_members
 from fnnlib.systems.base import DynamicalSystem
 from fnnlib.systems.spiral import Spiral
@@ -111,26 +111,6 @@ def switched_spiral_run(before: Sequence[float], after: Sequence[float], t_switc
     sw = SwitchedSystem([Spiral(*before), Spiral(*after)], [t_switch])
     x = sw.simulate(x0, t)
     return x.float(), sw.rate(t, x).float()
-
-
-def n_step_errors(pred: Tensor, truth: Tensor, N: int) -> Tensor:
-    """2-norm errors of N-step predictions from every start that has a truth sample N steps later.
-
-    ``pred`` (..., T, n): row ``k`` predicts ``truth[..., k + N, :]`` (the
-    layout of :func:`fnnlib.cascade_sweep` and :func:`fnnlib.cascade_predict`);
-    ``truth`` (T, n) or broadcastable. Returns shape (..., T - N).
-    """
-    N = int(N)
-    T = truth.shape[-2]
-    if not 1 <= N < T or pred.shape[-2] != T:
-        raise ValueError(f"need 1 <= N < T and predictions of length T; got N={N}, T={T}, "
-                         f"prediction length {pred.shape[-2]}")
-    for name, v in (("truth", truth[..., N:, :]), ("pred", pred[..., : T - N, :])):
-        if not bool(torch.isfinite(v).all()):
-            idx = tuple(int(i) for i in (~torch.isfinite(v)).nonzero()[0])
-            raise ValueError(f"{name} holds a NaN or infinite value among the scored samples (first at index {idx} "
-                             "of the scored part); score only samples that were measured")
-    return torch.linalg.vector_norm(pred[..., : T - N, :] - truth[..., N:, :], dim=-1)
 
 
 def n_step_rmse(pred: Tensor, truth: Tensor, N: int, dim: int | tuple[int, ...] = -1) -> Tensor:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+#: torch threads for the small networks (one is fastest on a few cores)
 DEFAULT_THREADS = 1
 
 

@@ -3,7 +3,7 @@
 The Sec. 3 and Sec. 4 notebooks (spiral, theory, ablations, observers, neural feedback, and the spiral part of
 "Your own system") share these values: their settings dataclasses (``fnnbook.tasks``) take their paper values
 from here, and a task's profile may still override them. The Sec. 5 values live in
-:mod:`fnnlib.quadrotor_presets`; the training recipes in :mod:`fnnlib.training` (``PAPER_SPIRAL_RECIPE``,
+:mod:`fnnlib.quadrotor.presets`; the training recipes in :mod:`fnnlib.training` (``PAPER_SPIRAL_RECIPE``,
 ``PAPER_BOTTLE_RECIPE``).
 
 Sequences are tuples (read-only); a notebook receives them as lists.

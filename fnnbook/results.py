@@ -56,6 +56,10 @@ from typing import Any
 
 from fnnlib.io import atomic_write
 
+__all__ = ["BETTER", "BY_CONSTRUCTION", "RESULTS_FILENAME", "STATUSES", "VERDICTS", "ClaimResult", "GuaranteeFailed",
+           "Headline", "Reading", "Results", "headline_number", "read_results", "verdict_from_checks",
+           "verdict_with_better", "write_results"]
+
 VERDICTS = ("reproduced", "partly", "not reproduced")
 #: the verdict of a claim whose every failed check fails because the result beats the claim in its own direction
 BETTER = "better than claimed"
