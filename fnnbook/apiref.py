@@ -37,6 +37,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "Observers": ("Observer", "LuenbergerObserver", "KalmanObserver", "ExtendedKalmanObserver",
                   "UnscentedKalmanObserver", "NeuralFeedbackObserver"),
     "Partial measurements (y = C x or h(x))": ("MeasuredFeedback", "model_jacobian", "check_measurements"),
+    "Options, checked on construction": ("Gains", "Measurement", "Solver", "Covariances", "SigmaPoints"),
 }
 
 #: module -> what it holds: the named homes of everything beyond the face, in the page's order

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import fnnlib as F
+from fnnlib.systems import Spiral
 
 F64 = torch.float64
 MAX_PARAMETERS = 8
@@ -58,7 +59,7 @@ def test_every_observer_is_built_as_f_Ts_then_keywords():
 
 
 def test_tuned_gains_are_a_tensor_and_a_schedule():
-    model = F.Spiral(2.0, 0.1, 0.0)
+    model = Spiral(2.0, 0.1, 0.0)
     x = model.simulate(torch.tensor([1.0, 0.0], dtype=F64), torch.arange(40, dtype=F64) * 0.05)
     tuned = F.tune_gains(model, x, 0.05, 3, F.TuneRecipe(L0=2.0, beta0=0.1, iterations=2, lr=0.1))
     assert isinstance(tuned.L, torch.Tensor) and tuned.L.dtype == F64 and tuned.L.shape == (2,)
@@ -137,6 +138,6 @@ def test_a_misplaced_option_is_refused_before_the_model_runs():
 def test_a_jacobian_without_an_output_form_is_refused():
     A = torch.zeros(2, 2, dtype=F64)
     with pytest.raises(ValueError, match="the full-state observer needs none"):
-        F.ExtendedKalmanObserver(F.Spiral(2.0, 0.1, 0.0), 0.1, n=2, cov=F.Covariances(1e-6, 1e-4), A=A)
+        F.ExtendedKalmanObserver(Spiral(2.0, 0.1, 0.0), 0.1, n=2, cov=F.Covariances(1e-6, 1e-4), A=A)
     with pytest.raises(ValueError, match="the full-state observer needs none"):
-        F.LuenbergerObserver(F.Spiral(2.0, 0.1, 0.0), 0.1, n=2, poles=[0.5, 0.6, 0.7, 0.8], A=A)
+        F.LuenbergerObserver(Spiral(2.0, 0.1, 0.0), 0.1, n=2, poles=[0.5, 0.6, 0.7, 0.8], A=A)

@@ -93,7 +93,8 @@ class Gains:
 
 @dataclass(frozen=True, eq=False)
 class Measurement:
-    r"""How a record was measured: :math:`y_k = C x_k` (or :math:`h(x_k)`) at the times ``t``, with gaps.
+    r"""How a record was measured: :math:`y_k = C x_k` (or :math:`h(x_k)`) at the times ``t``, with gaps: what the
+    feedback of Eqs. (7)-(8) corrects with.
 
     ``C``: a (p, n) matrix, a callable ``h(x)`` (batch, n) -> (batch, p), or ``None`` (every state measured);
     ``mask``: a boolean tensor (..., T) or (..., T, p), ``False`` where no sample was taken (a NaN in the

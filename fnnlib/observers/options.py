@@ -42,7 +42,8 @@ def _covariance(M, name: str, definite: bool) -> Tensor:
 
 @dataclass(frozen=True, eq=False)
 class Covariances:
-    r"""The covariances of a Kalman filter on the augmented model :math:`z = [x; d]`.
+    r"""The covariances of a Kalman filter on the augmented model :math:`z = [x; d]`, the baseline of the feedback
+    of Eqs. (7)-(8) on the same learned model (Eq. (3)).
 
     ``Q``: process noise of one nominal step ``Ts`` (on :math:`x`: model error within a step; on :math:`d`: a
     random walk, how fast the disturbance drifts); ``R``: measurement noise (e.g. ``std**2``), positive
@@ -63,8 +64,8 @@ class Covariances:
 
 @dataclass(frozen=True)
 class SigmaPoints:
-    """The scaled sigma points (van der Merwe) of the unscented filter: spread ``alpha`` > 0, ``beta`` (2 is
-    optimal for Gaussian priors) and ``kappa``; finite numbers."""
+    """The scaled sigma points (van der Merwe) of the unscented filter, a baseline of the feedback of Eqs. (7)-(8):
+    spread ``alpha`` > 0, ``beta`` (2 is optimal for Gaussian priors) and ``kappa``; finite numbers."""
 
     alpha: float = 1.0
     beta: float = 2.0

@@ -131,7 +131,7 @@ def test_tune_gains_through_gaps_and_with_a_recipe_and_an_objective():
     with pytest.raises(ValueError, match="TuneRecipe.L0 must be > 0"):
         F.TuneRecipe(L0=-1.0)
     d = F.tune_gains(PLANT, y[:40], TS, 5, u=u[:40])  # no recipe: the default one
-    assert len(d.loss) == F.DEFAULT_TUNE_RECIPE.iterations
+    assert len(d.loss) == F.TuneRecipe().iterations
 
 
 def test_tune_gains_with_an_observer_tunes_the_layers_after_it_and_checks_its_gain():
