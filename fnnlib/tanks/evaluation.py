@@ -503,7 +503,7 @@ def _kalman_member(F: Any, model: Any, rec: Any, Ts: float, C: Tensor, skip: int
     Ns = [int(N) for N in s.horizons]
 
     def make(cls: Any, qd: float) -> Any:
-        return cls(model, Ts, 2, [*s.kf_q, qd], s.kf_r, C=C, disturbance=[1], A=A)
+        return cls(model, Ts, n=2, cov=F.Covariances([*s.kf_q, qd], s.kf_r), C=C, disturbance=[1], A=A)
 
     score = {}
     for qd in s.kf_qd_grid:

@@ -148,7 +148,7 @@ seconds["bottle_tune"] = time.perf_counter() - t0
 # %%
 t0 = time.perf_counter()
 with torch.no_grad():
-    tuned_per_seed = torch.stack([cascade_position_errors(net, x_b_test, b_Ts, bN, torch.tensor(r.L), r.beta)
+    tuned_per_seed = torch.stack([cascade_position_errors(net, x_b_test, b_Ts, bN, r.L, r.beta)
                                   for net, r in zip(b_nets, b_tuned)])  # (seeds, throws)
     hand_per_seed = torch.stack([cascade_position_errors(net, x_b_test, b_Ts, bN, h.L, h.beta)
                                  for net, h in zip(b_nets, b_hand)])

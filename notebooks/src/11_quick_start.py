@@ -66,7 +66,8 @@ preds = {"open loop": observer.predict(y[3], N, u[3]),
          "feedback, tuned": F.cascade_predict(model, y[3], Ts, N, tuned.schedule(), u=u[3], observer=observer)}
 A = F.model_jacobian(model, torch.zeros(2, dtype=f64), torch.zeros(1, dtype=f64))
 for name, kf in [("EKF", F.ExtendedKalmanObserver), ("UKF", F.UnscentedKalmanObserver)]:
-    preds[name] = kf(model, Ts, 2, [1e-6, 1e-6, 1e-3], noise_std ** 2, C=C, disturbance=[1], A=A).predict(y[3], N, u[3])
+    preds[name] = kf(model, Ts, n=2, cov=F.Covariances([1e-6, 1e-6, 1e-3], noise_std ** 2), C=C, disturbance=[1],
+                     A=A).predict(y[3], N, u[3])
 errors = {k: float(n_step_errors(z @ C.T, x[3] @ C.T, N)[T // 4:].mean()) for k, z in preds.items()}
 
 # %% [markdown]
@@ -96,4 +97,4 @@ figure = save_figure(fig, out_dir, "quick_start_prediction")
 
 # %%
 results_file = write_results(out_dir, task="quick_start", profile=profile, claims=[],
-                               metrics={"errors": errors, "L": tuned.L, "beta": tuned.beta})
+                               metrics={"errors": errors, "L": tuned.L.tolist(), "beta": tuned.beta})

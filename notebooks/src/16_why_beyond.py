@@ -93,8 +93,8 @@ HORIZON = {"one_step": 1, "multi_step": multi_step_N, "judged": bN}
 # %% tags=["hide-input"]
 tuning = {s: x_train[torch.randperm(x_train.shape[0], generator=make_generator(s))[:ran_t["bottle_tune_throws"]]]
           for s in b_seeds}
-tune = partial(F.tune_gains, L0=ran_b["L"], beta0=ran_b["beta"], iterations=ran_t["bottle_tune_iterations"],
-               lr=ran_t["bottle_tune_lr"])
+tune = partial(F.tune_gains, recipe=F.TuneRecipe(L0=ran_b["L"], beta0=ran_b["beta"],
+                                                iterations=ran_t["bottle_tune_iterations"], lr=ran_t["bottle_tune_lr"]))
 
 # %% tags=["hide-input"]
 t0 = time.perf_counter()
