@@ -26,7 +26,7 @@ CLAIMS = ("Q3", "Q4", "Q5")
 
 def setting(record: Mapping[str, Any], cost: str, adapnn_gamma: float, Gamma: float, *,
             units: Sequence[Hashable]) -> dict[str, ClaimResult | None]:
-    """Q3-Q5 at one setting of one record (ours or the authors'): the seven models' tracking and first-step
+    r"""Q3-Q5 at one setting of one record (ours or the authors'): the seven models' tracking and first-step
     RMSEs under ``cost`` with AdapNN at ``adapnn_gamma`` and AdapFNN at ``Gamma``, judged by
     :func:`rules_at_setting` (Q3 and Q4 see AdapNN at its gain, Q5 sees AdapFNN at :math:`\Gamma`)."""
     numbers = {n: at_gains(record[cost], n, adapnn_gamma, Gamma) for n in (*SIX, "AdapFNN")}
@@ -37,7 +37,7 @@ def setting(record: Mapping[str, Any], cost: str, adapnn_gamma: float, Gamma: fl
 def holds_along_gains(results: Mapping[tuple, Mapping[str, ClaimResult | None]], claim: str, cost: str, *,
                       bounds: Sequence[float], adapnn_grid: Sequence[float], Gamma_grid: Sequence[float],
                       adapnn_gamma: float, Gamma: float) -> np.ndarray:
-    """Where ``claim`` reads *reproduced* under ``cost``, bool (bounds, gains): along AdapNN's gain (AdapFNN at the
+    r"""Where ``claim`` reads *reproduced* under ``cost``, bool (bounds, gains): along AdapNN's gain (AdapFNN at the
     profile's ``Gamma``) for Q3 and Q4, along :math:`\Gamma` (AdapNN at its chosen ``adapnn_gamma``) for Q5.
 
     ``results``: :func:`setting`'s results keyed by ``(u_max, cost, adapnn gain, Gamma)``. A point whose result is
@@ -58,7 +58,7 @@ def failing_checks(result: ClaimResult | None) -> list[str]:
 
 def gain_axis(claim: str, *, adapnn_grid: Sequence[float], Gamma_grid: Sequence[float], adapnn_gamma: float,
               Gamma: float) -> Axis:
-    """The gain axis of ``claim``'s grid: AdapFNN's :math:`\Gamma` of Eq. (30) for Q5, AdapNN's gain for Q3 and Q4
+    r"""The gain axis of ``claim``'s grid: AdapFNN's :math:`\Gamma` of Eq. (30) for Q5, AdapNN's gain for Q3 and Q4
     (neither is stated: App. A.5.4 says AdapNN's is "adjusted for optimal performance"); the profile's value is
     ``ours``."""
     if claim == "Q5":

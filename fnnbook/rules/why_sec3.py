@@ -61,7 +61,7 @@ def s8_levels(*, rate_neural_ode: Any, rate_feedback: Any, err_N_neural_ode: Any
 def s5_point(*, L: float, gamma: Any, x_feedback: Any, f_feedback: Any, x_continuous: Any, f_continuous: Any,
              limit_x: Any, L_sweep: Sequence[float], after_transient: Any, last_half: Any,
              conservative_ratio: float) -> tuple[ClaimResult, np.ndarray]:
-    """S5 (Theorem 1, Fig. S1) on one test spiral: :func:`sec3.s5` unchanged, and the ratio ball / limit of
+    r"""S5 (Theorem 1, Fig. S1) on one test spiral: :func:`sec3.s5` unchanged, and the ratio ball / limit of
     :math:`\|\tilde x\|` per seed.
 
     Tensors, one row per seed: ``gamma`` (S,) Assumption 1's bound along the run; ``x_feedback``, ``f_feedback``,

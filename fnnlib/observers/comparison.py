@@ -27,7 +27,7 @@ __all__ = ["design_checks", "lowpass_twin", "observer_set"]
 
 def observer_set(model: Any, Ts: float, *, L: float, beta: float, poles: Sequence[float], noise_std: float,
                  q_x: float, q_d: float, p0_d: float) -> dict[str, Any]:
-    """The seven observers of one network: the neural ODE alone (L = 0), the linear feedback (gain ``L``, decay
+    r"""The seven observers of one network: the neural ODE alone (L = 0), the linear feedback (gain ``L``, decay
     ``beta`` of Eq. (11)), the Luenberger observer that reproduces it, the Luenberger observer with ``poles``, the
     Kalman filter (time-varying and steady state) and the EKF, the last three with
     :math:`Q = \mathrm{diag}(q_x I, q_d I)`, :math:`R` = ``noise_std``:sup:`2` and
