@@ -6,7 +6,7 @@ models of App. A.5.4 and each configuration (QP implementation x numerics backen
 linearization method x truth sub-steps). The residual networks are the trained ones of the ``quadrotor_learning`` task when
 ``--learning-dir`` holds them, else freshly initialised networks of the paper's size (2 x 36, tanh:
 the cost per step does not depend on the weights); AdapNN adapts with Gamma = Ts * 8 = 0.16, the release's
-effective gain in this library's convention (see :class:`~fnnlib.mpc.models.AdaptiveNNModel`). Reported per model: median and p95 of
+effective gain in this library's convention (see :class:`~fnnlib.quadrotor.mpc.models.AdaptiveNNModel`). Reported per model: median and p95 of
 linearize + solve per step, the median of each part, and the whole loop's wall time (truth
 simulation, model updates and bookkeeping included) as a multiple of real time (with --repeats R, the
 step statistics pool all R flights and the loop time is their median).
@@ -25,10 +25,10 @@ import numpy as np
 import torch
 
 from fnnlib.training import load_checkpoint
-from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
-from fnnlib.mpc.linearized import COSTS
-from fnnlib.mpc import Backend, FlightTest, fly, lissajous_reference, paper_models, warm_up
+from fnnlib.quadrotor.residual import AeroResidual
+from fnnlib.quadrotor.mpc import LinearizedMPC, OSQPMPC, RebuildMPC
+from fnnlib.quadrotor.mpc.linearized import COSTS
+from fnnlib.quadrotor.mpc import Backend, FlightTest, fly, lissajous_reference, paper_models, warm_up
 from fnnlib.quadrotor.presets import (
     PAPER_BETA,
     PAPER_GAMMA,
@@ -40,7 +40,7 @@ from fnnlib.quadrotor.presets import (
     PAPER_THETA_MAX,
     PAPER_TS,
 )
-from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+from fnnlib.quadrotor.system import NOMINAL, TEST_TRUTH, Quadrotor
 
 N, TS = PAPER_HORIZON, PAPER_TS
 Q, R = np.array(PAPER_MPC_WEIGHTS["Q"]), np.array(PAPER_MPC_WEIGHTS["R"])

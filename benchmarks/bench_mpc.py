@@ -28,8 +28,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from fnnlib.mpc import LinearizedMPC, OSQPMPC, RebuildMPC, linearize
-from fnnlib.mpc.linearized import COSTS
+from fnnlib.quadrotor.mpc import LinearizedMPC, OSQPMPC, RebuildMPC, linearize
+from fnnlib.quadrotor.mpc.linearized import COSTS
 from fnnlib.quadrotor.presets import PAPER_MPC_WEIGHTS, PAPER_THETA_MAX
 
 N, NX, NU, DT = 10, 12, 4, 0.05

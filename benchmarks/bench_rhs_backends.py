@@ -6,7 +6,7 @@ millisecond of per-op overhead whatever the batch size. This script measures tha
 fnnlib model (nominal Eq. (27) + the 6-36-36-3 tanh residual) against a numpy transcription of the
 same right-hand side written here only to measure the option (it is not library code; it is checked
 equal to fnnlib to 1e-12 first), and against the compiled kernel the flight loop uses
-(:mod:`fnnlib.mpc.compiled`), whose exact step Jacobians for the 10 plan points are timed too (they
+(:mod:`fnnlib.quadrotor.mpc.compiled`), whose exact step Jacobians for the 10 plan points are timed too (they
 replace the 170-row forward-difference batch). Batch sizes: 1 (truth), 10 (model along the plan), 170
 (forward-difference linearization, N (n + m + 1)).
 
@@ -21,12 +21,12 @@ import time
 import numpy as np
 import torch
 
-from fnnlib.models.residual import AeroResidual
-from fnnlib.mpc.compiled import CompiledQuadrotor, warm_up
+from fnnlib.quadrotor.residual import AeroResidual
+from fnnlib.quadrotor.mpc.compiled import CompiledQuadrotor, warm_up
 from fnnlib.quadrotor.presets import PAPER_RESIDUAL_RECIPE, PAPER_TS
-from fnnlib.systems.allocation import allocation_matrix
-from fnnlib.systems.quadrotor import TEST_TRUTH, Quadrotor
-from fnnlib.systems.rotations import rotation_matrix
+from fnnlib.quadrotor.allocation import allocation_matrix
+from fnnlib.quadrotor.system import TEST_TRUTH, Quadrotor
+from fnnlib.quadrotor.rotations import rotation_matrix
 
 
 def numpy_twin(q: Quadrotor, net: AeroResidual):

@@ -17,7 +17,7 @@ paper's):
 
 Everything else lives in a named subpackage: the paper's settings and sweeps (:mod:`fnnlib.paper`), its
 systems (:mod:`fnnlib.systems`), the Sec. 5 quadrotor and MPC stack (:mod:`fnnlib.quadrotor`,
-:mod:`fnnlib.mpc`, :mod:`fnnlib.control`), the authors' released networks (:mod:`fnnlib.release`), data sets
+:mod:`fnnlib.quadrotor.mpc`, :mod:`fnnlib.quadrotor.control`), the authors' released networks (:mod:`fnnlib.release`), data sets
 (:mod:`fnnlib.data`), metrics, checkpoints, seeding and figures (:mod:`fnnlib.metrics`,
 :mod:`fnnlib.training`, :mod:`fnnlib.seeding`, :mod:`fnnlib.plotting`). The book's result types are
 :mod:`fnnbook.results`.

@@ -50,7 +50,8 @@ import torch
 from torch import Tensor, nn
 
 from fnnlib.data.bottle import DataError
-from fnnlib.models import AeroResidual, NeuralFeedback, NeuralODE
+from fnnlib.models import NeuralFeedback, NeuralODE
+from fnnlib.quadrotor.residual import AeroResidual
 from fnnlib.systems import Spiral
 
 __all__ = [
@@ -538,7 +539,7 @@ def _residual_from(layers: list[tuple[Tensor, Tensor | None]]) -> AeroResidual:
 
 def load_release_residual(data_dir: str | Path, run: str) -> AeroResidual:
     r"""A release quadrotor residual :math:`f_{neural}(v, \Theta)` (App. A.5.2, trained by Alg. 3) as an
-    :class:`~fnnlib.models.AeroResidual`.
+    :class:`~fnnlib.quadrotor.residual.AeroResidual`.
 
     ``model_param_epoch50.npy``: a float64 column (3024, 1), layers 6-36-36-36-3, tanh, per layer ``W``
     column-major then ``b``, no last bias. Returned in float64 with the sign of Eq. (27)'s added residual
@@ -550,7 +551,7 @@ def load_release_residual(data_dir: str | Path, run: str) -> AeroResidual:
 
 def load_release_mlp(data_dir: str | Path, run: str) -> AeroResidual:
     """A release quadrotor MLP baseline (App. A.5.4, single-step drag regression) as an
-    :class:`~fnnlib.models.AeroResidual` (what the MLP baseline of the flight test uses).
+    :class:`~fnnlib.quadrotor.residual.AeroResidual` (what the MLP baseline of the flight test uses).
 
     ``model_param_epoch500.pth``: a ``Drag_MLP`` state dict (``input_layer``, ``hidden_layer1``,
     ``hidden_layer2``, ``output_layer`` without bias), tanh, float32, regressed on the drag ``R D R^T v``

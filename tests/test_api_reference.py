@@ -52,7 +52,7 @@ def test_moved_names_live_in_their_homes_and_not_on_the_face() -> None:
 
 
 def test_the_face_exports_no_quadrotor_mpc_release_or_book_name() -> None:
-    for module in ("fnnlib.mpc", "fnnlib.control", "fnnlib.release", "fnnlib.quadrotor.presets",
+    for module in ("fnnlib.quadrotor.mpc", "fnnlib.quadrotor.control", "fnnlib.release", "fnnlib.quadrotor.presets",
                    "fnnlib.paper.spiral_presets", "fnnbook.results"):
         mod = importlib.import_module(module)
         names = list(getattr(mod, "__all__", []))

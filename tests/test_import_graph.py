@@ -103,3 +103,11 @@ def test_a_type_only_import_is_an_edge(tmp_path: Path) -> None:
 def test_no_import_cycle(package: str) -> None:
     found = [c for c in cycles(graph()) if any(m.split(".")[0] == package for m in c)]
     assert not found, f"import cycles: {found}"
+
+
+def test_the_method_does_not_import_the_quadrotor_stack() -> None:
+    """The Sec. 5 quadrotor and MPC stack lives in fnnlib.quadrotor; the method's subpackages never import it."""
+    method = ("fnnlib.systems", "fnnlib.models", "fnnlib.training", "fnnlib.feedback", "fnnlib.observers")
+    found = {m: sorted(t for t in ts if t.startswith("fnnlib.quadrotor"))
+             for m, ts in graph().items() if m.startswith(method)}
+    assert not {m: ts for m, ts in found.items() if ts}

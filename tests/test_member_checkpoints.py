@@ -12,7 +12,7 @@ import fnnlib as F
 from fnnlib.models import stack_members
 from fnnlib.seeding import seed_everything
 from fnnlib.training import load_seed_checkpoints, load_seed_ensemble, save_checkpoint, seed_checkpoint_name
-from fnnlib.models import AeroResidual
+from fnnlib.quadrotor.residual import AeroResidual
 from fnnlib.training import CheckpointError
 
 RUN = {"seeds": [1, 0], "epochs": 3, "lr": None}  # the run record's parameters (lr from a preset)

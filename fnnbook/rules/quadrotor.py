@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 from torch import Tensor
 
-from fnnlib.mpc.experiment import SIX
+from fnnlib.quadrotor.mpc.experiment import SIX
 from fnnbook.results import ClaimResult, GuaranteeFailed, Reading, verdict_from_checks
 from fnnlib.stats import paired_win
-from fnnlib.training.residual import convergence_checks
+from fnnlib.quadrotor.training import convergence_checks
 
 __all__ = ["AUTHORS_SECONDS_50_EPOCHS", "unjudged_bound_note", "GROUPS", "SIX", "count_trainable", "join_costs", "join_readings", "joined_verdict",
            "q1_convergence", "q2_prediction", "q3_tracking", "q4_prediction", "q5_adaptive", "q6_training_cost",
@@ -84,7 +84,7 @@ def q1_convergence(member_loss: np.ndarray, *, min_members: int = 5) -> ClaimRes
 
 
 GROUPS = ("p", "v", "Theta", "omega")
-"""The state groups of Q2 (:data:`~fnnlib.systems.quadrotor.STATE_GROUPS`): all 12 states."""
+"""The state groups of Q2 (:data:`~fnnlib.quadrotor.system.STATE_GROUPS`): all 12 states."""
 
 
 def q2_prediction(neural: Sequence[Mapping[str, float]], nominal: Mapping[str, float], *, units: Sequence[Hashable],

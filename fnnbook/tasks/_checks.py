@@ -57,8 +57,8 @@ def cvxpy_solvers() -> tuple[str, ...]:
 
 
 def from_mpc(attribute: str, module: str) -> Check:
-    """One of the names a table of :mod:`fnnlib.mpc` holds (imported on use: the MPC loads numba)."""
-    return lazy_choice(lambda: tuple(getattr(importlib.import_module(f"fnnlib.mpc.{module}"), attribute)))
+    """One of the names a table of :mod:`fnnlib.quadrotor.mpc` holds (imported on use: the MPC loads numba)."""
+    return lazy_choice(lambda: tuple(getattr(importlib.import_module(f"fnnlib.quadrotor.mpc.{module}"), attribute)))
 
 
 def changes(name: str, value: Any) -> Mapping[str, Any]:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from fnnbook.tasks._base import TaskSettings, setting
 from fnnbook.tasks._checks import ACT, N1, N2, POS, SEED, SEEDS1, WIDTHS, need, vec
 from fnnlib.quadrotor import presets as QP
-from fnnlib.systems.quadrotor import TRAINING_TRUTH
+from fnnlib.quadrotor.system import TRAINING_TRUTH
 
 __all__ = ["QuadrotorLearningSettings"]
 

@@ -9,7 +9,7 @@ from fnnbook.tasks._checks import (GAIN, N0, N1, N2, NONNEG, POS, SEED, cvxpy_so
                                    some, vec)
 from fnnlib import checks as C
 from fnnlib.quadrotor import presets as QP
-from fnnlib.systems.quadrotor import TEST_TRUTH
+from fnnlib.quadrotor.system import TEST_TRUTH
 
 __all__ = ["QuadrotorMPCSettings"]
 
@@ -63,7 +63,7 @@ class QuadrotorMPCSettings(TaskSettings, notebook="quadrotor_mpc"):
         need(min(self.u_max) > 0, f"u_max must list positive thrust bounds, got {self.u_max}")
         need(self.u_max_judged in self.u_max,
              f"u_max_judged = {self.u_max_judged} must be one of u_max = {self.u_max}")
-        grid = self.Gamma_adapnn_grid  # AdapNN's validation grid (fnnlib.mpc.tuning)
+        grid = self.Gamma_adapnn_grid  # AdapNN's validation grid (fnnlib.quadrotor.mpc.tuning)
         need(len(set(grid)) == len(grid) and min(grid) > 0,
              f"Gamma_adapnn_grid must list distinct finite gains > 0, got {grid}")
         need(min(self.R) > 0, f"R must be positive definite (every weight > 0), got {self.R}")

@@ -20,11 +20,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fnnlib.control.dfbc import DFBC
-from fnnlib.control.min_snap import random_min_snap_flights
+from fnnlib.quadrotor.control.dfbc import DFBC
+from fnnlib.quadrotor.control.min_snap import random_min_snap_flights
 from fnnlib.data.bottle import DataError
 from fnnlib.io import atomic_write
-from fnnlib.systems.quadrotor import Quadrotor, QuadrotorParams
+from fnnlib.quadrotor.system import Quadrotor, QuadrotorParams
 
 __all__ = ["Flights", "load_flights", "make_flights", "save_flights", "single_step_labels"]
 
@@ -79,10 +79,10 @@ def make_flights(n_flights: int, n_nodes: int, *, Ts: float, seed: int, truth: Q
     waypoint with the controller states at zero. The truth is integrated with
     RK4 and ``substeps`` sub-steps per ``Ts`` (finer than the learner's model).
     The waypoints (``n_waypoints``, ``box``, ``max_speed``) are drawn by
-    :func:`~fnnlib.control.min_snap.random_min_snap_flights`; the release's
+    :func:`~fnnlib.quadrotor.control.min_snap.random_min_snap_flights`; the release's
     ``n_waypoints``, ``box``, ``max_speed`` and ``substeps`` are
     :data:`~fnnlib.quadrotor.presets.PAPER_FLIGHT_DATA`, its training vehicle
-    :data:`~fnnlib.systems.quadrotor.TRAINING_TRUTH`.
+    :data:`~fnnlib.quadrotor.system.TRAINING_TRUTH`.
     """
     if int(n_flights) < 1 or int(n_nodes) < 2:
         raise ValueError(f"need n_flights >= 1 and n_nodes >= 2, got {n_flights}, {n_nodes}")

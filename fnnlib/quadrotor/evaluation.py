@@ -17,7 +17,7 @@ from typing import Any
 
 from torch import nn
 
-import fnnlib.mpc as M
+import fnnlib.quadrotor.mpc as M
 
 __all__ = ["ADAPTIVE", "at_gains", "flight_numbers", "fly_record"]
 
@@ -26,8 +26,8 @@ ADAPTIVE = ("AdapNN", "AdapFNN")
 
 
 def flight_numbers(runs: Sequence[M.FlightResult]) -> dict[str, list]:
-    """Per flight (one a unit): the mean per-axis tracking RMSE (:func:`fnnlib.mpc.tracking_rmse`), the first-step
-    acceleration prediction RMSE (Fig. S8, :func:`fnnlib.mpc.acc_pred_rmse`) and whether the flight diverged."""
+    """Per flight (one a unit): the mean per-axis tracking RMSE (:func:`fnnlib.quadrotor.mpc.tracking_rmse`), the first-step
+    acceleration prediction RMSE (Fig. S8, :func:`fnnlib.quadrotor.mpc.acc_pred_rmse`) and whether the flight diverged."""
     return {"rmse": [M.tracking_rmse(r.x, r.x_ref)["mean_axis"] for r in runs],
             "acc": [M.acc_pred_rmse(r) for r in runs], "diverged": [bool(r.diverged) for r in runs]}
 
@@ -48,10 +48,10 @@ def fly_record(nets: Sequence[tuple[Any, nn.Module]], mlps: Sequence[tuple[Any, 
                names: Sequence[str], adapnn_grid: Sequence[float], Gamma_grid: Sequence[float],
                transient: int) -> dict[str, Any]:
     r"""One cost's record (the layout :func:`at_gains` reads) for one set of networks under ``mpc``: the models in
-    ``names`` flown once per unit (:func:`fnnlib.mpc.paired_units`, AdapNN at ``adapnn_gamma``), AdapNN once per gain
+    ``names`` flown once per unit (:func:`fnnlib.quadrotor.mpc.paired_units`, AdapNN at ``adapnn_gamma``), AdapNN once per gain
     of ``adapnn_grid`` (App. A.5.4) and AdapFNN once per :math:`\Gamma` of ``Gamma_grid`` (Eq. (30)), each AdapFNN
     flight with the share of its steps inside Theorem 2's bound after ``transient`` steps
-    (:func:`fnnlib.mpc.theorem2_check` at ``model_settings["L"]``)."""
+    (:func:`fnnlib.quadrotor.mpc.theorem2_check` at ``model_settings["L"]``)."""
     fly = dict(tests=tests, mpc=mpc)
     base = M.paired_units(nets, mlps, **fly, model_settings=model_settings, adapnn_gamma=adapnn_gamma, only=names)
     rec: dict[str, Any] = {n: flight_numbers(r) for n, r in base.items()}

@@ -2,10 +2,10 @@
 
 Library functions take these as required keywords, never as silent defaults; a paper run passes them
 from here (tests, benchmarks) or from a notebook's ``parameters`` cell. The vehicles of Eq. (27) are
-presets of :class:`~fnnlib.systems.quadrotor.QuadrotorParams` and live beside it:
-:data:`~fnnlib.systems.quadrotor.NOMINAL` (the models' and the DFBC's vehicle),
-:data:`~fnnlib.systems.quadrotor.TRAINING_TRUTH` (the training data) and
-:data:`~fnnlib.systems.quadrotor.TEST_TRUTH` (the Sec. 5.3 flight test).
+presets of :class:`~fnnlib.quadrotor.system.QuadrotorParams` and live beside it:
+:data:`~fnnlib.quadrotor.system.NOMINAL` (the models' and the DFBC's vehicle),
+:data:`~fnnlib.quadrotor.system.TRAINING_TRUTH` (the training data) and
+:data:`~fnnlib.quadrotor.system.TEST_TRUTH` (the Sec. 5.3 flight test).
 
 Mappings are read-only; unpack them into the call, e.g. ``DFBC(NOMINAL, **PAPER_DFBC_GAINS)``.
 """
@@ -97,8 +97,8 @@ PAPER_MLP_RECIPE = MappingProxyType({"epochs": 300, "lr": 1e-3, "batch_size": 25
 VALIDATION_RANDOMIZATION = MappingProxyType({"mass": 0.5, "inertia": 0.5, "drag": 0.5, "force_per_weight": 0.1})
 r"""Domain randomisation of the validation vehicles on which a baseline's settings (AdapNN's :math:`\Gamma`) are chosen.
 
-Each validation vehicle is drawn around :data:`~fnnlib.systems.quadrotor.TRAINING_TRUTH`, the vehicle that made
-the training data, by :func:`fnnlib.mpc.tuning.randomized_vehicles`: mass, each of the three inertias and each
+Each validation vehicle is drawn around :data:`~fnnlib.quadrotor.system.TRAINING_TRUTH`, the vehicle that made
+the training data, by :func:`fnnlib.quadrotor.mpc.tuning.randomized_vehicles`: mass, each of the three inertias and each
 of the three drag coefficients independently uniform in *training value* x (1 +- the relative half-width given
 here), and a constant force with each axis uniform in +- ``force_per_weight`` x the training vehicle's weight
 (+-0.81 N). Arm, torque coefficient and gravity stay.

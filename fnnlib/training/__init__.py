@@ -19,9 +19,8 @@ from fnnlib.training.feedback import (
 )
 from fnnlib.training.neural_ode import PAPER_BOTTLE_RECIPE, PAPER_SPIRAL_RECIPE, QUICK_RECIPE, ODERecipe, TrainHistory, sample_segments, train_neural_ode
 from fnnlib.training.outputs import OutputFit, OutputRecipe, free_run, train_from_outputs
-from fnnlib.training.residual import PAPER_RESIDUAL, ResidualRecipe, train_residual_ensemble
 
 __all__ = ["CheckpointError", "adjoint_gradient", "train_with_inputs", "TrainHistory", "feedback_loss", "load_checkpoint", "load_seed_checkpoints", "load_seed_ensemble", "seed_checkpoint_name", "sample_segments", "save_checkpoint",
            "train_neural_feedback", "train_neural_ode", "FeedbackRecipe", "ODERecipe", "PAPER_BOTTLE_RECIPE", "PAPER_FEEDBACK_RECIPE",
-           "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model", "InputRecipe", "PAPER_RESIDUAL",
-           "ResidualRecipe", "train_residual_ensemble", "OutputFit", "OutputRecipe", "free_run", "train_from_outputs"]
+           "PAPER_SPIRAL_RECIPE", "QUICK_RECIPE", "randomized_cases", "register_model", "InputRecipe",
+           "OutputFit", "OutputRecipe", "free_run", "train_from_outputs"]

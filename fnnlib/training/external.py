@@ -424,7 +424,7 @@ def train_with_inputs(
         (K, T, m). Cast to the dtype and device of ``model``'s parameters.
     recipe : InputRecipe
         Segment length, batch size, epochs and learning rate (the paper's, with the network's:
-        :data:`~fnnlib.training.residual.PAPER_RESIDUAL`).
+        :data:`~fnnlib.quadrotor.training.PAPER_RESIDUAL`).
     W : Tensor or sequence of float, shape (n,), optional
         Diagonal loss weights (default ones), e.g. ones on the 12 quadrotor
         states and zeros on the 6 controller states.

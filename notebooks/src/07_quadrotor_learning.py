@@ -56,15 +56,15 @@ import torch
 from fnnbook.results import headline_number, verdict_from_checks, write_results
 from fnnlib.plotting import new_figure, save_figure
 from fnnlib.training import save_checkpoint
-from fnnlib.control.dfbc import DFBC
+from fnnlib.quadrotor.control.dfbc import DFBC
 from fnnlib.data.quadrotor import make_flights, save_flights, single_step_labels
-from fnnlib.models.residual import AeroResidual
+from fnnlib.quadrotor.residual import AeroResidual
 from fnnbook.rules import quadrotor as rules
-from fnnlib.mpc import FeedbackCascadeModel, PredictionModel
+from fnnlib.quadrotor.mpc import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor.presets import (PAPER_BETA, PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_HORIZON, PAPER_L,
                                       PAPER_MLP_RECIPE)
-from fnnlib.systems.quadrotor import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
-from fnnlib.training.residual import (ResidualRecipe, convergence_checks, predict_flights, state_group_errors,
+from fnnlib.quadrotor.system import NOMINAL, STATE_GROUPS, TRAINING_TRUTH, Quadrotor
+from fnnlib.quadrotor.training import (ResidualRecipe, convergence_checks, predict_flights, state_group_errors,
                                       train_residual_ensemble, train_single_step)
 
 # %%

@@ -67,12 +67,12 @@ import numpy as np
 from fnnbook.results import headline_number, verdict_from_checks, write_results
 from fnnlib.plotting import new_figure, save_figure
 from fnnlib.training import load_checkpoint, load_seed_checkpoints
-import fnnlib.mpc as M
+import fnnlib.quadrotor.mpc as M
 from fnnbook.params import upstream_parameters
 from fnnbook.rules import quadrotor as rules
-from fnnlib.mpc import randomized_vehicles, validation_references
+from fnnlib.quadrotor.mpc import randomized_vehicles, validation_references
 from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, PAPER_LISSAJOUS, PAPER_THRUST_MAX, VALIDATION_RANDOMIZATION
-from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
+from fnnlib.quadrotor.system import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 # %%
 up = Path(upstream_dirs["quadrotor_learning"])
@@ -111,14 +111,14 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 # ## Which thrust bound is judged
 # The paper bounds each thrust by 4 N, the authors' release by 6 N. The cell above prints what the test
 # vehicle needs per motor just to hover and at the Lissajous' peak acceleration, $m \max_t\lVert g e_3 - a_r(t)
-# \rVert / 4$ from the test vehicle's mass and the reference (`fnnlib.mpc.thrust_needed`; drag and the force
+# \rVert / 4$ from the test vehicle's mass and the reference (`fnnlib.quadrotor.mpc.thrust_needed`; drag and the force
 # come on top): more than 4 N, so at 4 N no model can follow the reference (the 4 N table below shows every
 # model far off it). A claim about which model tracks best needs flights that can track, so Q3-Q5 are judged
 # at `u_max_judged` (6 N); the 4 N flights are reported as context only, count toward no verdict, and each
 # claim's row states their outcome and this reason (`at_paper_setting`).
 #
 # `backend = "numba"` evaluates the models along the plan, their exact Jacobians and the truth's step with the
-# compiled twins in `fnnlib.mpc.compiled`; the tests hold them to the torch reference (1e-8 m). `qp = "osqp"`
+# compiled twins in `fnnlib.quadrotor.mpc.compiled`; the tests hold them to the torch reference (1e-8 m). `qp = "osqp"`
 # updates OSQP from cvxpy's canonicalisation of the one cvxpy problem; `qp = "cvxpy"` solves it through cvxpy.
 # A guard before every solve refuses data at or above OSQP's infinity or not finite and plans outside the
 # boxes; such a step flies the previous plan for at most N steps, then the reference input, and is counted
@@ -126,11 +126,11 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 
 # %% [markdown]
 # ## AdapNN's gain, chosen away from the test flight
-# Convention (see `fnnlib.mpc.models.AdaptiveNNModel`): each step adds $\Gamma(v_{t+1} - \hat v_{t+1})\phi^\top$; the
+# Convention (see `fnnlib.quadrotor.mpc.models.AdaptiveNNModel`): each step adds $\Gamma(v_{t+1} - \hat v_{t+1})\phi^\top$; the
 # release steps $T_s\Gamma_{rel}\,e\,\phi^\top$, so $\Gamma = T_s\Gamma_{rel}$ and the release's 8 is 0.16 here. The
 # grid `Gamma_adapnn_grid` brackets 0.16.
 #
-# **Protocol** (`fnnlib.mpc.tuning`), fixed before any flight and blind to the test vehicle:
+# **Protocol** (`fnnlib.quadrotor.mpc.tuning`), fixed before any flight and blind to the test vehicle:
 # - *References*: `validation_flights` random minimum-snap flights drawn like the training data (App. A.5.4:
 #   waypoints in the training box, speeds up to 10 m/s), with their own seed `validation_seed`.
 # - *Vehicles*: `validation_vehicles` vehicles drawn by domain randomisation around the **training** vehicle, in
@@ -145,7 +145,7 @@ print(f"reference thrust {float(u_r.min()):.2f}..{float(u_r.max()):.2f} N per mo
 #   as worst; the lowest score wins, and gains within `Gamma_rtol` (5 %) of it are ties, broken toward the
 #   **smaller gain** (a larger adaptive gain is the riskier one).
 #
-# Nothing of the test flight (vehicle, force, Lissajous curve) enters these flights; `tests/mpc/test_tuning.py`
+# Nothing of the test flight (vehicle, force, Lissajous curve) enters these flights; `tests/quadrotor/mpc/test_tuning.py`
 # checks that the cell below reads none of it.
 
 # %%

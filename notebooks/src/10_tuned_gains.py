@@ -195,10 +195,10 @@ print("hand sweep picks (L, beta): " + ", ".join(f"({h.L:g}, {h.beta:g})" for h 
 # profile changes them, so the hand grid spans every gain the tuning can pick.
 
 # %% tags=["hide-input"]
-import fnnlib.mpc as M
+import fnnlib.quadrotor.mpc as M
 from fnnlib.data.quadrotor import load_flights
 from fnnlib.quadrotor.presets import PAPER_FLIGHT_DATA, VALIDATION_RANDOMIZATION
-from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
+from fnnlib.quadrotor.system import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 q_mpc, m = upstream["quadrotor_mpc"].metrics, ran["quadrotor_mpc"]  # m: the flight settings it flew
 quad_L, quad_beta, quad_N, quad_Ts = m["L"], m["beta"], m["N"], m["Ts"]

@@ -37,12 +37,12 @@ import numpy as np
 
 from fnnbook.results import RESULTS_FILENAME, read_results
 from fnnlib.training import load_seed_checkpoints
-import fnnlib.mpc as M
+import fnnlib.quadrotor.mpc as M
 from fnnbook.params import upstream_parameters
 from fnnlib.quadrotor.evaluation import at_gains, fly_record
 from fnnlib import release
 from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_THRUST_MAX
-from fnnlib.systems.quadrotor import NOMINAL, Quadrotor
+from fnnlib.quadrotor.system import NOMINAL, Quadrotor
 
 t_start = time.perf_counter()
 

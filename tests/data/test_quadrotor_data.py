@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from fnnlib.control.dfbc import DFBC
-from fnnlib.control.min_snap import random_min_snap_flights
+from fnnlib.quadrotor.control.dfbc import DFBC
+from fnnlib.quadrotor.control.min_snap import random_min_snap_flights
 from fnnlib.data.bottle import DataError
 from fnnlib.data.quadrotor import Flights, load_flights, make_flights, save_flights, single_step_labels
 from fnnlib.quadrotor.presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA, PAPER_TS
-from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
+from fnnlib.quadrotor.system import NOMINAL, TRAINING_TRUTH, Quadrotor
 
 F64 = torch.float64
 #: the release's flights (0.02 s, DFBC on the nominal model); tests change some settings

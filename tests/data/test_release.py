@@ -423,10 +423,10 @@ def test_real_residual_and_mlp_predict_the_drag_on_a_dfbc_flight() -> None:
     drag acceleration -R D R^T v with an RMS error under 50 % of its RMS (trained end to end through the
     closed loop: 16-38 % per flight, the z drag least), the single-step MLPs under 10 % (about 4 %); the
     unnegated networks are off by about 200 %."""
-    from fnnlib.control.dfbc import DFBC
+    from fnnlib.quadrotor.control.dfbc import DFBC
     from fnnlib.data.quadrotor import make_flights
     from fnnlib.quadrotor.presets import PAPER_DFBC_GAINS, PAPER_FLIGHT_DATA
-    from fnnlib.systems.quadrotor import NOMINAL, TRAINING_TRUTH, Quadrotor
+    from fnnlib.quadrotor.system import NOMINAL, TRAINING_TRUTH, Quadrotor
 
     flight = make_flights(1, 150, Ts=0.02, seed=3, truth=TRAINING_TRUTH, controller=DFBC(NOMINAL, **PAPER_DFBC_GAINS),
                           n_waypoints=3, box=PAPER_FLIGHT_DATA["box"], max_speed=10.0, substeps=4)

@@ -44,12 +44,12 @@ def test_a_record_flies_each_model_once_per_unit_and_the_adaptive_ones_per_gain(
     2's share; each entry the numbers of the flights paired_units flies at that gain."""
     import torch
 
-    import fnnlib.mpc as M
+    import fnnlib.quadrotor.mpc as M
     from fnnlib.quadrotor.evaluation import fly_record
-    from fnnlib.models import AeroResidual
-    from fnnlib.mpc.backends import Backend
+    from fnnlib.quadrotor.residual import AeroResidual
+    from fnnlib.quadrotor.mpc.backends import Backend
     from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
-    from fnnlib.systems.quadrotor import NOMINAL, TEST_TRUTH, Quadrotor
+    from fnnlib.quadrotor.system import NOMINAL, TEST_TRUTH, Quadrotor
 
     torch.manual_seed(0)
     nets = [(k, AeroResidual((4,), "tanh").double()) for k in range(2)]

@@ -139,7 +139,7 @@ def test_config_that_does_not_fit_the_weights(saved):
 
 def test_unknown_model_type_refuses_to_save(tmp_path):
     with pytest.raises(TypeError, match=r"cannot checkpoint a Linear: register its class first with "
-                                        r"fnnlib.training.register_model\(Linear\).*known models: \['AeroResidual', 'NeuralFeedback', 'NeuralODE'\]"):
+                                        r"fnnlib.training.register_model\(Linear\).*known models: \[.*'NeuralFeedback', 'NeuralODE'.*\]"):
         save_checkpoint(tmp_path / "lin.pt", nn.Linear(2, 2))
     assert not (tmp_path / "lin.pt").exists()
 
