@@ -399,7 +399,7 @@ def _free_starts(rec: Any, seeds: Sequence[int], s: TanksSettings, stacked: Any,
     E = len(seeds)
     train_from_outputs(stacked, rec.y_est.expand(-1, E).contiguous(), _blocks(C, E), OutputRecipe(
         start="free", iterations=int(s.train_iterations), lr=s.train_lr, burn=1,
-        horizon=int(s.baseline_horizon)), Ts=rec.Ts, u=rec.u_est, seed=seeds[0], progress=False)
+        horizon=int(s.baseline_horizon), seed=int(seeds[0])), Ts=rec.Ts, u=rec.u_est, progress=False)
     return stacked
 
 
@@ -426,7 +426,7 @@ def no_feedback(rec: Any, seed: int, s: TanksSettings, make: Any, C: Tensor, *, 
             m = copy.deepcopy(make)
             encoder = train_from_outputs(m, rec.y_est, C, OutputRecipe(
                 start=start, iterations=int(s.train_iterations), lr=s.train_lr,
-                burn=1 if start == "free" else skip, horizon=H), Ts=rec.Ts, u=rec.u_est, seed=seed,
+                burn=1 if start == "free" else skip, horizon=H, seed=int(seed)), Ts=rec.Ts, u=rec.u_est,
                 progress=False).encoder
         est = _simulate(F, m, encoder, rec.y_est, rec.u_est, rec.Ts, skip, C, s)
         tried[start] = (m, encoder, capped(simulation_rmse, est, rec.y_est, skip=skip))

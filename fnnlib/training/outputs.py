@@ -34,7 +34,7 @@ from fnnlib.feedback.gaps import first_layer, measure_fn, start_state
 from fnnlib.feedback.layer import eval_field
 from fnnlib.feedback.measured import MeasuredFeedback
 from fnnlib.feedback.measurement import Measurements, check_measurements
-from fnnlib.feedback.options import Measurement
+from fnnlib.feedback.options import Measurement, record_sampling
 from fnnlib.feedback.sampling import Steps, check_times, row_steps
 from fnnlib.models.neural_ode import init_parameters, mlp
 from fnnlib.training.neural_ode import OPTIMIZERS, Recipe
@@ -66,6 +66,8 @@ class OutputRecipe(Recipe):
         Also descend on the output gain.
     encoder_hidden : tuple of int
         Hidden layers of the encoder (``"encoder"``).
+    seed : int
+        Seeds the draws of the training (segments, the encoder's and the free starts' initial values).
     """
 
     start: str = "feedback"
@@ -78,11 +80,12 @@ class OutputRecipe(Recipe):
     L: tuple | None = None
     train_gain: bool = False
     encoder_hidden: tuple = (64,)
+    seed: int = 0
 
     def __post_init__(self):
         if self.start not in STARTS:
             raise ValueError(f"OutputRecipe.start must be one of {STARTS}, got {self.start!r}")
-        for name, low in (("iterations", 1), ("burn", 1), ("horizon", 1), ("batch", 1)):
+        for name, low in (("iterations", 1), ("burn", 1), ("horizon", 1), ("batch", 1), ("seed", 0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < low:
                 raise ValueError(f"OutputRecipe.{name} must be an integer >= {low}, got {v!r}")
@@ -145,21 +148,23 @@ def _output_loss(model, meas_seg: Measurements, x_pred: Tensor, first: int) -> T
 
 
 def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, Ts: float | None = None,
-                       t: Tensor | None = None, u: Tensor | None = None, mask: Tensor | None = None, seed: int = 0,
+                       u: Tensor | None = None, measurement: Measurement | None = None,
                        progress: bool = True) -> OutputFit:
     r"""Train ``model`` (``f(t, x)`` or ``f(t, x, u)``) from outputs ``y`` (B, T, p) or (T, p) alone (module docstring).
 
     Each segment starts at the estimate of the feedback of Eqs. (7)-(8) on the measured outputs;
     :math:`f_{neural}` of Eq. (3) is fitted through it.
 
-    ``C`` (p, n) or ``h(x)``; ``Ts`` or the times ``t`` ((T,) or (B, T)); ``u`` (B, T, m) or (T, m);
-    a NaN in ``y`` or ``False`` in ``mask`` is a missing sample. Checked before any work; every record needs a
-    present output. Returns an :class:`OutputFit`.
+    ``C`` (p, n) or ``h(x)``; ``Ts``, or the times ``t`` ((T,) or (B, T)) of ``measurement``; ``u`` (B, T, m)
+    or (T, m); a NaN in ``y`` or ``False`` in the ``measurement``'s ``mask`` is a missing sample (the
+    measurement carries the record's ``t`` and ``mask`` only: its ``C`` is the argument here). Checked before
+    any work; every record needs a present output. Returns an :class:`OutputFit`; ``recipe.seed`` seeds it.
     """
     if not isinstance(recipe, OutputRecipe):
         raise TypeError(f"recipe must be an OutputRecipe, got {type(recipe).__name__}")
     if not isinstance(model, nn.Module):
         raise TypeError("model must be an nn.Module (its parameters are trained)")
+    t, mask = record_sampling(measurement)
     n = _state_dim(model, C, recipe)
     y = y[None] if isinstance(y, Tensor) and y.ndim == 2 else y
     u = u[None].expand(y.shape[0], *u.shape) if isinstance(u, Tensor) and u.ndim == 2 else u
@@ -173,7 +178,7 @@ def train_from_outputs(model: nn.Module, y: Tensor, C, recipe: OutputRecipe, *, 
     dtype = meas.y.dtype
     steps = row_steps(dt, 0, T)
     steps = steps.expand(B, T, 1) if isinstance(steps, Tensor) else steps
-    gen = torch.Generator().manual_seed(int(seed))
+    gen = torch.Generator().manual_seed(int(r.seed))
     params = [p for p in model.parameters() if p.requires_grad]
     observer, encoder, x_free, L_y, fixed = None, None, None, None, None
     if r.start == "feedback":

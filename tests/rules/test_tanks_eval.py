@@ -186,8 +186,8 @@ def test_the_free_start_baselines_train_as_one_ensemble_as_alone() -> None:
     both = _free_starts(rec, [0, 1], s, _field(s, [0, 1]), LEVEL)
     for e, seed in enumerate((0, 1)):
         one = _field(s, [seed])
-        train_from_outputs(one, rec.y_est, LEVEL, OutputRecipe(start="free", iterations=4, lr=0.01, burn=1, horizon=10),
-                           Ts=rec.Ts, u=rec.u_est, seed=seed, progress=False)
+        train_from_outputs(one, rec.y_est, LEVEL, OutputRecipe(start="free", iterations=4, lr=0.01, burn=1, horizon=10,
+                                                               seed=seed), Ts=rec.Ts, u=rec.u_est, progress=False)
         for a, b in zip(both.member(e).parameters(), one.parameters()):
             torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
 

@@ -43,8 +43,8 @@ def _fit(start, train):
     torch.manual_seed(1)
     model = F.NeuralODE(2, (16, 16), "tanh", n_input=1).double()
     recipe = OutputRecipe(start=start, iterations=150, lr=0.01, burn=20, horizon=40, batch=32,
-                          L=tuple(map(tuple, _gain().tolist())))
-    train_from_outputs(model, train[0], C, recipe, Ts=TS, u=train[1], seed=0, progress=False)
+                          L=tuple(map(tuple, _gain().tolist())), seed=0)
+    train_from_outputs(model, train[0], C, recipe, Ts=TS, u=train[1], progress=False)
     return model
 
 
@@ -74,8 +74,8 @@ def test_encoder_start_trains(records):
     train, test = records
     torch.manual_seed(1)
     model = F.NeuralODE(2, (8,), "tanh", n_input=1).double()
-    fit = train_from_outputs(model, train[0], C, OutputRecipe(start="encoder", iterations=30, burn=10, horizon=20),
-                             Ts=TS, u=train[1], seed=0, progress=False)
+    fit = train_from_outputs(model, train[0], C, OutputRecipe(start="encoder", iterations=30, burn=10, horizon=20,
+                                                              seed=0), Ts=TS, u=train[1], progress=False)
     assert fit.encoder is not None and fit.loss[-1] < fit.loss[0]
     sim = free_run(model, test[0], C, burn=10, Ts=TS, u=test[1], encoder=fit.encoder)
     assert sim.shape == (B, T - 10, 1) and bool(torch.isfinite(sim).all())
@@ -99,4 +99,9 @@ def test_bad_training_inputs_are_refused_before_any_work(records):
         train_from_outputs(model, y[:, :30], C, OutputRecipe(start="free", burn=20, horizon=40), Ts=TS, u=u[:, :30],
                            progress=False)
     with pytest.raises(TypeError, match="not both"):
-        train_from_outputs(model, y, C, recipe, Ts=TS, t=torch.arange(T, dtype=F64), u=u, progress=False)
+        train_from_outputs(model, y, C, recipe, Ts=TS, measurement=F.Measurement(t=torch.arange(T, dtype=F64)), u=u,
+                           progress=False)
+    with pytest.raises(ValueError, match="C and x0 belong to the first layer's observer"):
+        train_from_outputs(model, y, C, recipe, Ts=TS, measurement=F.Measurement(C=C), u=u, progress=False)
+    with pytest.raises(ValueError, match="seed must be an integer >= 0"):
+        OutputRecipe(start="free", seed=-1)
