@@ -36,11 +36,11 @@ nominal ``Ts`` given at construction): each interval :math:`\Delta_k = t_{k+1} -
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import functools
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import torch
-from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from torch import Tensor
 
 from fnnlib._validation import as_trajectory
@@ -58,6 +58,9 @@ from fnnlib.observers.augmented import (
     steps_per_record,
 )
 from fnnlib.observers.options import Covariances
+
+if TYPE_CHECKING:
+    from filterpy.kalman import KalmanFilter
 
 #: Beyond this magnitude the squared deviations a filter forms overflow float64 (its largest value is ~1.8e308).
 SQUARE_LIMIT = 1e150
@@ -397,6 +400,8 @@ class KalmanObserver(_KalmanBase):
 
     def make_filter(self) -> KalmanFilter:
         """A filterpy ``KalmanFilter`` with F = A, B, H = C, Q, R and P = P0 (state left at zero)."""
+        from filterpy.kalman import KalmanFilter  # noqa: PLC0415 (imported on use, see _learned_model_ekf)
+
         kf = self._new(KalmanFilter)
         kf.B = self.B.numpy().copy()
         return kf
@@ -458,21 +463,32 @@ class KalmanObserver(_KalmanBase):
         return f"KalmanObserver(n={self.n}, Ts={self.Ts}, steady_state={self.steady_state})"
 
 
-class _LearnedModelEKF(ExtendedKalmanFilter):
-    """filterpy's EKF predicts linearly (``F x + B u``); here ``predict_x`` runs the learned model.
+@functools.cache
+def _learned_model_ekf() -> type:
+    """The EKF class of :class:`ExtendedKalmanObserver`, made on first use.
 
-    ``step(z)`` returns the next state and the Jacobian at ``z``; setting
-    ``self.F`` there makes the following ``P = F P F' + Q`` of ``predict`` use it.
+    filterpy imports scipy.stats, ~0.25 s of CPU in every process that imports it; most processes that import
+    fnnlib (every notebook's kernel) never run a Kalman filter, so filterpy is imported where a filter is made.
     """
+    from filterpy.kalman import ExtendedKalmanFilter  # noqa: PLC0415
 
-    def __init__(self, step, dim_x: int, dim_z: int):
-        super().__init__(dim_x=dim_x, dim_z=dim_z)
-        self.step = step
+    class _LearnedModelEKF(ExtendedKalmanFilter):
+        """filterpy's EKF predicts linearly (``F x + B u``); here ``predict_x`` runs the learned model.
 
-    k: int | None = None  # the sample the next prediction steps from (its input)
+        ``step(z)`` returns the next state and the Jacobian at ``z``; setting
+        ``self.F`` there makes the following ``P = F P F' + Q`` of ``predict`` use it.
+        """
 
-    def predict_x(self, u=0):
-        self.x, self.F = self.step(self.x, self.k)
+        def __init__(self, step, dim_x: int, dim_z: int):
+            super().__init__(dim_x=dim_x, dim_z=dim_z)
+            self.step = step
+
+        k: int | None = None  # the sample the next prediction steps from (its input)
+
+        def predict_x(self, u=0):
+            self.x, self.F = self.step(self.x, self.k)
+
+    return _LearnedModelEKF
 
 
 class ExtendedKalmanObserver(_KalmanBase):
@@ -535,7 +551,7 @@ class ExtendedKalmanObserver(_KalmanBase):
         z = np.empty((*ys.shape[:2], self.n + self.q))
         for i, y in enumerate(ys):  # filterpy: one filter per trajectory, one sample per call
             ui, hi = (None if us is None else us[i]), hs[i]
-            ekf = self._new(_LearnedModelEKF,
+            ekf = self._new(_learned_model_ekf(),
                             lambda s, k=None: self._step(s, dtype, None if ui is None else ui[k], float(hi[k])))
             ekf.x = self.start(y[0], None if ms is None else ms[i, 0], None if x0s is None else x0s[i])  # z_{0|-1}
             for k in range(y.shape[0]):

@@ -14,9 +14,10 @@ non-finite or indefinite (a diverging model) stops the filter with the sample wh
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from torch import Tensor
 
 from fnnlib.feedback.types import VectorField
@@ -25,15 +26,23 @@ from fnnlib.observers.kalman import SQUARE_LIMIT, _KalmanBase
 from fnnlib.observers.options import Covariances, SigmaPoints
 
 
-class _BatchedUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with every sigma point propagated in one call of ``fx_batch`` (S, n + q) -> (S, n + q)."""
+@functools.cache
+def _batched_ukf() -> type:
+    """The UKF class, made on first use (filterpy is imported where a filter is made, as in
+    :mod:`fnnlib.observers.kalman`)."""
+    from filterpy.kalman import UnscentedKalmanFilter  # noqa: PLC0415
 
-    def __init__(self, fx_batch, **kw):
-        super().__init__(fx=None, hx=None, **kw)
-        self.fx_batch = fx_batch
+    class _BatchedUKF(UnscentedKalmanFilter):
+        """filterpy's UKF with every sigma point propagated in one call of ``fx_batch`` (S, n + q) -> (S, n + q)."""
 
-    def compute_process_sigmas(self, dt, fx=None, **fx_args):
-        self.sigmas_f = self.fx_batch(self.points_fn.sigma_points(self.x, self.P), **fx_args)
+        def __init__(self, fx_batch, **kw):
+            super().__init__(fx=None, hx=None, **kw)
+            self.fx_batch = fx_batch
+
+        def compute_process_sigmas(self, dt, fx=None, **fx_args):
+            self.sigmas_f = self.fx_batch(self.points_fn.sigma_points(self.x, self.P), **fx_args)
+
+    return _BatchedUKF
 
 
 class UnscentedKalmanObserver(_KalmanBase):
@@ -71,6 +80,8 @@ class UnscentedKalmanObserver(_KalmanBase):
                  x0=None) -> DisturbanceEstimate:
         """Filtered state, disturbance and change rate along measurements ``x`` (..., T, p); see the EKF's (``t``,
         ``x0``)."""
+        from filterpy.kalman import MerweScaledSigmaPoints  # noqa: PLC0415 (imported on use, see _batched_ukf)
+
         meas, ys, us, ms, hs, x0s = self.measurements(x, u, mask, t=t, x0=x0, limit=SQUARE_LIMIT)
         dtype = meas.y.dtype
         dim = self.n + self.q
@@ -78,7 +89,7 @@ class UnscentedKalmanObserver(_KalmanBase):
         for i, y in enumerate(ys):
             ui, hi = (None if us is None else us[i]), hs[i]
             points = MerweScaledSigmaPoints(dim, alpha=self.alpha, beta=self.beta, kappa=self.kappa)
-            ukf = self._new(_BatchedUKF, lambda s, k: self._fx(s, dtype, None if ui is None else ui[k], float(hi[k])),
+            ukf = self._new(_batched_ukf(), lambda s, k: self._fx(s, dtype, None if ui is None else ui[k], float(hi[k])),
                             dt=self.Ts, points=points)
             ukf.x = self.start(y[0], None if ms is None else ms[i, 0], None if x0s is None else x0s[i])[:, 0]
             ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # the first update has no prediction before it
