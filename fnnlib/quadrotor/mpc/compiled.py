@@ -32,7 +32,6 @@ from typing import Any
 
 import numba as nb
 import numpy as np
-from numba.typed import List
 import torch
 from torch import Tensor, nn
 
@@ -58,9 +57,7 @@ _NP = 25
 
 @nb.njit(**_FAST)
 def _residual(y, Ws, bs, H, r, G, want_jac):  # pragma: no cover - compiled
-    """f_neural(v, Theta) into r (3,); with want_jac its Jacobian (3, 6) into G[:3, :6] (reverse pass).
-
-    ``Ws``, ``bs``: typed lists of the layers' weights (n_out, n_in) and biases, first layer first."""
+    """f_neural(v, Theta) into r (3,); with want_jac its Jacobian (3, 6) into G[:3, :6] (reverse pass)."""
     L = len(Ws)
     for j in range(6):
         H[0, j] = y[3 + j]
@@ -189,7 +186,7 @@ def _rhs(y, u, P, Ws, bs, H, G, has_res, k, Jm, want_jac):  # pragma: no cover -
             Jm[9 + i, 12 + j] = P[_S_T + 4 * j + 1 + i]
 
 
-def _buffers(Ws: List) -> tuple[np.ndarray, np.ndarray]:
+def _buffers(Ws: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
     width = max([6] + [W.shape[0] for W in Ws] + [W.shape[1] for W in Ws])
     return np.zeros((len(Ws) + 1, width)), np.zeros((6, width))
 
@@ -340,22 +337,7 @@ def pack_params(plant: Quadrotor) -> np.ndarray:
     return P
 
 
-def _typed(arrays: tuple[np.ndarray, ...]) -> List:
-    """The arrays as one numba typed list (no copies: the list holds views of the same memory).
-
-    A typed list's type does not depend on its length, so the kernels compile once for every depth of network
-    (and for the plant alone): a tuple of arrays made the number of layers part of the argument types, and every
-    depth compiled (and cached) the three kernels again, ~10 s each.
-    """
-    out = List()
-    for a in arrays:
-        out.append(a)
-    return out
-
-
-def _dummy() -> tuple[List, List]:
-    """Typed stand-ins when there is no residual (never evaluated): one (3, 6) layer."""
-    return _typed((np.zeros((3, 6)),)), _typed((np.zeros(3),))
+_DUMMY = ((np.zeros((3, 6)),), (np.zeros(3),))  # typed stand-in when there is no residual (never evaluated)
 
 
 class CompiledQuadrotor:
@@ -383,7 +365,7 @@ class CompiledQuadrotor:
         self.P = pack_params(plant)
         Ws, bs = residual_layers(residual)  # fails early on an unsupported network
         # (weights, biases, has_res): views of the network's tensors, so in-place updates are seen
-        self._net = (_typed(Ws), _typed(bs), True) if Ws else (*_dummy(), False)
+        self._net = (Ws, bs, True) if Ws else (_DUMMY[0], _DUMMY[1], False)
         self._H, self._G = _buffers(self._net[0])
 
     @staticmethod
@@ -500,11 +482,10 @@ _WARM_UP_TS = 0.01  # any step: numba compiles per argument type, not value
 
 
 def warm_up(*residuals: nn.Module | None) -> float:
-    """Compile (or load from numba's cache) every kernel, and run each for the plant alone and for each residual.
+    """Compile (or load from numba's cache) every kernel for the plant alone and for each residual's depth.
 
-    Numba compiles a kernel at its first call, per argument types; the layers travel as typed lists, so one
-    compilation serves the plant alone and networks of any depth (~10 s on a fresh cache, ~0.5 s to load a
-    cached one). Call this before timing a loop.
+    Numba compiles a kernel at its first call, per argument types (the number of network layers is
+    one of them): ~30 s on a fresh cache, ~0.5 s to load a cached one. Call this before timing a loop.
 
     Returns
     -------

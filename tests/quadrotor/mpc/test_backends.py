@@ -10,6 +10,10 @@ from fnnlib.quadrotor.mpc.backends import BACKENDS, NumbaBackend, TorchBackend, 
 from fnnlib.quadrotor.mpc.models import FeedbackCascadeModel, PredictionModel
 from fnnlib.quadrotor.system import NOMINAL, TEST_TRUTH, Quadrotor
 
+# one worker runs every test that compiles the numba kernels: they compile once (~8 s per network depth),
+# not once per worker at the same moment
+pytestmark = pytest.mark.xdist_group("numba")
+
 TS, N = 0.02, 4
 
 

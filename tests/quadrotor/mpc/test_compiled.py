@@ -19,6 +19,10 @@ from fnnlib.quadrotor.mpc.models import paper_models
 from fnnlib.quadrotor.presets import PAPER_LISSAJOUS, PAPER_MPC_WEIGHTS
 from fnnlib.quadrotor.system import NOMINAL, TEST_TRUTH, Quadrotor
 
+# one worker runs every test that compiles the numba kernels: they compile once (~8 s per network depth),
+# not once per worker at the same moment
+pytestmark = pytest.mark.xdist_group("numba")
+
 F64 = torch.float64
 N, TS = 10, 0.02
 
@@ -58,6 +62,7 @@ def _case(name: str) -> tuple[Quadrotor, nn.Module | None]:
             residual.chi_hat.add_(0.3)  # as if adapted
     elif kind == "shallow":
         residual = _net(2, (20,))
+
     return Quadrotor(params), residual
 
 
