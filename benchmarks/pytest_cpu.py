@@ -31,10 +31,10 @@ def _cpu() -> float:
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
-    cpu, wall = _cpu(), time.perf_counter()
+    cpu, wall, start = _cpu(), time.perf_counter(), time.time()
     yield
     line = {"test": item.nodeid, "cpu_s": round(_cpu() - cpu, 3), "wall_s": round(time.perf_counter() - wall, 3),
-            "worker": os.environ.get("PYTEST_XDIST_WORKER", "main")}
+            "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"), "start": round(start, 3)}
     with OUT.open("a", encoding="utf-8") as f:
         f.write(json.dumps(line) + "\n")
 
@@ -59,6 +59,22 @@ def summary(path: Path) -> None:
     print()
     for r in sorted(rows, key=lambda r: -r["cpu_s"])[:30]:
         print(f"{r['cpu_s']:8.1f} cpu {r['wall_s']:7.1f} wall  {r['test']}")
+    if all("start" in r for r in rows):
+        _timeline(rows)
+
+
+def _timeline(rows: list[dict]) -> None:
+    """When each worker started its first test and ended its last, and the tests of 5 s or more in time order:
+    the suite's tail, and which long test ran beside which."""
+    t0 = min(r["start"] for r in rows)
+    print(f"\ntimeline (s from the first test's start)")
+    for worker in sorted({r["worker"] for r in rows}):
+        mine = [r for r in rows if r["worker"] == worker]
+        end = max(r["start"] + r["wall_s"] for r in mine)
+        print(f"  {worker}: first test at {min(r['start'] for r in mine) - t0:6.1f}, last ends at {end - t0:6.1f}")
+    for r in sorted((r for r in rows if r["wall_s"] >= 5), key=lambda r: r["start"]):
+        start = r["start"] - t0
+        print(f"  {start:6.1f} - {start + r['wall_s']:6.1f}  {r['worker']}  {r['test']}")
 
 
 if __name__ == "__main__":
