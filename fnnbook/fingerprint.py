@@ -192,13 +192,36 @@ def package_roots(packages: Sequence[Path] | None = None) -> dict[str, Path]:
 
 # ---------------------------------------------------------------- environment
 def environment() -> dict[str, str]:
-    """The installed distributions (normalised name -> version) and the Python version: what the kernels run."""
+    """The installed distributions (normalised name -> version) and the Python version: what the kernels run.
+
+    Reading every distribution's metadata takes ~0.2 s, and a run reads it once per call of
+    :func:`~fnnbook.runner.run` (the test suite: once per task, hundreds of times). It is read again only when
+    a folder of ``sys.path`` changed: installing, upgrading or removing a distribution adds or removes its
+    ``.dist-info`` folder there, which changes that folder's modification time.
+    """
+    return dict(_distributions(_path_stamps()))
+
+
+def _path_stamps() -> tuple[tuple[str, int], ...]:
+    """Each folder of ``sys.path`` with its modification time (ns)."""
+    stamps = []
+    for entry in sys.path:
+        try:
+            stamps.append((entry, os.stat(entry or ".").st_mtime_ns))
+        except OSError:
+            continue
+    return tuple(stamps)
+
+
+@lru_cache(maxsize=4)
+def _distributions(stamps: tuple[tuple[str, int], ...]) -> tuple[tuple[str, str], ...]:
+    """:func:`environment` for one state of ``sys.path`` (``stamps``, the cache key)."""
     dists: dict[str, str] = {"python": ".".join(map(str, sys.version_info[:3]))}
     for dist in metadata.distributions():
         name = (dist.metadata["Name"] or "").lower().replace("_", "-")
         if name:
             dists[name] = dist.version
-    return dict(sorted(dists.items()))
+    return tuple(sorted(dists.items()))
 
 
 # ---------------------------------------------------------------- data

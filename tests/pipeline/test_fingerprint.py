@@ -236,3 +236,36 @@ def test_code_digest_ignores_docstrings_and_comments_only() -> None:
     assert code_digest(RULES.replace("Whether x passes.", "Reworded.").replace("# a comment", "")) == base
     assert code_digest(RULES.replace("x > FACTOR", "x >= FACTOR")) != base
     assert code_digest("def f():\n    '''doc'''\n") == code_digest("def f():\n    pass\n")
+
+
+def _dist_info(folder: Path, name: str, version: str) -> None:
+    info = folder / f"{name}-{version}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n", encoding="utf-8")
+
+
+def test_the_environment_is_read_again_exactly_when_an_install_changes_a_path_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The environment is cached (reading every distribution's metadata costs ~0.2 s per run): an install,
+    an upgrade or a removal in a folder of sys.path is seen at the next call, and nothing else rereads it."""
+    from importlib import metadata  # noqa: PLC0415
+
+    from fnnbook import fingerprint  # noqa: PLC0415
+
+    site = tmp_path / "site"
+    site.mkdir()
+    _dist_info(site, "pkg-one", "1.0")
+    monkeypatch.syspath_prepend(str(site))
+    reads = []
+    real = metadata.distributions
+    monkeypatch.setattr(metadata, "distributions", lambda: reads.append(1) or real())
+    first = fingerprint.environment()
+    assert first["pkg-one"] == "1.0" and len(reads) == 1
+    assert fingerprint.environment() == first and len(reads) == 1  # nothing changed: not read again
+    shutil.rmtree(site / "pkg-one-1.0.dist-info")  # an upgrade
+    _dist_info(site, "pkg-one", "2.0")
+    _dist_info(site, "pkg-two", "0.1")  # an install
+    second = fingerprint.environment()
+    assert len(reads) == 2 and second["pkg-one"] == "2.0" and second["pkg-two"] == "0.1"
+    shutil.rmtree(site / "pkg-two-0.1.dist-info")  # a removal
+    assert "pkg-two" not in fingerprint.environment() and len(reads) == 3
