@@ -191,3 +191,20 @@ def test_a_downstream_notebook_reads_what_its_upstream_ran_with(make_pipeline: M
     assert {k: ran[k] for k in ("value", "scale", "fail", "profile")} == {"value": 7, "scale": 1.0, "fail": False,
                                                                         "profile": "smoke"}
     assert "out_dir" not in ran  # no machine paths
+
+
+def test_a_changed_claims_registry_is_read_again(tmp_path: Path) -> None:
+    """The registry's claim IDs are cached by the file's content: an edit is seen at the next check, a broken
+    registry is refused as before."""
+    from fnnbook.runner import _known_claims  # noqa: PLC0415
+
+    from .nbfactory import CLAIMS_YAML  # noqa: PLC0415
+
+    claims = tmp_path / "claims.yaml"
+    claims.write_text(CLAIMS_YAML)
+    assert _known_claims(claims) == {"S1", "S2"}
+    claims.write_text(CLAIMS_YAML.replace("id: S2", "id: S3"))
+    assert _known_claims(claims) == {"S1", "S3"}
+    claims.write_text(CLAIMS_YAML.replace("id: S2", "id: S1"))
+    with pytest.raises(PipelineError, match="S1"):
+        _known_claims(claims)
