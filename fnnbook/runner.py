@@ -47,7 +47,7 @@ def _known_claims(claims_file: Path) -> set[str] | None:
 def _claim_ids(path: str, content: bytes) -> frozenset[str]:
     """The claim IDs of a registry, parsed again when its content changes (the cache key): parsing the YAML
     costs ~0.06 s, and a run checks it at every call."""
-    return frozenset(c.id for c in read_claims(path))
+    return frozenset(c.id for c in read_claims(path, content.decode("utf-8")))
 
 
 def check(

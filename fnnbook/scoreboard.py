@@ -150,7 +150,7 @@ def _claim(entry: Any, group: str, group_settings: str, where: str) -> Claim:
                  shared=_text(entry["shared"], where, "shared") if "shared" in entry else "")
 
 
-def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
+def read_claims(path: str | os.PathLike[str], text: str | None = None) -> list[Claim]:
     """Read every claim of a claims registry (YAML, see ``claims.yaml`` at the repository root).
 
     The file holds ``groups:``, a list (possibly empty) of ``{name, settings, claims}``; each claim gives ``id``,
@@ -164,6 +164,8 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
     ----------
     path : path-like
         The registry.
+    text : str, optional
+        Its content, already read (``path`` then only names it in errors).
 
     Returns
     -------
@@ -177,7 +179,7 @@ def read_claims(path: str | os.PathLike[str]) -> list[Claim]:
     """
     where = str(path)
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8") if text is None else text)
     except yaml.YAMLError as exc:
         raise ValueError(f"{where}: not a YAML claims registry: {exc}") from exc
     groups = data.get("groups") if isinstance(data, Mapping) else None
