@@ -23,15 +23,17 @@ import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
-import torch
 from filelock import FileLock
 from hypothesis import settings
 
-import fnnlib
-from fnnbook import PipelineSpec, RunReport, load_spec, run
-from fnnbook.runner import TaskOutcome
+if TYPE_CHECKING:
+    from fnnbook import PipelineSpec, RunReport
+
+# torch, fnnlib and fnnbook are imported where used: the xdist controller loads this file before it starts the
+# workers and runs no test, so their ~2.5 s of imports there only delayed every worker's start
 
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "pipeline.yaml"
@@ -42,7 +44,10 @@ def pytest_configure(config):
     """The tests compute with one torch thread, as the notebooks do (importing fnnlib does not set it), and
     hypothesis draws its examples from a fixed seed: the same command runs the same examples (a property test
     that fails fails every time, not one run in many)."""
-    fnnlib.threads.set_num_threads(1)
+    if not (getattr(config.option, "numprocesses", None) and not os.environ.get("PYTEST_XDIST_WORKER")):
+        import fnnlib  # noqa: PLC0415 (a process that runs tests: not the xdist controller)
+
+        fnnlib.threads.set_num_threads(1)
     settings.register_profile("fixed", derandomize=True)
     settings.load_profile("fixed")
 
@@ -51,6 +56,8 @@ def pytest_configure(config):
 def f():
     """A small random vector field f(t, x) on R^2: a float64 tanh MLP 2-8-2 drawn with seed 0 (the Sec. 3
     kernels' tests; one per test module)."""
+    import torch  # noqa: PLC0415
+
     from fnnlib.models import mlp  # noqa: PLC0415
 
     torch.manual_seed(0)
@@ -69,7 +76,9 @@ class SmokeOutputs:
 
         Up-to-date tasks are skipped; the first task that fails stops the rest.
         """
-        outcomes: list[TaskOutcome] = []
+        from fnnbook import RunReport, run  # noqa: PLC0415
+
+        outcomes = []
         for name in self.spec.closure(tasks):
             with FileLock(str(self.spec.output_root / f".{name}.lock")):
                 report = run(self.spec, SMOKE, [name], progress_bar=False, echo=lambda _: None,
@@ -141,6 +150,8 @@ def smoke_outputs(tmp_path_factory: pytest.TempPathFactory) -> SmokeOutputs:
         if not (base / "new-user.copied").is_file():
             bare_copy(repo)
             (base / "new-user.copied").touch()
+    from fnnbook import load_spec  # noqa: PLC0415
+
     # the notebooks' kernels (and the book's autodoc) import the copy's fnnlib, not this checkout's
     path = os.environ.get("PYTHONPATH")
     os.environ["PYTHONPATH"] = os.pathsep.join([str(repo), *([path] if path else [])])
@@ -166,6 +177,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """
     import yaml  # noqa: PLC0415
 
+    from fnnbook import load_spec  # noqa: PLC0415
     from fnnbook.executor import longest_remaining  # noqa: PLC0415
 
     _group_the_marked(config, items)
