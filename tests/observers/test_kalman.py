@@ -141,3 +141,17 @@ def test_an_undetectable_pair_has_no_stationary_gain():
     A = np.diag([1.2, 0.5])  # the unstable mode is not seen by C
     with pytest.raises(RuntimeError, match="detectable"):
         steady_state_gain(A, np.array([[0.0, 1.0]]), np.eye(2), np.eye(1))
+
+
+def test_filterpy_is_imported_only_where_a_filter_is_made():
+    """filterpy (with scipy.stats, ~0.25 s) is not loaded by fnnlib's face, the observers or the training code, which
+    every notebook kernel imports; making a Kalman filter loads it."""
+    import subprocess  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    code = ("import sys, torch, fnnlib as F, fnnlib.observers, fnnlib.training; F.KalmanObserver; "
+            "F.UnscentedKalmanObserver; F.ExtendedKalmanObserver; print('filterpy' in sys.modules); "
+            "from fnnlib.observers.kalman import _learned_model_ekf; _learned_model_ekf(); "
+            "print('filterpy' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["False", "True"], done.stdout
