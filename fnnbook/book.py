@@ -255,6 +255,7 @@ def assemble_book(spec: PipelineSpec, profile: str, book_dir: str | os.PathLike[
         ``_generated/`` is built aside and swapped in only when complete, under
         a reader's share of the outputs' locks (no run writes them meanwhile).
     """
+    spec = spec.for_profile(profile)  # the grid points the profile runs
     book = Path(book_dir).resolve()
     for page in _STATIC_PAGES:
         if not (book / page).is_file():

@@ -115,6 +115,7 @@ def _spec(args: argparse.Namespace) -> PipelineSpec:
 
 def _states(spec: PipelineSpec, profile: str) -> dict[str, str]:
     """Each task's state in ``profile``: up to date, stale (with the input that changed), not run, data missing."""
+    spec = spec.for_profile(profile)
     names = [n for n, t in spec.tasks.items() if profile in t.parameters]
     try:
         plan = check(spec, profile, names)

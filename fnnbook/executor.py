@@ -174,6 +174,7 @@ def run_on_dask(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision],
     KeyboardInterrupt
         After cancelling the tasks and stopping their kernels.
     """
+    spec = spec.for_profile(plan.profile)
     if scheduler is not None:
         try:
             ctx: contextlib.AbstractContextManager[Client] = Client(scheduler, timeout="10s")

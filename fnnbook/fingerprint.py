@@ -345,6 +345,7 @@ def stale_reason(spec: PipelineSpec, plan: Plan, task: str) -> str | None:
     truncated or edited product is stale), was made with the plan's fingerprint, and from the upstream
     outputs that are there now (an upstream task rerun since, even with the same inputs, makes it stale).
     """
+    spec = spec.for_profile(plan.profile)
     out = spec.output_dir(plan.profile, task)
     record = stored(spec, plan.profile, task)
     if not record:

@@ -94,6 +94,7 @@ def run(
     """
     if workers < 1 or (threads is not None and threads < 1):
         raise PipelineError(f"workers and threads must be >= 1, got workers={workers}, threads={threads}")
+    spec = spec.for_profile(profile)  # without the grid points the profile leaves out
     plan = check(spec, profile, tasks, sources=sources)
     if threads is None:  # on a cluster given by address, the local core count says nothing: 1
         threads = 1 if scheduler is not None else task_threads(workers)
@@ -170,6 +171,7 @@ def run_here(spec: PipelineSpec, plan: Plan, verdict: Mapping[str, Decision], *,
     Interrupted
         On Ctrl-C, with the outcomes so far (the running task: failed, "interrupted").
     """
+    spec = spec.for_profile(plan.profile)
     n = len(plan.order)
     outcomes: dict[str, TaskOutcome] = {}
     for i, name in enumerate(plan.order, 1):

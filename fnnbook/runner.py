@@ -85,6 +85,7 @@ def check(
     """
     if profile not in spec.profiles:
         raise PipelineError(f"unknown profile {profile!r}; profiles: {', '.join(spec.profiles)}")
+    spec = spec.for_profile(profile)
     selected = list(dict.fromkeys(tasks)) if tasks else spec.declares(profile)
     order = spec.closure(selected)
     claims = _known_claims(spec.claims_file)
@@ -152,6 +153,7 @@ def decide(spec: PipelineSpec, plan: Plan, *, force: bool = False) -> dict[str, 
     set aside counts as missing until its writer puts it back); a task whose
     data are missing, or whose upstream task cannot run, does not run.
     """
+    spec = spec.for_profile(plan.profile)
     verdict: dict[str, Decision] = {}
     for name in plan.order:
         task = spec.tasks[name]

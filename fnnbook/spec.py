@@ -29,7 +29,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _TOP_REQUIRED = ("claims_file", "output_root", "parts", "tasks")
 _TOP_OPTIONAL = ("data_dir", "profiles", "shared")
 _TASK_REQUIRED = ("title", "notebook", "products", "parameters")
-_TASK_OPTIONAL = ("claims", "explains", "upstream", "grid", "data")
+_TASK_OPTIONAL = ("claims", "explains", "upstream", "grid", "profile_grid", "data")
 _PART_KEYS = ("title", "tasks")
 
 
@@ -79,6 +79,7 @@ class Task:
     explains: tuple[str, ...] = ()
     inherited: frozenset[str] = frozenset()
     data: tuple[str, ...] = ()
+    left_out: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,8 @@ class PipelineSpec:
         with a ``grid`` appears as one task per grid point.
     grids : mapping of str to tuple of str
         Grid task name -> the names of its points.
+    narrowed : tuple of str
+        The grid points :meth:`for_profile` has left out of this spec (empty for the spec as loaded).
     extends : mapping of str to str
         Profile -> the profile it extends (``profiles: {why: {extends: paper}}``): a task that does not
         declare the profile runs there as in the extended one, and keeps its outputs in that one's folder,
@@ -124,10 +127,28 @@ class PipelineSpec:
     tasks: Mapping[str, Task] = field(repr=False)
     grids: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     extends: Mapping[str, str] = field(default_factory=dict)
+    narrowed: tuple[str, ...] = ()
 
     def declares(self, profile: str) -> list[str]:
-        """The tasks that declare ``profile`` themselves (what ``run --profile`` runs by default), in order."""
-        return [n for n, t in self.tasks.items() if profile in t.parameters and profile not in t.inherited]
+        """The tasks that declare ``profile`` themselves (what ``run --profile`` runs by default), in order; a grid
+        point that the profile's ``profile_grid`` leaves out is not among them."""
+        return [n for n, t in self.tasks.items()
+                if profile in t.parameters and profile not in t.inherited and profile not in t.left_out]
+
+    def for_profile(self, profile: str) -> PipelineSpec:
+        """The pipeline as ``profile`` runs it: without the grid points its ``profile_grid`` leaves out, in the
+        tasks, the grids and every upstream list (an aggregate step reads the points the profile runs).
+
+        Every function that plans, runs, judges or shows one profile's tasks calls it first; it returns ``self``
+        when the profile narrows no grid (and when this spec is that profile's already).
+        """
+        out = {n for n, t in self.tasks.items() if profile in t.left_out}
+        if not out:
+            return self
+        tasks = {n: dataclasses.replace(t, upstream=tuple(u for u in t.upstream if u not in out))
+                 for n, t in self.tasks.items() if n not in out}
+        grids = {g: tuple(p for p in points if p not in out) for g, points in self.grids.items()}
+        return dataclasses.replace(self, tasks=tasks, grids=grids, narrowed=tuple(n for n in self.tasks if n in out))
 
     def home(self, profile: str, task: str) -> str:
         """The profile whose folder holds ``task``'s outputs when it runs in ``profile``: the extended one
@@ -177,6 +198,9 @@ class PipelineSpec:
         wanted: set[str] = set()
         stack = [point for name in names for point in self.grids.get(name, (name,))]
         for name in stack:
+            if name in self.narrowed:
+                raise PipelineError(f"grid point {name!r} is not run in this profile: its profile_grid leaves it "
+                                    "out (pipeline.yaml)")
             if name not in self.tasks:
                 raise PipelineError(f"no task named {name!r}{_suggest(name, self.tasks)}; "
                                     f"tasks: {', '.join(self.tasks)}")
@@ -331,8 +355,44 @@ def _point_name(task: str, point: Mapping[str, Any]) -> str:
     return "__".join([task, *(f"{k}_{_point_value(v)}" for k, v in point.items())])
 
 
-def _expand_grid(task: Task, grid: Any) -> list[Task]:
-    """One task per point of ``grid`` (parameter -> list of values; the product of the lists)."""
+def _json(value: Any) -> str:
+    return json.dumps(value, sort_keys=True)
+
+
+def _narrowing(task: Task, grid: Mapping[str, list[Any]], raw: Any) -> dict[str, dict[str, set[str]]]:
+    """``profile_grid`` checked: profile -> parameter -> the canonical JSON of the values that profile runs, each
+    profile one the task declares, each parameter one of the grid's, each value one of its grid values."""
+    where = f"task {task.name!r}: profile_grid"
+    narrowing: dict[str, dict[str, set[str]]] = {}
+    for profile, sub in _mapping(where, raw).items():
+        if profile not in task.parameters:
+            raise PipelineError(f"{where}.{profile}: the task declares no profile {profile!r}"
+                                f"{_suggest(profile, task.parameters)}; profiles: {', '.join(task.parameters)}")
+        sub = _mapping(f"{where}.{profile}", sub)
+        if not sub:
+            raise PipelineError(f"{where}.{profile} must name at least one parameter of the grid")
+        narrowing[profile] = {}
+        for name, values in sub.items():
+            if name not in grid:
+                raise PipelineError(f"{where}.{profile}: {name!r} is not a parameter of the grid"
+                                    f"{_suggest(name, grid)}; grid: {', '.join(grid)}")
+            if not isinstance(values, list) or not values:
+                raise PipelineError(f"{where}.{profile}.{name} must be a non-empty list of values, got {values!r}")
+            keys = [_json(v) for v in values]
+            if len(set(keys)) != len(keys):
+                raise PipelineError(f"{where}.{profile}.{name} lists a value twice: {values!r}")
+            unknown = [v for v, k in zip(values, keys) if k not in {_json(g) for g in grid[name]}]
+            if unknown:
+                raise PipelineError(f"{where}.{profile}.{name}: {unknown[0]!r} is not a value of the grid "
+                                    f"({grid[name]!r}); a profile runs a part of the grid, not other points")
+            narrowing[profile][name] = set(keys)
+    return narrowing
+
+
+def _expand_grid(task: Task, grid: Any, profile_grid: Any = None) -> list[Task]:
+    """One task per point of ``grid`` (parameter -> list of values; the product of the lists); ``profile_grid``
+    (profile -> parameter -> a part of its values) leaves the other points out of that profile
+    (:attr:`Task.left_out`)."""
     where = f"task {task.name!r}: grid"
     grid = _mapping(where, grid)
     if not grid:
@@ -340,15 +400,18 @@ def _expand_grid(task: Task, grid: Any) -> list[Task]:
     for name, values in grid.items():
         if not isinstance(values, list) or not values:
             raise PipelineError(f"{where}.{name} must be a non-empty list of values, got {values!r}")
-        if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+        if len({_json(v) for v in values}) != len(values):
             raise PipelineError(f"{where}.{name} lists a value twice: {values!r}")
+    narrowing = _narrowing(task, grid, profile_grid) if profile_grid is not None else {}
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
     names = [_point_name(task.name, point) for point in points]
     if len(set(names)) != len(names):  # cannot happen short of a hash collision: refused, not dropped
         raise PipelineError(f"{where}: two points get the same name: "
                             f"{sorted(n for n in names if names.count(n) > 1)[0]}")
     return [dataclasses.replace(task, name=name,
-                                parameters={prof: {**values, **point} for prof, values in task.parameters.items()})
+                                parameters={prof: {**values, **point} for prof, values in task.parameters.items()},
+                                left_out=frozenset(prof for prof, sub in narrowing.items()
+                                                   if any(_json(point[k]) not in keep for k, keep in sub.items())))
             for name, point in zip(names, points)]
 
 
@@ -410,8 +473,10 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
     grids: dict[str, tuple[str, ...]] = {}
     for name, value in raw_tasks.items():
         task = _load_task(root, name, value)
+        if isinstance(value, Mapping) and "profile_grid" in value and "grid" not in value:
+            raise PipelineError(f"task {name!r}: profile_grid narrows a grid, and the task has none")
         if isinstance(value, Mapping) and "grid" in value:
-            points = _expand_grid(task, value["grid"])
+            points = _expand_grid(task, value["grid"], value.get("profile_grid"))
             grids[name] = tuple(p.name for p in points)
             tasks.update((p.name, p) for p in points)
         else:
@@ -458,6 +523,12 @@ def load_spec(path: str | os.PathLike[str]) -> PipelineSpec:
                             "(every task must be listed under parts)")
 
     extends = _load_profiles(where, data.get("profiles") or {}, tasks)
+    for task in tasks.values():
+        tied = sorted(p for p in task.left_out if p in extends or p in extends.values())
+        if tied:
+            raise PipelineError(f"task {in_grid[task.name]!r}: profile_grid narrows profile {tied[0]!r}, which "
+                                "extends another or is extended: it shares that profile's outputs, so it runs the "
+                                "whole grid")
     tasks = {n: _inherit(t, extends) for n, t in tasks.items()}
     data_dir = data.get("data_dir")
     return PipelineSpec(

@@ -79,7 +79,7 @@ class SmokeOutputs:
         from fnnbook import RunReport, run  # noqa: PLC0415
 
         outcomes = []
-        for name in self.spec.closure(tasks):
+        for name in self.spec.for_profile(SMOKE).closure(tasks):  # the grid points the smoke profile runs
             with FileLock(str(self.spec.output_root / f".{name}.lock")):
                 report = run(self.spec, SMOKE, [name], progress_bar=False, echo=lambda _: None,
                              threads=1)  # one torch thread per task, as the paper runs

@@ -25,6 +25,7 @@ def test_the_why_tasks_judge_ours_only_without_the_release(smoke_outputs: SmokeO
     report = smoke_outputs.run(WHY_TASKS)  # the shared smoke run (their upstream tasks too)
     assert report.ok, [(o.task, o.status, o.message) for o in report.outcomes]
     spec = smoke_outputs.spec.with_paths(output_root=tmp_path / "outputs", data_dir=tmp_path / "data")
+    points = spec.for_profile(SMOKE).grids["why_quadrotor_point"]  # the thrust bounds the smoke profile flies
     shutil.copytree(smoke_outputs.spec.output_root / SMOKE, tmp_path / "outputs" / SMOKE,
                     ignore=shutil.ignore_patterns(".staging", "*.lock"))
     for folder in EMPTY_RELEASE:
@@ -33,10 +34,9 @@ def test_the_why_tasks_judge_ours_only_without_the_release(smoke_outputs: SmokeO
     report = run(spec, SMOKE, WHY_TASKS, progress_bar=False, echo=lines.append, threads=1)
     assert report.ok, [(o.task, str(o.status), o.message) for o in report.outcomes]
     ran = {o.task for o in report.outcomes if o.status == "ok"}
-    assert {"why_feedback", "why_quadrotor", *spec.grids["why_quadrotor_point"]} <= ran  # their data changed
+    assert {"why_feedback", "why_quadrotor", *points} <= ran  # their data changed
     assert not {"spiral", "neural_feedback", "quadrotor_learning", "quadrotor_mpc"} & ran  # no data of theirs
-    said = {t: (spec.output_dir(SMOKE, t) / f"{t}.ipynb").read_text() for t in ("why_feedback",
-                                                                              *spec.grids["why_quadrotor_point"])}
+    said = {t: (spec.output_dir(SMOKE, t) / f"{t}.ipynb").read_text() for t in ("why_feedback", *points)}
     assert "judging ours only" in said["why_feedback"]
     assert all("ours judged only" in text for name, text in said.items() if name != "why_feedback")
     for task in WHY_TASKS:
