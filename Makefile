@@ -66,8 +66,12 @@ data: venv
 # they start (kernels, Dask workers, chromium), and the extra worker keeps the cores busy meanwhile (2 cores:
 # 3 workers, 4 min 52 s against 5 min 8 s with 2). The smoke pipeline still runs once (tests/conftest.py).
 TEST_WORKERS ?= $(shell echo $$(( $$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1) + 1 )))
+# The suite starts ~100 Python processes (xdist workers, notebook kernels, nbval's reruns) that import the same
+# modules: it lets Python keep their bytecode (in the git-ignored __pycache__ folders) even where the environment
+# says not to (PYTHONDONTWRITEBYTECODE=1, which the machines this was measured on set), instead of compiling them
+# again in every process.
 test: venv
-	$(PY) -m pytest -n $(TEST_WORKERS) --durations=25
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -n $(TEST_WORKERS) --durations=25
 
 # Rebuild notebooks/NN_<name>.ipynb from its source notebooks/src/NN_<name>.py (jupytext's percent format),
 # keeping the cell ids; tests/test_notebook_sources.py checks that the committed notebooks match.
