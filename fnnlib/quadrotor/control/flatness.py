@@ -18,8 +18,8 @@ Body rates. :math:`\dot z_B = R(\omega\times e_3) = R[\omega_y, -\omega_x, 0]` a
 so :math:`\omega_x = -(R^\top\dot z_B)_y`, :math:`\omega_y = (R^\top\dot z_B)_x`, and
 :math:`\dot\psi = 0` in :math:`W(\Theta)` gives :math:`\omega_z = -\tan\phi\,\omega_y`.
 
-Inputs. :math:`\dot\omega` is the exact forward-mode derivative
-(``torch.func.jvp``) of the body-rate map along :math:`(\dot v, \dot a, \dot j) = (a, j, s)`,
+Inputs. :math:`\dot\omega` is the exact derivative (:func:`jvp`, by automatic
+differentiation) of the body-rate map along :math:`(\dot v, \dot a, \dot j) = (a, j, s)`,
 :math:`\tau = J\dot\omega + \omega\times J\omega`, :math:`u = C^{-1}[T, \tau]`.
 
 Drag and disturbance. The paper's map (and the DFBC) is the nominal one, no
@@ -36,13 +36,11 @@ restricted to ``psi = 0``). Unequal x/y drag makes the map implicit and is refus
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from typing import Any
 
 import torch
 from torch import Tensor
-from torch.func import jvp as _torch_jvp
 
 from fnnlib.quadrotor.system import Quadrotor, QuadrotorParams, constants
 from fnnlib.quadrotor.rotations import check_last, rmatvec, rotation_matrix
@@ -63,15 +61,39 @@ __all__ = [
 
 
 def jvp(fn: Callable[..., Any], primals: tuple[Tensor, ...], tangents: tuple[Tensor, ...]) -> tuple[Any, Any]:
-    """``torch.func.jvp``, quiet about torch's own one-time ``torch.jit.script`` deprecation warning.
+    """``(fn(*primals), J tangents)``: the Jacobian-vector product of ``fn`` at ``primals``, as ``torch.func.jvp``
+    returns it (``fn`` returns a tensor or a tuple of tensors).
 
-    The first forward-mode call loads torch's jvp decompositions, which script
-    a few functions with ``torch.jit.script`` and warn; that warning is
-    torch-internal and says nothing about the caller's code.
+    By reverse mode twice: ``g(w) = J^T w`` is linear in ``w``, so ``J t`` is the gradient of ``g(w) . t`` in
+    ``w``. Forward mode gives the same derivative (to round-off) but loads ``torch._dynamo`` on its first product (~1 s of CPU
+    in every process that computes a flight reference). The results carry a graph, and can be differentiated,
+    where a primal or a tangent requires grad.
     """
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=r".*torch\.jit\.script.*deprecated", category=DeprecationWarning)
-        return _torch_jvp(fn, primals, tangents)
+    if len(primals) != len(tangents):
+        raise ValueError(f"jvp: {len(primals)} primals but {len(tangents)} tangents")
+    for i, (p, t) in enumerate(zip(primals, tangents)):
+        if p.shape != t.shape or p.dtype != t.dtype:
+            raise ValueError(f"jvp: tangent {i} is {tuple(t.shape)} {t.dtype}, its primal {tuple(p.shape)} {p.dtype}")
+    graph = torch.is_grad_enabled() and any(t.requires_grad for t in (*primals, *tangents))
+    with torch.enable_grad():
+        xs = tuple(p if p.requires_grad else p.detach().requires_grad_() for p in primals)
+        result = fn(*xs)
+        flat = [result] if isinstance(result, Tensor) else list(result)
+        live = [i for i, o in enumerate(flat) if o.requires_grad]
+        ws = [torch.zeros_like(flat[i], requires_grad=True) for i in live]
+        g = torch.autograd.grad([flat[i] for i in live], xs, ws, create_graph=True, allow_unused=True) if live else ()
+        used = [(gi, t) for gi, t in zip(g, tangents) if gi is not None and gi.requires_grad]
+        Jt = torch.autograd.grad([gi for gi, _ in used], ws, [t for _, t in used], create_graph=graph,
+                                 allow_unused=True) if used else (None,) * len(ws)
+    out = [torch.zeros_like(o) for o in flat]
+    for i, d in zip(live, Jt):
+        if d is not None:
+            out[i] = d
+    if not graph:
+        flat, out = [o.detach() for o in flat], [d.detach() for d in out]
+    if isinstance(result, Tensor):
+        return flat[0], out[0]
+    return tuple(flat), tuple(out)
 
 
 # --------------------------------------------------------------------------- checks
@@ -293,8 +315,8 @@ def state_to_flat(
 ) -> Tensor:
     """Flat outputs seen by the model: the inverse of :func:`flat_to_state` / :func:`flat_to_input`.
 
-    ``a = v'`` from Eq. (27), and ``j = a'`` by an exact forward-mode
-    derivative of the acceleration along ``(x', u') = (f(x, u), u_dot)``.
+    ``a = v'`` from Eq. (27), and ``j = a'`` by an exact derivative (:func:`jvp`)
+    of the acceleration along ``(x', u') = (f(x, u), u_dot)``.
 
     Parameters
     ----------

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import warnings
+
 import pytest
 import torch
 
@@ -122,3 +126,49 @@ def test_bad_inputs_are_refused() -> None:
         split_flat(torch.zeros(4, 9, dtype=F64))
     with pytest.raises(TypeError, match="dtype"):
         flat_to_state(p, v.float(), a, j, params=NOMINAL)
+
+
+def _field(x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Three outputs: one of both inputs, one of ``x`` alone, one of neither."""
+    return torch.sin(x) * y.pow(2), torch.exp(x).sum(-1, keepdim=True), torch.ones(2, dtype=F64)
+
+
+def _func_jvp(*args):
+    """``torch.func.jvp``, quiet about torch's own one-time ``torch.jit.script`` deprecation warning."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*torch\.jit\.script.*deprecated", category=DeprecationWarning)
+        return torch.func.jvp(*args)
+
+
+def test_jvp_is_torch_funcs_product_without_forward_mode() -> None:
+    g = torch.Generator().manual_seed(0)
+    x, y, tx, ty = (torch.randn(4, 3, generator=g, dtype=F64) for _ in range(4))
+    ours = jvp(_field, (x, y), (tx, ty))
+    theirs = _func_jvp(_field, (x, y), (tx, ty))
+    for a, b in zip((*ours[0], *ours[1]), (*theirs[0], *theirs[1])):
+        assert a.shape == b.shape and torch.allclose(a, b, rtol=1e-13, atol=1e-14)
+    assert torch.equal(ours[1][2], torch.zeros(2, dtype=F64))  # an output of neither input: no change
+    assert not any(t.requires_grad for t in (*ours[0], *ours[1]))  # no input needs grad: plain tensors
+    one = jvp(lambda x_: x_.pow(3), (x,), (tx,))  # a function of one tensor returns tensors, not tuples
+    assert torch.allclose(one[1], 3 * x.pow(2) * tx, rtol=1e-13)
+    with pytest.raises(ValueError, match="tangent 0 is"):
+        jvp(lambda x_: x_, (x,), (tx[:2],))
+
+
+def test_jvp_is_differentiable_where_an_input_needs_grad() -> None:
+    g = torch.Generator().manual_seed(1)
+    x, y, tx, ty = (torch.randn(4, 3, generator=g, dtype=F64) for _ in range(4))
+    x.requires_grad_(True)
+    ours = torch.autograd.grad(jvp(_field, (x, y), (tx, ty))[1][0].sum(), x)[0]
+    theirs = torch.autograd.grad(_func_jvp(_field, (x, y), (tx, ty))[1][0].sum(), x)[0]
+    assert torch.allclose(ours, theirs, rtol=1e-13, atol=1e-14)
+
+
+def test_a_flight_reference_leaves_torch_dynamo_unloaded() -> None:
+    """Forward mode loads ``torch._dynamo`` on its first product (~1 s in every process that flies)."""
+    code = ("import sys, torch\nfrom fnnlib.quadrotor.control.flatness import flat_reference\n"
+            "from fnnlib.quadrotor.system import NOMINAL\n"
+            "x, u = flat_reference(torch.full((5, 12), 0.1, dtype=torch.float64), params=NOMINAL)\n"
+            "print('torch._dynamo' in sys.modules, bool(torch.isfinite(u).all()))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["False", "True"], done.stdout + done.stderr
