@@ -26,6 +26,9 @@ F64 = torch.float64
 TS, T, N = 0.01, 60, 5
 MODEL = Spiral(2.0, 0.1, 0.0)  # stands in for the learned field
 Q, R = [1e-8, 1e-8, 1e-2, 1e-2], 1e-4
+#: the observers of :func:`_observers`, by name: written out, so that collecting the tests makes none (a Luenberger
+#: observer imports python-control, ~1 s in every pytest-xdist worker)
+NAMES = ("linear feedback", "luenberger", "kalman", "kalman_ss", "ekf")
 
 
 def _observers() -> dict[str, Observer]:
@@ -46,7 +49,11 @@ def problem():
     return x, add_measurement_noise(x, 0.01, make_generator(0)), system.rate(x)
 
 
-@pytest.mark.parametrize("name", list(_observers()))
+def test_the_names_are_the_observers() -> None:
+    assert tuple(_observers()) == NAMES
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_observer_satisfies_the_interface(name, problem):
     obs = _observers()[name]
     assert isinstance(obs, Observer)
