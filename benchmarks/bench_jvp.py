@@ -2,9 +2,9 @@
 
 For each implementation, in a fresh interpreter: the CPU time of the first flight reference (what a notebook
 kernel or a test process pays once: ``torch.func.jvp`` loads ``torch._dynamo`` on its first product), whether
-``torch._dynamo`` got loaded, and the median wall time of ``flat_reference`` and of ``state_to_flat`` on a
-Lissajous command of ``--points`` samples (what each flight pays per reference). Both run in the same invocation,
-so their ratio is measured on one machine state.
+``torch._dynamo`` got loaded, and the median wall time of ``flat_reference`` and of ``state_to_flat`` on the
+paper's Lissajous command, ``--points`` samples 0.02 s apart (what each flight pays per reference). Both run in
+the same invocation, so their ratio is measured on one machine state.
 
     .venv/bin/python benchmarks/bench_jvp.py [--points 300] [--repeats 50]
 """
@@ -22,6 +22,9 @@ t0 = time.process_time()
 import torch
 import fnnlib.quadrotor.control.flatness as F
 from fnnlib.quadrotor.system import TEST_TRUTH
+from fnnlib.quadrotor.control.lissajous import lissajous
+from fnnlib.quadrotor.presets import PAPER_LISSAJOUS
+import numpy as np
 torch.set_num_threads(1)
 impl, points, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 if impl == "torch.func.jvp":
@@ -30,14 +33,8 @@ if impl == "torch.func.jvp":
             warnings.simplefilter("ignore", DeprecationWarning)
             return torch.func.jvp(fn, primals, tangents)
     F.jvp = forward_mode
-t = torch.linspace(0.0, 6.0, points, dtype=torch.float64)
-S, C = torch.sin, torch.cos
-p = torch.stack([S(t), S(2 * t), C(t)], -1)
-v = torch.stack([C(t), 2 * C(2 * t), -S(t)], -1)
-a = torch.stack([-S(t), -4 * S(2 * t), -C(t)], -1)
-j = torch.stack([-C(t), -8 * C(2 * t), S(t)], -1)
-s = torch.stack([S(t), 16 * S(2 * t), C(t)], -1)
-Psi = torch.cat([p, v, a, j], -1)
+d = lissajous(0.02 * np.arange(points), **PAPER_LISSAJOUS)  # the paper's test curve, at the flight's Ts
+Psi, s = (torch.from_numpy(np.concatenate(parts, -1)) for parts in ((d.p, d.v, d.a, d.j), (d.s,)))
 imported = time.process_time()
 x, u = F.flat_reference(Psi, s, params=TEST_TRUTH)
 first = time.process_time() - imported
