@@ -52,6 +52,7 @@ for fa in sorted(ra.glob("*/results.json")):
         for c in d.get("claims", []):
             if c.get("id") == "Q6" and isinstance(c.get("headline"), dict):
                 c["headline"].pop("value", None); c["headline"].pop("per_seed", None); c["headline"].pop("spread", None)
+                c.get("numbers", {}).pop("over_authors", None)  # our training time over the authors' (a timing)
     walk(da, db, fa.parent.name, out, pairs)
     largest, other = summary(pairs)
     extra = len(out) - len(pairs)  # a key or a list entry on one side only
