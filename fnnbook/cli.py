@@ -148,7 +148,9 @@ def _list(spec: PipelineSpec) -> None:
         print(part.title)
         for name in (n for listed in part.tasks for n in spec.grids.get(listed, (listed,))):
             task = spec.tasks[name]
-            status = [f"{profile}: {states[profile][name]}" for profile in spec.profiles if name in states[profile]]
+            status = [f"{profile}: {states[profile][name]}" if name in states[profile] else
+                      f"{profile}: not in its profile_grid" for profile in spec.profiles
+                      if name in states[profile] or profile in task.left_out]
             print(f"  {name:<16} {task.title}")
             print(f"  {'':<16} claims {' '.join(task.claims) or '-'}; upstream "
                   f"{' '.join(task.upstream) or '-'}; {'; '.join(status)}")

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from fnnbook import PipelineError, check, load_spec, run
+from fnnbook.cli import main
 from fnnbook.runner import decide
 from fnnbook.outcome import Action
 
@@ -66,6 +67,16 @@ def test_the_profile_runs_its_part_of_the_grid_and_the_other_runs_all(make_pipel
     with pytest.raises(PipelineError, match=r"grid point 'pt__value_2' is not run in this profile"):
         check(spec, "smoke", ["pt__value_2"])
     assert check(spec, "paper", ["pt__value_2"]).order == ("pt__value_2",)
+
+
+def test_list_says_which_points_a_profile_leaves_out(make_pipeline: MakePipeline, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    spec = _spec(make_pipeline, tmp_path, {"smoke": {"value": [1, 3]}})
+    assert main(["list", "--pipeline", str(spec.path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    said = {lines[i].split()[0]: lines[i + 1] for i in range(len(lines) - 1) if lines[i].startswith("  pt__")}
+    assert "smoke: not in its profile_grid" in said["pt__value_2"] and "paper: not run" in said["pt__value_2"]
+    assert "smoke: not run" in said["pt__value_1"] and "profile_grid" not in said["pt__value_1"]
 
 
 def test_a_profile_grid_that_leaves_nothing_out_changes_nothing(make_pipeline: MakePipeline, tmp_path: Path) -> None:
