@@ -10,8 +10,8 @@ from pathlib import Path
 
 TIMING = re.compile(r"(^created$|time|seconds|wall|elapsed|duration|_ms$|_ms_|ms_per|us_per|_s$|per_step|speed|real_time|x_real)", re.I)
 
-def walk(a, b, path, out, pairs=None):
-    pairs = [] if pairs is None else pairs
+def walk(a, b, path, out, pairs):
+    """Append each differing path to ``out`` and each differing leaf pair (a, b) to ``pairs``."""
     if isinstance(a, dict) and isinstance(b, dict):
         for k in sorted(set(a) | set(b)):
             if TIMING.search(str(k)):

@@ -65,9 +65,9 @@ def jvp(fn: Callable[..., Any], primals: tuple[Tensor, ...], tangents: tuple[Ten
     returns it (``fn`` returns a tensor or a tuple of tensors).
 
     By reverse mode twice: ``g(w) = J^T w`` is linear in ``w``, so ``J t`` is the gradient of ``g(w) . t`` in
-    ``w``. Forward mode gives the same derivative (to round-off) but loads ``torch._dynamo`` on its first product (~1 s of CPU
-    in every process that computes a flight reference). The results carry a graph, and can be differentiated,
-    where a primal or a tangent requires grad.
+    ``w``. Forward mode gives the same derivative (to round-off) but loads ``torch._dynamo`` on its first product
+    (~1 s of CPU in every process that computes a flight reference). The results carry a graph, and can be
+    differentiated, where a primal or a tangent requires grad.
     """
     if len(primals) != len(tangents):
         raise ValueError(f"jvp: {len(primals)} primals but {len(tangents)} tangents")
